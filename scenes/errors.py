@@ -1,0 +1,69 @@
+"""The ``SceneError`` family: every way a building can fail to load.
+
+Each error names *where* (a file, a bundled name, a JSON field path) and *what*. The CLI prints
+``str(error)`` and exits non-zero without a traceback, so the message must stand on its own.
+"""
+
+from __future__ import annotations
+
+
+class SceneError(Exception):
+    """Base class of every error raised while loading, building or validating a scene.
+
+    Parameters
+    ----------
+    source : str
+        Where the problem is: a file path, a bundled scene name or a spec string.
+    problem : str
+        What is wrong, as a sentence fragment.
+    path : str, optional
+        For structured input (floor-plan JSON), the offending field, e.g. ``rooms[2].polygon``.
+    """
+
+    def __init__(self, source: str, problem: str, *, path: str | None = None) -> None:
+        self.source = str(source)
+        self.problem = problem
+        self.path = path
+        where = f"{self.source}: {path}" if path else self.source
+        super().__init__(f"{where}: {problem}")
+
+
+class UnknownSceneError(SceneError, LookupError):
+    """A spec that is neither a bundled name, nor a file, nor ``generated:SEED``."""
+
+
+class SceneFileError(SceneError, OSError):
+    """A scene file that is missing or cannot be read."""
+
+
+class UnsupportedFormatError(SceneError, ValueError):
+    """A file whose extension no loader handles."""
+
+
+class InvalidMeshError(SceneError, ValueError):
+    """An empty mesh, non-finite vertices, or label arrays that do not match the faces."""
+
+
+class MissingStructureError(SceneError, ValueError):
+    """A scene with no floor or no wall faces: there is nothing structural to scan."""
+
+
+class FloorPlanError(SceneError, ValueError):
+    """Invalid floor-plan JSON: a syntax error or a schema violation (``path`` names the field)."""
+
+
+class PlanGeometryError(FloorPlanError):
+    """A plan that parses but cannot be built: a self-intersecting room, a misplaced door, clutter
+    blocking a door, clutter outside every room."""
+
+
+class StoreyValidationError(SceneError, ValueError):
+    """A built storey that fails validation: an unreachable room, a blocked start, a leak."""
+
+
+class IfcError(SceneError, ValueError):
+    """An IFC file with no storey, an unknown storey, or no walls on the chosen storey."""
+
+
+class MissingDependencyError(SceneError, ImportError):
+    """An optional dependency (an extra) is not installed; the message gives the install hint."""

@@ -1,0 +1,147 @@
+"""Checks that a storey built from a plan can be scanned by the robot.
+
+- **Reachable**: every room can be reached from the start through doors by a robot of
+  :data:`~scenes.geometry.ROBOT_RADIUS` that keeps :data:`~scenes.geometry.SAFETY_DISTANCE` from walls
+  and clutter inside rooms. A door is crossed straight along its axis, so it needs only the robot's
+  width plus 10 cm: doors of 0.8-1.0 m could never be crossed with 0.2 m of safety on each side, and
+  the method drives to the door frame deliberately (METHOD §8).
+- **Free start**: the start keeps the same clearance.
+- **Closed**: no ray cast from inside any room escapes the building.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import shapely
+from shapely.geometry import Point, Polygon
+
+from scenes._open3d import open3d
+from scenes.errors import StoreyValidationError
+from scenes.floorplan import FloorPlan
+from scenes.geometry import CLEARANCE, ROBOT_RADIUS
+from scenes.model import Scene
+
+__all__ = ["count_escaping_rays", "fibonacci_sphere", "room_free_space", "validate_plan_scene"]
+
+#: How much wider than the robot a door must be.
+DOOR_MARGIN = 0.10
+
+
+def fibonacci_sphere(n: int) -> np.ndarray:
+    """(n, 3) float: unit vectors spread evenly over the sphere."""
+    k = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * k / n
+    r = np.sqrt(1.0 - z**2)
+    phi = np.pi * (1.0 + 5**0.5) * k
+    return np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+
+
+def count_escaping_rays(scene: Scene, origins: np.ndarray, n_directions: int = 4096) -> np.ndarray:
+    """For each origin, how many of ``n_directions`` rays hit nothing.
+
+    Parameters
+    ----------
+    origins : (m, 3) float
+        Ray origins.
+
+    Returns
+    -------
+    (m,) int
+    """
+    o3d = open3d()
+    rc = o3d.t.geometry.RaycastingScene()
+    rc.add_triangles(
+        o3d.core.Tensor(scene.mesh.vertices.astype(np.float32)),
+        o3d.core.Tensor(scene.mesh.faces.astype(np.uint32)),
+    )
+    dirs = fibonacci_sphere(n_directions)
+    origins = np.asarray(origins, dtype=float).reshape(-1, 3)
+    rays = np.concatenate([np.repeat(origins, len(dirs), axis=0), np.tile(dirs, (len(origins), 1))], axis=1).astype(
+        np.float32
+    )
+    t_hit = rc.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+    return (~np.isfinite(t_hit)).reshape(len(origins), len(dirs)).sum(axis=1)
+
+
+def room_free_space(plan: FloorPlan, scene: Scene, room: int, clearance: float = CLEARANCE) -> Polygon:
+    """Where the robot's centre may stand in ``room`` (shapely Polygon or MultiPolygon)."""
+    clear = Polygon(scene.rooms[room].polygon)
+    free = clear.buffer(-clearance, join_style="mitre")
+    feet = [c.footprint() for c in plan.clutter if clear.buffer(1e-6).contains(c.footprint())]
+    if feet:
+        free = free.difference(shapely.union_all(feet).buffer(clearance))
+    return free
+
+
+def validate_plan_scene(plan: FloorPlan, scene: Scene) -> None:
+    """Raise :class:`StoreyValidationError` unless the storey is reachable, starts free and is closed."""
+    name = scene.name
+    parts: list[list[Polygon]] = []
+    for i in range(len(scene.rooms)):
+        free = room_free_space(plan, scene, i)
+        parts.append([g for g in getattr(free, "geoms", [free]) if not g.is_empty])
+        if not parts[-1]:
+            raise StoreyValidationError(
+                name, f"room {scene.rooms[i].name!r} has no space where the robot keeps {CLEARANCE} m clearance"
+            )
+
+    def node_of(room: int, p: np.ndarray) -> tuple[int, int] | None:
+        pt = Point(float(p[0]), float(p[1]))
+        for k, g in enumerate(parts[room]):
+            if g.covers(pt):
+                return (room, k)
+        return None
+
+    adjacency: dict[tuple[int, int], set[tuple[int, int]]] = {}
+    reach = plan.wall_thickness / 2 + CLEARANCE + 0.05
+    for j, door in enumerate(scene.doors):
+        a, b = door.rooms
+        if door.width < 2 * ROBOT_RADIUS + DOOR_MARGIN:
+            raise StoreyValidationError(
+                name, f"door doors[{j}] is {door.width} m wide; the robot needs {2 * ROBOT_RADIUS + DOOR_MARGIN} m"
+            )
+        c = door.position[:2]
+        na = node_of(a, c - door.normal * reach)
+        nb = node_of(b, c + door.normal * reach)
+        for room, node in ((a, na), (b, nb)):
+            if node is None:
+                raise StoreyValidationError(
+                    name, f"door doors[{j}] cannot be approached from room {scene.rooms[room].name!r} (blocked)"
+                )
+        adjacency.setdefault(na, set()).add(nb)
+        adjacency.setdefault(nb, set()).add(na)
+
+    start = scene.start
+    first = None
+    for i, room in enumerate(scene.rooms):
+        if Polygon(room.polygon).covers(Point(start[0], start[1])):
+            first = node_of(i, start)
+            break
+    if first is None:
+        raise StoreyValidationError(
+            name, f"the start {tuple(np.round(start[:2], 3))} is not {CLEARANCE} m clear of walls and clutter"
+        )
+    seen = {first}
+    todo = [first]
+    while todo:
+        for nxt in adjacency.get(todo.pop(), ()):
+            if nxt not in seen:
+                seen.add(nxt)
+                todo.append(nxt)
+    for i, room_parts in enumerate(parts):
+        main = max(range(len(room_parts)), key=lambda k: room_parts[k].area)
+        if (i, main) not in seen:
+            raise StoreyValidationError(
+                name, f"room {scene.rooms[i].name!r} cannot be reached from the start through doors"
+            )
+
+    origins = []
+    for room_parts in parts:
+        g = max(room_parts, key=lambda p: p.area).representative_point()
+        origins.append([g.x, g.y, 1.5])
+    escaped = count_escaping_rays(scene, np.array(origins))
+    if escaped.any():
+        i = int(np.argmax(escaped))
+        raise StoreyValidationError(
+            name, f"{int(escaped[i])} rays cast from inside room {scene.rooms[i].name!r} escape the building"
+        )

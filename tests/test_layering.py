@@ -1,0 +1,49 @@
+"""The house rules: imports run one way (scenes -> nbs_env -> policies -> train), and the code is lint-clean."""
+
+from __future__ import annotations
+
+import ast
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+FLOORS = ["scenes", "nbs_env", "policies", "train"]
+
+
+def imported_packages(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text())
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out |= {alias.name.split(".")[0] for alias in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.add(node.module.split(".")[0])
+    return out
+
+
+@pytest.mark.parametrize("floor", FLOORS)
+def test_nothing_imports_upward(floor):
+    above = set(FLOORS[FLOORS.index(floor) + 1 :])
+    offenders = {}
+    for path in (ROOT / floor).rglob("*.py"):
+        bad = imported_packages(path) & above
+        if bad:
+            offenders[str(path.relative_to(ROOT))] = sorted(bad)
+    assert not offenders, f"{floor} imports from a floor above it: {offenders}"
+
+
+def test_scenes_has_no_gymnasium_or_robot_imports():
+    for path in (ROOT / "scenes").rglob("*.py"):
+        assert "gymnasium" not in imported_packages(path), path
+
+
+def test_ruff_is_clean():
+    ruff = shutil.which("ruff") or str(Path(sys.executable).parent / "ruff")
+    if not Path(ruff).exists():
+        pytest.skip("ruff is not installed (it is in the 'test' extra)")
+    proc = subprocess.run([ruff, "check", "--no-cache", str(ROOT)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr

@@ -1,0 +1,1 @@
+"""Experiments and the ``nbs`` command line: the top floor, importing everything below it."""
