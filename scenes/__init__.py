@@ -31,7 +31,7 @@ from scenes.errors import (
     UnknownSceneError,
     UnsupportedFormatError,
 )
-from scenes.floorplan import FloorPlan, extrude, load_plan
+from scenes.floorplan import ClutterPlan, DoorPlan, FloorPlan, RoomPlan, WindowPlan, extrude, load_plan
 from scenes.generator import GeneratorConfig, generate_plan
 from scenes.model import STRUCTURAL_CLASSES, Door, Room, Scene, StructureSamples, SurfaceClass
 

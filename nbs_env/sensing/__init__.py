@@ -1,0 +1,1 @@
+"""Sensing: the simulated scanner, odometry, and registration into the accumulated cloud S(t)."""

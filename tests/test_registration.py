@@ -1,0 +1,156 @@
+"""Odometry drift, ICP registration into S(t), and the accumulated cloud."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nbs_env.config import OdometryConfig, RegistrationConfig, ScannerConfig
+from nbs_env.sensing.odometry import Odometry, path_length
+from nbs_env.sensing.pose import planar, pose_error, pose_from_xyz_rpy, yaw_of
+from nbs_env.sensing.registration import AccumulatedCloud, register
+from nbs_env.sensing.scanner import Scanner
+from scenes import load_scene
+from scenes.geometry import point_is_free
+
+
+def second_stop(scene, rng):
+    """A free point 0.5-1.5 m from the start, in the simulator's truth."""
+    for _ in range(200):
+        p = scene.start[:2] + rng.uniform(-1.5, 1.5, 2)
+        if 0.5 <= np.linalg.norm(p - scene.start[:2]) and point_is_free(scene, p, 0.0):
+            return p
+    return scene.start[:2]
+
+
+def perturb(pose, rng, max_shift=0.3, max_yaw_deg=5.0):
+    d = rng.normal(size=2)
+    d = d / np.linalg.norm(d) * rng.uniform(0.0, max_shift)
+    yaw = yaw_of(pose) + np.radians(rng.uniform(-max_yaw_deg, max_yaw_deg))
+    return planar(pose[0, 3] + d[0], pose[1, 3] + d[1], yaw, pose[2, 3])
+
+
+@pytest.mark.expensive
+def test_icp_recovers_known_perturbations_on_generated_storeys():
+    rng = np.random.default_rng(2024)
+    cfg = ScannerConfig(angular_step=0.5)
+    good, trials = 0, 40
+    errors = []
+    for trial in range(trials):
+        scene = load_scene(f"generated:{trial}", rooms=(1, 3))
+        scanner = Scanner(scene, cfg)
+        odometry = Odometry(OdometryConfig(), rng)
+        t0 = odometry.true_sensor_pose(scene.start[:2], rng.uniform(-np.pi, np.pi), 0.0, cfg.height)
+        cloud = AccumulatedCloud()
+        first = scanner.scan(t0, rng)
+        cloud.add(first.truth.points_world, t0[:3, 3])
+        t1 = odometry.true_sensor_pose(second_stop(scene, rng), rng.uniform(-np.pi, np.pi), 0.0, cfg.height)
+        result = register(scanner.scan(t1, rng).points, perturb(t1, rng), cloud)
+        dt, dr = pose_error(result.pose, t1)
+        errors.append((dt, dr))
+        good += result.accepted and dt < 0.02 and dr < 0.2
+    assert good >= 0.95 * trials, errors
+
+
+def test_icp_recovers_roll_and_pitch_the_odometry_cannot_see():
+    rng = np.random.default_rng(5)
+    scene = load_scene("l_room")
+    scanner = Scanner(scene, ScannerConfig(angular_step=0.5))
+    t0 = pose_from_xyz_rpy(3.0, 4.5, 1.5)
+    cloud = AccumulatedCloud()
+    cloud.add(scanner.scan(t0, rng).truth.points_world, t0[:3, 3])
+    t1 = pose_from_xyz_rpy(2.0, 5.5, 1.5, np.radians(0.4), np.radians(-0.3), 0.5)
+    initial = planar(2.0 + 0.1, 5.5 - 0.05, 0.5 + np.radians(2), 1.5)
+    result = register(scanner.scan(t1, rng).points, initial, cloud)
+    assert result.accepted, result.reason
+    dt, dr = pose_error(result.pose, t1)
+    assert dt < 0.01 and dr < 0.1
+    assert pose_error(initial, t1)[1] > 2.0  # the starting error was real
+
+
+def test_a_two_metre_error_is_rejected():
+    rng = np.random.default_rng(3)
+    scene = load_scene("five_rooms")
+    scanner = Scanner(scene, ScannerConfig(angular_step=0.5))
+    t0 = pose_from_xyz_rpy(*scene.start[:2], 1.5)
+    cloud = AccumulatedCloud()
+    cloud.add(scanner.scan(t0, rng).truth.points_world, t0[:3, 3])
+    t1 = pose_from_xyz_rpy(scene.start[0] + 0.8, scene.start[1] + 0.5, 1.5, 0, 0, 0.3)
+    wrong = t1.copy()
+    wrong[:2, 3] += [2.0, 0.0]
+    result = register(scanner.scan(t1, rng).points, wrong, cloud)
+    assert not result.accepted
+    assert result.reason
+    assert np.array_equal(result.pose, wrong)  # a rejected ICP keeps the odometry pose
+
+
+def test_first_scan_is_accepted_as_is():
+    cloud = AccumulatedCloud()
+    pose = pose_from_xyz_rpy(1, 2, 1.5)
+    result = register(np.random.default_rng(0).normal(size=(100, 3)), pose, cloud)
+    assert result.accepted and np.array_equal(result.pose, pose)
+
+
+def test_odometry_drift_grows_with_distance():
+    cfg = OdometryConfig(sigma_xy_per_m=0.02, sigma_yaw_deg_per_m=0.5, sigma_tilt_deg=0.0)
+    start = planar(0, 0, 0, 1.5)
+    for distance, expected in ((1.0, 0.02), (5.0, 0.1)):
+        errs, yaws = [], []
+        odometry = Odometry(cfg, np.random.default_rng(11))
+        end = planar(distance, 0, 0, 1.5)
+        for _ in range(2000):
+            believed = odometry.drive(start, start, end, distance)
+            errs.append(believed[:2, 3] - end[:2, 3])
+            yaws.append(np.degrees(yaw_of(believed)))
+        assert np.std(np.asarray(errs), axis=0) == pytest.approx([expected, expected], rel=0.1)
+        assert np.std(yaws) == pytest.approx(0.5 * distance, rel=0.1)
+    # Driving nowhere adds no error.
+    assert np.allclose(Odometry(cfg, np.random.default_rng(0)).drive(start, start, start, 0.0), start)
+
+
+def test_odometry_is_deterministic_for_a_seed():
+    a = Odometry(None, np.random.default_rng(4)).drive(planar(0, 0, 0), planar(0, 0, 0), planar(3, 1, 1), 3.2)
+    b = Odometry(None, np.random.default_rng(4)).drive(planar(0, 0, 0), planar(0, 0, 0), planar(3, 1, 1), 3.2)
+    assert np.array_equal(a, b)
+    with pytest.raises(ValueError, match="distance"):
+        Odometry(None, np.random.default_rng(4)).drive(planar(0, 0, 0), planar(0, 0, 0), planar(3, 1, 1), np.nan)
+
+
+def test_true_pose_has_small_tilt():
+    odometry = Odometry(OdometryConfig(sigma_tilt_deg=0.2), np.random.default_rng(0))
+    tilts = [
+        pose_error(odometry.true_sensor_pose(np.zeros(2), 0.0, 0.0, 1.5), planar(0, 0, 0, 1.5))[1] for _ in range(500)
+    ]
+    # The angle of a 2-D Gaussian tilt is Rayleigh distributed: mean = sigma * sqrt(pi / 2).
+    assert np.mean(tilts) == pytest.approx(0.2 * np.sqrt(np.pi / 2), rel=0.1)
+
+
+def test_accumulated_cloud_keeps_full_resolution_and_rooms():
+    rng = np.random.default_rng(0)
+    cloud = AccumulatedCloud(voxel_size=0.1)
+    a = rng.uniform(0, 5, size=(20000, 3))
+    b = rng.uniform(5, 10, size=(10000, 3))
+    cloud.add(a, np.zeros(3), room=0)
+    cloud.add(b, np.zeros(3), room=1)
+    assert len(cloud) == 2 and cloud.n_points == 30000
+    assert np.array_equal(cloud.room_points(1), b)
+    assert len(cloud.storey_points()) == 30000
+    work = cloud.working_points()
+    assert len(work) < 30000 and cloud.working_cloud().has_normals()
+    assert len(cloud.working_points(room=0)) < len(work)
+    with pytest.raises(ValueError, match="finite"):
+        cloud.add(np.full((3, 3), np.nan), np.zeros(3))
+
+
+def test_path_length():
+    assert path_length(np.array([[0, 0], [3, 4], [3, 0]])) == pytest.approx(9.0)
+    assert path_length(np.zeros((1, 2))) == 0.0
+
+
+def test_registration_config_checks():
+    from nbs_env.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="voxel_size"):
+        RegistrationConfig(voxel_size=0)
+    with pytest.raises(ConfigError, match="max_correspondence"):
+        RegistrationConfig(max_correspondence=())
