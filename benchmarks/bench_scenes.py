@@ -22,7 +22,7 @@ from scenes import extrude, generate_plan, load_scene
 from scenes.validation import validate_plan_scene
 
 
-def timed(fn, repeat: int = 1):  # noqa: ANN001, ANN201
+def timed(fn, repeat: int = 1):
     best, out = float("inf"), None
     for _ in range(repeat):
         t0 = time.perf_counter()
@@ -47,8 +47,8 @@ def main() -> None:
         t, _ = timed(lambda plan=plan, scene=scene: validate_plan_scene(plan, scene), repeat=3)
         val.append(t)
         t, _ = timed(
-            lambda scene=scene: [
-                trimesh.creation.extrude_polygon(Polygon(r.polygon), plan.ceiling_height) for r in scene.rooms
+            lambda scene=scene, height=plan.ceiling_height: [
+                trimesh.creation.extrude_polygon(Polygon(r.polygon), height) for r in scene.rooms
             ],
             repeat=3,
         )
@@ -56,7 +56,8 @@ def main() -> None:
         t, samples = timed(lambda scene=scene: scene.structure_samples(0.05), repeat=3)
         samp.append(t)
         se = scene.mesh.submesh([np.flatnonzero(scene.structural_mask())], append=True)
-        t, _ = timed(lambda se=se, n=len(samples): trimesh.sample.sample_surface(se, n, seed=0), repeat=3)
+        n = len(samples)
+        t, _ = timed(lambda se=se, n=n: trimesh.sample.sample_surface(se, n, seed=0), repeat=3)
         samp_ref.append(t)
 
     med = statistics.median

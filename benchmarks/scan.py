@@ -24,7 +24,7 @@ from nbs_env.sensing.scanner import Scanner
 from scenes import load_scene
 
 
-def median_time(fn, repeat: int) -> float:  # noqa: ANN001
+def median_time(fn, repeat: int) -> float:
     fn()
     times = []
     for _ in range(repeat):
@@ -67,7 +67,8 @@ def main() -> None:
         t_icp = median_time(lambda second=second, cloud=cloud, guess=guess: register(second.points, guess, cloud), 5)
         result = register(second.points, guess, cloud)
         print(
-            f"  ICP per scan            : {t_icp * 1e3:7.1f} ms  (accepted={result.accepted}, fitness={result.fitness:.3f})"
+            f"  ICP per scan            : {t_icp * 1e3:7.1f} ms"
+            f"  (accepted={result.accepted}, fitness={result.fitness:.3f})"
         )
 
 

@@ -97,7 +97,7 @@ class ScannerConfig:
     @property
     def n_rows(self) -> int:
         """Rows of the pattern: elevations from ``elevation_min`` to ``elevation_max`` inclusive."""
-        return int(math.floor((self.elevation_max - self.elevation_min) / self.angular_step + 1e-9)) + 1
+        return math.floor((self.elevation_max - self.elevation_min) / self.angular_step + 1e-9) + 1
 
     @property
     def n_rays(self) -> int:

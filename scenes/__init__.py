@@ -37,7 +37,9 @@ from scenes.model import STRUCTURAL_CLASSES, Door, Room, Scene, StructureSamples
 
 __all__ = [
     "STRUCTURAL_CLASSES",
+    "ClutterPlan",
     "Door",
+    "DoorPlan",
     "FloorPlan",
     "FloorPlanError",
     "GeneratorConfig",
@@ -47,6 +49,7 @@ __all__ = [
     "MissingStructureError",
     "PlanGeometryError",
     "Room",
+    "RoomPlan",
     "Scene",
     "SceneError",
     "SceneFileError",
@@ -55,6 +58,7 @@ __all__ = [
     "SurfaceClass",
     "UnknownSceneError",
     "UnsupportedFormatError",
+    "WindowPlan",
     "bundled_plan",
     "extrude",
     "generate_plan",

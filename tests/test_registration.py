@@ -18,7 +18,7 @@ def second_stop(scene, rng):
     """A free point 0.5-1.5 m from the start, in the simulator's truth."""
     for _ in range(200):
         p = scene.start[:2] + rng.uniform(-1.5, 1.5, 2)
-        if 0.5 <= np.linalg.norm(p - scene.start[:2]) and point_is_free(scene, p, 0.0):
+        if np.linalg.norm(p - scene.start[:2]) >= 0.5 and point_is_free(scene, p, 0.0):
             return p
     return scene.start[:2]
 

@@ -53,7 +53,7 @@ def test_points_lie_on_the_mesh(exact_scan):
 
 def test_ranges_match_the_analytic_distances(exact_scan):
     scan, pose, cfg = exact_scan
-    directions, rows, cols = ray_pattern(cfg)
+    directions, _, _ = ray_pattern(cfg)
     flat = scan.rows * cfg.n_cols + scan.cols
     world_dirs = directions[flat].astype(np.float64) @ pose[:3, :3].T
     expected = analytic_ranges(pose[:3, 3], world_dirs)
@@ -80,7 +80,7 @@ def test_point_count_is_pattern_minus_dropped_returns(box_room):
     # Rays within 0.1 mm of a limit may fall either side in float32; all others are decided.
     surely = np.count_nonzero((expected >= 2.5 + 1e-4) & (expected <= 4.0 - 1e-4))
     maybe = np.count_nonzero((expected >= 2.5 - 1e-4) & (expected <= 4.0 + 1e-4))
-    assert 0 < surely and maybe < cfg.n_rays and maybe - surely < 20
+    assert surely > 0 and maybe < cfg.n_rays and maybe - surely < 20
     assert surely <= len(scan) <= maybe
     assert np.all((scan.ranges >= 2.5) & (scan.ranges <= 4.0))
 

@@ -6,7 +6,7 @@ import numpy as np
 
 from nbs_env.errors import InvalidPoseError
 
-__all__ = ["check_pose", "planar", "pose_from_xyz_rpy", "pose_error", "yaw_of"]
+__all__ = ["check_pose", "planar", "pose_error", "pose_from_xyz_rpy", "yaw_of"]
 
 
 def pose_from_xyz_rpy(

@@ -18,7 +18,7 @@ from scenes._open3d import open3d
 __all__ = ["AccumulatedCloud", "RegistrationResult", "register"]
 
 
-def _cloud(points: np.ndarray, normals: np.ndarray | None = None):  # noqa: ANN202 - open3d type
+def _cloud(points: np.ndarray, normals: np.ndarray | None = None):
     o3d = open3d()
     pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=np.float64)))
     if normals is not None:
@@ -26,7 +26,7 @@ def _cloud(points: np.ndarray, normals: np.ndarray | None = None):  # noqa: ANN2
     return pc
 
 
-def _downsample_with_normals(points: np.ndarray, origin: np.ndarray, voxel: float, radius: float):  # noqa: ANN202
+def _downsample_with_normals(points: np.ndarray, origin: np.ndarray, voxel: float, radius: float):
     o3d = open3d()
     pc = _cloud(points).voxel_down_sample(voxel)
     pc.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=30))
@@ -85,7 +85,7 @@ class AccumulatedCloud:
         self._storey = self._merge(self._storey, new)
         self._room_copies[int(room)] = self._merge(self._room_copies.get(int(room)), new)
 
-    def _merge(self, old, new):  # noqa: ANN001, ANN202
+    def _merge(self, old, new):
         if old is None:
             return new
         merged = old + new
@@ -106,7 +106,7 @@ class AccumulatedCloud:
         pc = self._storey if room is None else self._room_copies.get(room)
         return np.zeros((0, 3)) if pc is None else np.asarray(pc.points)
 
-    def working_cloud(self, room: int | None = None):  # noqa: ANN201 - open3d PointCloud
+    def working_cloud(self, room: int | None = None):
         """The downsampled working copy (an open3d PointCloud with normals), or None when empty."""
         return self._storey if room is None else self._room_copies.get(room)
 
