@@ -1,0 +1,595 @@
+"""Load one storey of an IFC building model as a :class:`~scenes.model.Scene` (needs ifcopenshell).
+
+Conventions
+-----------
+*Storeys.* The file's ``IfcBuildingStorey`` entities are sorted by elevation: the world z of the
+storey's placement (its ``Elevation`` attribute when it has no placement), in metres. A storey is
+chosen by ``Name`` or ``LongName``, or by index into that list (negative indices count from the
+top); by default the storey whose elevation is nearest 0 (the lower one on a tie). The storey spans
+from its elevation to the next storey's elevation, or to the top of its walls if it is the highest.
+
+*Elements.* The scene holds the elements contained in the storey (directly, through a space, or as
+parts of a contained element) plus, from other storeys, the slabs, coverings and roofs that bound it:
+those whose bottom lies within :data:`BOUNDING_TOLERANCE` of the storey's top become CEILING, those
+whose top lies within it of the storey's floor become FLOOR, provided they overlap the storey's walls
+in plan. ``IfcSite``, ``IfcSpace`` and ``IfcOpeningElement`` are never meshed (door and window
+openings are already cut from the walls by the geometry engine).
+
+*Classes.* :data:`DEFAULT_CLASS_MAP` maps IFC classes to :class:`~scenes.model.SurfaceClass`;
+``class_map`` entries are merged over it. A key is an IFC class name, optionally with a predefined
+type (``"IfcCovering.CEILING"``), matched case-insensitively; an element takes the entry of its
+most specific class, a ``Class.TYPE`` key beating the plain ``Class`` key. A value of ``None`` leaves
+the element out of the mesh. Three rules refine the table:
+
+* an element aggregated into another element (a slab of an ``IfcRoof``, a member or plate of an
+  ``IfcCurtainWall``, a flight of an ``IfcStair``) takes the class of that whole;
+* an ``IfcSlab`` on the storey mapped to FLOOR or CEILING is a FLOOR when its middle lies in the lower
+  half of the storey and a CEILING otherwise, because ArchiCAD, Revit and others file the slab between
+  two storeys under either of them;
+* a slab, covering or roof from another storey is FLOOR or CEILING by where it bounds the storey (see
+  above).
+
+*Ground truth.* Rooms come from the storey's ``IfcSpace`` entities: the polygon is the largest piece
+of the union of the space geometry's triangles projected to xy (counter-clockwise), the name its
+``LongName`` (else ``Name``), ``floor_z``/``ceiling_z`` its z range. A face belongs to the room whose
+prism (polygon x [floor_z, ceiling_z], :data:`ROOM_Z_TOLERANCE` slack) contains the point 0.1 m in
+front of the face's centroid along its normal, else room -1, so the outside of exterior walls, the
+underside of the floor slab and the top of the ceiling slab belong to no room. Faces longer than
+:data:`MAX_FACE_EDGE` are split first, so that the single pair of triangles of a slab's top or a long
+wall's side is shared out among the rooms along it. Doors come from the storey's ``IfcDoor``
+entities: ``OverallWidth``/``OverallHeight`` (else the geometry's extent); of the two horizontal axes
+of the door's placement (of the smallest rectangle around its plan if it has none), the one along
+which the geometry is thinner is the normal; the rooms are those containing the centre of the door's
+plan -/+ 0.6 m along the normal (-1 = outside), listed room before outside, else lower id first,
+with the normal pointing from the first to the second; ``position`` is that centre at the door's
+lowest z.
+
+Doors are meshed as the model draws them, usually closed: a ray (or robot) cannot pass a closed door
+leaf. Pass ``class_map={"IfcDoor": None}`` for open doorways; the ``Door`` ground truth is kept.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+import shapely
+import trimesh
+
+from scenes.errors import IfcError, MissingDependencyError, MissingStructureError, SceneFileError
+from scenes.importers import footprint_polygon
+from scenes.model import Door, Room, Scene, SurfaceClass
+
+__all__ = [
+    "BOUNDING_TOLERANCE",
+    "DEFAULT_CLASS_MAP",
+    "MAX_FACE_EDGE",
+    "ROOM_Z_TOLERANCE",
+    "load_ifc_scene",
+]
+
+_S = SurfaceClass
+
+#: IFC class (optionally ``.PREDEFINEDTYPE``) -> SurfaceClass, or None to leave the element out.
+#: The most specific entry wins, so ``IfcElement`` is the catch-all for anything not listed.
+#:
+#: Choices beyond the obvious ones: columns and curtain-wall plates are WALL (vertical structure that
+#: bounds the free space); beams are CEILING (they hang under it); stairs, ramps, railings and members
+#: (rafters, studs, mullions outside a curtain wall) are CLUTTER, obstacles rather than the building's
+#: envelope; coverings are CEILING, FLOOR or WALL by predefined type and CLUTTER otherwise; footings
+#: and piles lie below the floor and are left out, as are virtual and feature elements.
+DEFAULT_CLASS_MAP: Mapping[str, SurfaceClass | None] = MappingProxyType(
+    {
+        "IfcWall": _S.WALL,
+        "IfcWallStandardCase": _S.WALL,
+        "IfcCurtainWall": _S.WALL,
+        "IfcColumn": _S.WALL,
+        "IfcPlate": _S.WALL,
+        "IfcSlab": _S.FLOOR,
+        "IfcSlab.ROOF": _S.CEILING,
+        "IfcRoof": _S.CEILING,
+        "IfcBeam": _S.CEILING,
+        "IfcCovering": _S.CLUTTER,
+        "IfcCovering.CEILING": _S.CEILING,
+        "IfcCovering.FLOORING": _S.FLOOR,
+        "IfcCovering.CLADDING": _S.WALL,
+        "IfcDoor": _S.DOOR,
+        "IfcWindow": _S.WINDOW,
+        "IfcStair": _S.CLUTTER,
+        "IfcStairFlight": _S.CLUTTER,
+        "IfcRamp": _S.CLUTTER,
+        "IfcRampFlight": _S.CLUTTER,
+        "IfcRailing": _S.CLUTTER,
+        "IfcMember": _S.CLUTTER,
+        "IfcFurnishingElement": _S.CLUTTER,
+        "IfcBuildingElementProxy": _S.CLUTTER,
+        "IfcDistributionElement": _S.CLUTTER,
+        "IfcTransportElement": _S.CLUTTER,
+        "IfcElement": _S.CLUTTER,
+        "IfcFooting": None,
+        "IfcPile": None,
+        "IfcFeatureElement": None,
+        "IfcVirtualElement": None,
+        "IfcGeographicElement": None,
+    }
+)
+
+#: How close (m) a slab's bottom must come to a storey's top, or its top to the storey's floor, to
+#: bound that storey.
+BOUNDING_TOLERANCE = 0.5
+#: Faces with a longer edge (m) are split before rooms are assigned.
+MAX_FACE_EDGE = 1.0
+#: Slack (m) on a room's z range when testing which room a face belongs to. Less than the 0.1 m probe
+#: distance, so that a face lying on the room's floor or ceiling plane but facing away from the room
+#: (the top of a beam against the slab) stays out of it.
+ROOM_Z_TOLERANCE = 0.05
+#: Distance (m) in front of a face at which its room is tested.
+_FACE_PROBE = 0.1
+#: Distance (m) either side of a door's centre at which its two rooms are looked up.
+_DOOR_PROBE = 0.6
+
+_INSTALL_HINT = "reading IFC needs ifcopenshell: pip install 'nbs-env[ifc]'"
+_BOUNDING_CLASSES = ("IfcSlab", "IfcCovering", "IfcRoof")
+
+
+@dataclass(frozen=True)
+class _Storey:
+    entity: Any
+    name: str
+    long_name: str
+    elevation: float
+
+    def describe(self, index: int) -> str:
+        long = f" / {self.long_name!r}" if self.long_name and self.long_name != self.name else ""
+        return f"{index}: {self.name!r}{long} at {self.elevation:.2f} m"
+
+
+def load_ifc_scene(
+    path: str | Path,
+    *,
+    storey: str | int | None = None,
+    class_map: Mapping[str, SurfaceClass | None] | None = None,
+    name: str | None = None,
+) -> Scene:
+    """Load one storey of an IFC file as a labelled scene with rooms and doors.
+
+    Parameters
+    ----------
+    path : str or Path
+        An IFC file (any schema ifcopenshell reads: IFC2X3, IFC4, IFC4X3).
+    storey : str or int, optional
+        ``Name`` or ``LongName`` of the storey, or its index in the storeys sorted by elevation
+        (negative counts from the top). Default: the storey nearest elevation 0.
+    class_map : mapping, optional
+        Entries merged over :data:`DEFAULT_CLASS_MAP` (IFC class or ``Class.PREDEFINEDTYPE`` ->
+        SurfaceClass, or None to leave such elements out).
+    name : str, optional
+        Name of the scene; default ``"<path>#<storey name>"``.
+
+    Returns
+    -------
+    Scene
+        World coordinates in metres, z up. ``face_labels`` (F,) uint8, ``face_rooms`` (F,) int32
+        indexing ``rooms`` (from ``IfcSpace``) or -1, ``doors`` (from ``IfcDoor``), and ``metadata``
+        with ``source``, ``format`` ("ifc"), ``schema``, ``storey`` (its name), ``storey_index``,
+        ``elevation`` and ``height`` (m).
+
+    Raises
+    ------
+    MissingDependencyError
+        ifcopenshell is not installed.
+    SceneFileError
+        The file does not exist.
+    IfcError
+        The file is not IFC, has no storey, the storey is unknown, ``class_map`` names an unknown
+        class, or the storey has no wall faces.
+    MissingStructureError
+        The storey has walls but no floor faces.
+    """
+    path = Path(path)
+    source = str(path)
+    try:
+        import ifcopenshell
+        import ifcopenshell.geom
+        import ifcopenshell.util.element
+        import ifcopenshell.util.placement
+        import ifcopenshell.util.unit
+    except ImportError as exc:
+        raise MissingDependencyError(source, _INSTALL_HINT) from exc
+    if not path.is_file():
+        raise SceneFileError(source, "no such file" if not path.exists() else "not a regular file")
+    try:
+        model = ifcopenshell.open(str(path))
+    except Exception as exc:  # ifcopenshell raises its own error types, or OSError, for bad input
+        raise IfcError(source, f"cannot read as IFC: {type(exc).__name__}: {exc}") from exc
+
+    scale = float(ifcopenshell.util.unit.calculate_unit_scale(model))
+    mapping = _merge_class_map(source, model, class_map)
+    storeys = _sorted_storeys(model, scale)
+    if not storeys:
+        raise IfcError(source, "no storey: the file has no IfcBuildingStorey")
+    index = _select_storey(source, storeys, storey)
+    chosen = storeys[index]
+    elevation = chosen.elevation
+
+    decomposition = ifcopenshell.util.element.get_decomposition(chosen.entity)
+    on_storey = {e.id(): e for e in decomposition if e.is_a("IfcProduct")}
+    classes: dict[int, SurfaceClass] = {}
+    for eid, element in on_storey.items():
+        if element.is_a("IfcElement") and (cls := _element_class(element, mapping, model)) is not None:
+            classes[eid] = cls
+    horizontal = (SurfaceClass.FLOOR, SurfaceClass.CEILING)
+    others = [
+        e
+        for e in model.by_type("IfcElement")
+        if e.id() not in on_storey and _is_bounding_kind(e) and _element_class(e, mapping, model) in horizontal
+    ]
+    spaces = [e for e in on_storey.values() if e.is_a("IfcSpace")]
+    doors = [e for e in on_storey.values() if e.is_a("IfcDoor")]
+    # Doors are meshed even when left out of the scene: their geometry gives the Door ground truth.
+    wanted = {e.id(): e for e in [*(on_storey[i] for i in classes), *others, *spaces, *doors]}
+    shapes = _triangulate(source, ifcopenshell, model, wanted.values())
+
+    wall_ids = [i for i, c in classes.items() if c == SurfaceClass.WALL and i in shapes]
+    if not wall_ids:
+        raise IfcError(
+            source,
+            f"storey {chosen.name!r} has no wall faces (no IfcWall, or none with body geometry); "
+            f"storeys: {'; '.join(s.describe(i) for i, s in enumerate(storeys))}",
+        )
+    if index + 1 < len(storeys):
+        top = storeys[index + 1].elevation
+    else:
+        top = max(float(shapes[i][0][:, 2].max()) for i in wall_ids)
+    plan = shapely.convex_hull(shapely.multipoints(np.concatenate([shapes[i][0][:, :2] for i in wall_ids])))
+    _place_slabs(classes, on_storey, shapes, elevation, top)
+    classes.update(_bounding_elements(others, shapes, plan, elevation, top))
+
+    vertices, faces, labels = _assemble(shapes, classes)
+    if not np.any(labels == SurfaceClass.FLOOR):
+        raise MissingStructureError(
+            source, f"storey {chosen.name!r} has no floor faces (no slab at its elevation {elevation:.2f} m)"
+        )
+    structural = np.isin(labels, [c.value for c in SurfaceClass if c.is_structural])
+    vertices, faces, origin = _split_long_faces(vertices, faces, MAX_FACE_EDGE, structural)
+    labels = labels[origin]
+    mesh = trimesh.Trimesh(vertices, faces, process=False, validate=False)
+
+    rooms = _rooms(spaces, shapes)
+    face_rooms = _face_rooms(mesh, rooms)
+    door_list = _doors(doors, shapes, rooms, scale)
+    return Scene(
+        mesh,
+        labels,
+        face_rooms,
+        rooms=rooms,
+        doors=door_list,
+        name=name if name is not None else f"{source}#{chosen.name}",
+        metadata={
+            "source": source,
+            "format": "ifc",
+            "schema": str(model.schema),
+            "storey": chosen.name,
+            "storey_index": index,
+            "elevation": elevation,
+            "height": top - elevation,
+        },
+    )
+
+
+# ------------------------------------------------------------------------------------- storeys
+def _sorted_storeys(model: Any, scale: float) -> list[_Storey]:
+    import ifcopenshell.util.placement
+
+    storeys = []
+    for order, entity in enumerate(model.by_type("IfcBuildingStorey")):
+        if entity.ObjectPlacement is not None:
+            # The placement's world z agrees with the world-coordinate geometry even when the
+            # building itself is placed above the project origin; Elevation need not.
+            z = float(ifcopenshell.util.placement.get_local_placement(entity.ObjectPlacement)[2, 3]) * scale
+        else:
+            z = float(entity.Elevation or 0.0) * scale
+        storeys.append((z, order, _Storey(entity, entity.Name or f"#{entity.id()}", entity.LongName or "", z)))
+    return [s for _, _, s in sorted(storeys, key=lambda t: (t[0], t[1]))]
+
+
+def _select_storey(source: str, storeys: list[_Storey], storey: str | int | None) -> int:
+    listing = "; ".join(s.describe(i) for i, s in enumerate(storeys))
+    if storey is None:
+        # Nearest to 0; sorted ascending, so min() keeps the lower storey on a tie.
+        return min(range(len(storeys)), key=lambda i: abs(storeys[i].elevation))
+    if isinstance(storey, bool) or not isinstance(storey, (str, int, np.integer)):
+        raise IfcError(source, f"storey must be a name or an index, got {storey!r}; storeys: {listing}")
+    if isinstance(storey, str):
+        for i, s in enumerate(storeys):
+            if storey in (s.name, s.long_name):
+                return i
+        raise IfcError(source, f"no storey named {storey!r}; storeys: {listing}")
+    n = len(storeys)
+    if not -n <= int(storey) < n:
+        raise IfcError(source, f"storey index {storey} is out of range; storeys: {listing}")
+    return int(storey) % n
+
+
+# ------------------------------------------------------------------------------------- classes
+def _merge_class_map(
+    source: str, model: Any, class_map: Mapping[str, SurfaceClass | None] | None
+) -> dict[str, SurfaceClass | None]:
+    """The lower-cased merged table; user keys are checked against the file's schema."""
+    import ifcopenshell.ifcopenshell_wrapper as wrapper
+
+    schema = wrapper.schema_by_name(model.schema_identifier)
+    merged: dict[str, SurfaceClass | None] = {k.lower(): v for k, v in DEFAULT_CLASS_MAP.items()}
+    for key, value in (class_map or {}).items():
+        cls_name = str(key).split(".", 1)[0]
+        try:
+            schema.declaration_by_name(cls_name)
+        except Exception:
+            raise IfcError(source, f"class_map: {key!r} is no IFC class of schema {model.schema_identifier}") from None
+        if value is not None and not isinstance(value, SurfaceClass):
+            try:
+                value = SurfaceClass(value)
+            except ValueError:
+                raise IfcError(source, f"class_map[{key!r}] = {value!r} is no SurfaceClass") from None
+        merged[str(key).lower()] = value
+    return merged
+
+
+def _class_chain(model: Any, ifc_class: str) -> list[str]:
+    """``ifc_class`` and its supertypes, most specific first."""
+    import ifcopenshell.ifcopenshell_wrapper as wrapper
+
+    decl = wrapper.schema_by_name(model.schema_identifier).declaration_by_name(ifc_class)
+    chain = []
+    while decl is not None:
+        chain.append(decl.name())
+        decl = decl.supertype()
+    return chain
+
+
+def _lookup(element: Any, mapping: Mapping[str, SurfaceClass | None], model: Any) -> SurfaceClass | None:
+    import ifcopenshell.util.element
+
+    ptype = ifcopenshell.util.element.get_predefined_type(element)
+    for cls_name in _class_chain(model, element.is_a()):
+        if ptype and f"{cls_name}.{ptype}".lower() in mapping:
+            return mapping[f"{cls_name}.{ptype}".lower()]
+        if cls_name.lower() in mapping:
+            return mapping[cls_name.lower()]
+    return None
+
+
+def _whole(element: Any) -> Any:
+    """The outermost element that ``element`` is (recursively) an aggregated part of, or itself."""
+    import ifcopenshell.util.element
+
+    whole = element
+    while (parent := ifcopenshell.util.element.get_aggregate(whole)) is not None and parent.is_a("IfcElement"):
+        whole = parent
+    return whole
+
+
+def _element_class(element: Any, mapping: Mapping[str, SurfaceClass | None], model: Any) -> SurfaceClass | None:
+    """The class of an element: that of the element it is part of, if any, else its own entry."""
+    return _lookup(_whole(element), mapping, model)
+
+
+def _is_bounding_kind(element: Any) -> bool:
+    """Slabs, coverings and roofs, or parts of one: the elements that may close another storey."""
+    return any(e.is_a(c) for e in (element, _whole(element)) for c in _BOUNDING_CLASSES)
+
+
+def _place_slabs(
+    classes: dict[int, SurfaceClass],
+    on_storey: Mapping[int, Any],
+    shapes: Mapping[int, tuple[np.ndarray, np.ndarray]],
+    elevation: float,
+    top: float,
+) -> None:
+    """Make the storey's own slabs FLOOR below the storey's middle height and CEILING above it."""
+    middle = 0.5 * (elevation + top)
+    for eid, cls in list(classes.items()):
+        element = on_storey[eid]
+        if cls not in (SurfaceClass.FLOOR, SurfaceClass.CEILING) or eid not in shapes:
+            continue
+        # A slab that is part of a roof or another whole keeps the class of that whole.
+        if element.is_a("IfcSlab") and _whole(element).id() == element.id():
+            z = shapes[eid][0][:, 2]
+            classes[eid] = SurfaceClass.FLOOR if 0.5 * (z.min() + z.max()) < middle else SurfaceClass.CEILING
+
+
+def _bounding_elements(
+    others: list[Any],
+    shapes: Mapping[int, tuple[np.ndarray, np.ndarray]],
+    plan: shapely.Geometry,
+    elevation: float,
+    top: float,
+) -> dict[int, SurfaceClass]:
+    """Elements of other storeys that close this one: CEILING from above, FLOOR from below."""
+    found = {}
+    for element in others:
+        if element.id() not in shapes:
+            continue
+        verts = shapes[element.id()][0]
+        if not _overlaps_in_plan(verts, plan):
+            continue
+        if abs(float(verts[:, 2].min()) - top) <= BOUNDING_TOLERANCE:
+            found[element.id()] = SurfaceClass.CEILING
+        elif abs(float(verts[:, 2].max()) - elevation) <= BOUNDING_TOLERANCE:
+            found[element.id()] = SurfaceClass.FLOOR
+    return found
+
+
+# ------------------------------------------------------------------------------------ geometry
+def _triangulate(
+    source: str, ifcopenshell: Any, model: Any, elements: Iterable[Any]
+) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """World-coordinate triangles of each element: id -> (vertices (n, 3) float, faces (m, 3) int)."""
+    elements = list(elements)
+    if not elements:
+        return {}
+    settings = ifcopenshell.geom.settings()
+    settings.set("use-world-coords", True)
+    shapes: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    try:
+        iterator = ifcopenshell.geom.iterator(settings, model, max(1, os.cpu_count() or 1), include=elements)
+        if not iterator.initialize():
+            return shapes
+        while True:
+            shape = iterator.get()
+            verts = np.asarray(shape.geometry.verts, dtype=float).reshape(-1, 3)
+            faces = np.asarray(shape.geometry.faces, dtype=np.int64).reshape(-1, 3)
+            if len(faces):
+                shapes[int(shape.id)] = (verts, faces)
+            if not iterator.next():
+                break
+    except Exception as exc:
+        raise IfcError(source, f"the geometry engine failed: {type(exc).__name__}: {exc}") from exc
+    return shapes
+
+
+def _assemble(
+    shapes: Mapping[int, tuple[np.ndarray, np.ndarray]], classes: Mapping[int, SurfaceClass]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Concatenate the classified elements in id order (the iterator's order depends on threads)."""
+    verts, faces, labels = [], [], []
+    offset = 0
+    for eid in sorted(i for i in classes if i in shapes):
+        v, f = shapes[eid]
+        verts.append(v)
+        faces.append(f + offset)
+        labels.append(np.full(len(f), classes[eid].value, dtype=np.uint8))
+        offset += len(v)
+    if not faces:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.uint8)
+    return np.concatenate(verts), np.concatenate(faces), np.concatenate(labels)
+
+
+def _overlaps_in_plan(verts: np.ndarray, plan: shapely.Geometry) -> bool:
+    """Whether an element's plan hull covers at least a quarter of the smaller of it and ``plan``."""
+    hull = shapely.convex_hull(shapely.multipoints(verts[:, :2]))
+    if hull.area <= 0 or plan.area <= 0:
+        return False
+    return hull.intersection(plan).area >= 0.25 * min(hull.area, plan.area)
+
+
+def _split_long_faces(
+    vertices: np.ndarray, faces: np.ndarray, max_edge: float, mask: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bisect the longest edge of every face (of those in ``mask``) longer than ``max_edge``.
+
+    Returns the new vertices (V', 3), faces (F', 3) and, per new face, the index of the face it came
+    from (F',); the first F faces keep their indices. Bisecting only the longest edge splits a long
+    thin face into about ``length / max_edge`` pieces, where splitting into four would make slivers
+    by the thousand.
+    """
+    vertices = np.asarray(vertices, dtype=float)
+    faces = np.array(faces, dtype=np.int64)
+    origin = np.arange(len(faces))
+    eligible = np.ones(len(faces), bool) if mask is None else np.asarray(mask, bool).copy()
+    for _ in range(64):
+        tri = vertices[faces]
+        lengths = np.linalg.norm(tri[:, [1, 2, 0]] - tri, axis=2)  # edge k runs from corner k to k+1
+        longest = lengths.argmax(axis=1)
+        split = eligible & (lengths[np.arange(len(faces)), longest] > max_edge)
+        if not split.any():
+            break
+        idx = np.flatnonzero(split)
+        k = longest[idx]
+        a = faces[idx, k]
+        b = faces[idx, (k + 1) % 3]
+        c = faces[idx, (k + 2) % 3]
+        mid = np.arange(len(vertices), len(vertices) + len(idx))
+        vertices = np.concatenate([vertices, 0.5 * (vertices[a] + vertices[b])])
+        # (a, m, c) and (m, b, c) keep the winding of (a, b, c).
+        faces[idx] = np.column_stack([a, mid, c])
+        faces = np.concatenate([faces, np.column_stack([mid, b, c])])
+        origin = np.concatenate([origin, origin[idx]])
+        eligible = np.concatenate([eligible, np.ones(len(idx), bool)])
+    return vertices, faces, origin
+
+
+# ------------------------------------------------------------------------------- ground truth
+def _rooms(spaces: list[Any], shapes: Mapping[int, tuple[np.ndarray, np.ndarray]]) -> list[Room]:
+    rooms: list[Room] = []
+    for space in sorted(spaces, key=lambda s: s.id()):
+        if space.id() not in shapes:
+            continue
+        verts, faces = shapes[space.id()]
+        polygon = footprint_polygon(verts[faces])
+        if polygon is None:
+            continue
+        label = space.LongName or space.Name or f"space #{space.id()}"
+        rooms.append(Room(len(rooms), label, polygon, float(verts[:, 2].min()), float(verts[:, 2].max())))
+    return rooms
+
+
+def _face_rooms(mesh: trimesh.Trimesh, rooms: list[Room]) -> np.ndarray:
+    """Room of each face: the room whose prism holds the point 0.1 m in front of its centroid."""
+    result = np.full(len(mesh.faces), -1, dtype=np.int32)
+    probe = mesh.triangles_center + _FACE_PROBE * mesh.face_normals
+    for room in rooms:
+        inside = shapely.contains_xy(shapely.Polygon(room.polygon), probe[:, 0], probe[:, 1])
+        inside &= (probe[:, 2] >= room.floor_z - ROOM_Z_TOLERANCE) & (probe[:, 2] <= room.ceiling_z + ROOM_Z_TOLERANCE)
+        result[inside & (result < 0)] = room.id
+    return result
+
+
+def _room_at(rooms: list[Room], xy: np.ndarray) -> int:
+    for room in rooms:
+        if shapely.contains_xy(shapely.Polygon(room.polygon), float(xy[0]), float(xy[1])):
+            return room.id
+    return -1
+
+
+def _door_axes(door: Any, verts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two horizontal unit axes for a door: its placement's x axis and the perpendicular.
+
+    The placement gives exact axes where the smallest rectangle around the geometry can tilt by a
+    degree for a handle or an asymmetric frame; that rectangle is only the fallback.
+    """
+    import ifcopenshell.util.placement
+
+    if door.ObjectPlacement is not None:
+        x_axis = ifcopenshell.util.placement.get_local_placement(door.ObjectPlacement)[:2, 0]
+        if np.linalg.norm(x_axis) > 0.5:
+            u = x_axis / np.linalg.norm(x_axis)
+            return u, np.array([-u[1], u[0]])
+    rect = shapely.minimum_rotated_rectangle(shapely.multipoints(verts[:, :2]))
+    corners = np.asarray(getattr(rect, "exterior", rect).coords)
+    edge = corners[1] - corners[0] if len(corners) > 1 else np.array([1.0, 0.0])
+    if np.linalg.norm(edge) == 0:
+        edge = np.array([1.0, 0.0])
+    u = edge / np.linalg.norm(edge)
+    return u, np.array([-u[1], u[0]])
+
+
+def _doors(
+    doors: list[Any], shapes: Mapping[int, tuple[np.ndarray, np.ndarray]], rooms: list[Room], scale: float
+) -> list[Door]:
+    result = []
+    for door in sorted(doors, key=lambda d: d.id()):
+        if door.id() not in shapes:
+            continue
+        verts = shapes[door.id()][0]
+        u, v = _door_axes(door, verts)
+        pu, pv = verts[:, :2] @ u, verts[:, :2] @ v
+        centre = u * 0.5 * (pu.min() + pu.max()) + v * 0.5 * (pv.min() + pv.max())
+        extent_u, extent_v = float(np.ptp(pu)), float(np.ptp(pv))
+        # The door's normal is its horizontal axis of least extent: across the wall.
+        normal, geometric_width = (v, extent_u) if extent_u >= extent_v else (u, extent_v)
+        width = float(door.OverallWidth) * scale if door.OverallWidth else geometric_width
+        z0, z1 = float(verts[:, 2].min()), float(verts[:, 2].max())
+        height = float(door.OverallHeight) * scale if door.OverallHeight else z1 - z0
+        a = _room_at(rooms, centre - _DOOR_PROBE * normal)
+        b = _room_at(rooms, centre + _DOOR_PROBE * normal)
+        # Canonical order: a room before the outside, else the lower id first.
+        if (a < 0 <= b) or (0 <= b < a):
+            a, b, normal = b, a, -normal
+        result.append(Door((a, b), np.array([centre[0], centre[1], z0]), width, height, normal + 0.0))
+    return result

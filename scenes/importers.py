@@ -1,0 +1,612 @@
+"""Load and save labelled triangle meshes (OBJ, glTF/GLB, PLY) as :class:`~scenes.model.Scene`.
+
+Labelling conventions
+---------------------
+*Names (OBJ, glTF/GLB).* Every part of the file carries a name, and the name's **prefix** gives
+the :class:`~scenes.model.SurfaceClass` of all its faces, case-insensitively:
+
+====================  =====================================================================
+prefix                class
+====================  =====================================================================
+``wall``              WALL
+``floor``             FLOOR
+``ceiling``           CEILING
+``door``              DOOR
+``window``            WINDOW
+``clutter``           CLUTTER
+====================  =====================================================================
+
+The prefix must end the name or be followed by ``_``, ``-``, ``.``, a space or a digit, so
+``wall_north``, ``Floor.001``, ``door2`` and ``clutter-desk`` are labelled while ``walls`` and
+``doorway`` are not. Parts whose names match no prefix become CLUTTER, and one
+:class:`UnlabelledPartsWarning` lists them all.
+
+An optional ``room<N>`` token gives the faces room ``N``: it starts the name or follows a
+``_``, ``-``, ``.`` or space, and ends the name or is followed by one (``wall_room3_0``,
+``floor.room12``; not ``clutter_bedroom2``). Faces without one get room -1. The room numbers in a
+file need not be contiguous: they are renumbered 0..k-1 in increasing order, and each room keeps its
+file number in its name (``room3``).
+
+* **OBJ**: a part is a run of faces under an ``o`` (object) and/or ``g`` (group) statement. When
+  both are set, the group name is tried first and the object name second, for the class and for
+  the room token alike; an ``o`` statement ends the current group. Polygons are fan-triangulated;
+  texture and normal indices are ignored.
+  The file is read by a small parser here rather than by trimesh, because trimesh 5.2 names split
+  parts ``<object>_<group>`` (so ``o wall`` + ``g floor`` became a *wall*), lets an ``o`` inherit
+  the previous ``g``, and de-duplicates repeated names with suffixes.
+* **glTF/GLB**: each node of the scene graph that instances a mesh is a part, placed with its world
+  transform. The class and room come from the node name, then the mesh name, then the names of the
+  node's ancestors (nearest first), so an empty parent ``room2`` can give its children a room.
+
+*Per-face properties (PLY).* A PLY file holds one mesh; its ``face`` element carries an integer
+property ``label`` (a :class:`~scenes.model.SurfaceClass` value) and optionally ``room`` (a room
+number, negative for none), renumbered like the room tokens.
+
+Axes and units
+--------------
+Coordinates are metres with z up. Files authored y up (the glTF convention, Blender's glTF
+exporter) load with ``y_up=True``, which rotates +90 degrees about x: ``(x, y, z) -> (x, -z, y)``.
+Files written by :func:`export_scene` are z up.
+
+Ground truth
+------------
+When any face carries a room, every room gets a :class:`~scenes.model.Room`: its polygon is the
+largest piece of the union of its FLOOR triangles projected to xy (counter-clockwise, not closed),
+``floor_z`` the lowest z of those triangles and ``ceiling_z`` the highest z of its CEILING faces
+(``floor_z + 2.7`` without any). A room with faces but no floor faces has no outline; its faces
+fall back to room -1 with a warning. Meshes carry no door ground truth.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import shapely
+import trimesh
+
+from scenes.errors import InvalidMeshError, MissingStructureError, SceneFileError, UnsupportedFormatError
+from scenes.model import Room, Scene, SurfaceClass
+
+__all__ = [
+    "EXPORT_EXTENSIONS",
+    "SUPPORTED_EXTENSIONS",
+    "UnlabelledPartsWarning",
+    "export_scene",
+    "footprint_polygon",
+    "load_mesh_scene",
+    "parse_part_name",
+]
+
+#: Extensions :func:`load_mesh_scene` reads.
+SUPPORTED_EXTENSIONS: tuple[str, ...] = (".obj", ".glb", ".gltf", ".ply")
+#: Extensions :func:`export_scene` writes (a ``.gltf`` would need side files for its buffers).
+EXPORT_EXTENSIONS: tuple[str, ...] = (".obj", ".glb", ".ply")
+
+#: Ceiling height assumed for a room whose faces include no ceiling.
+DEFAULT_ROOM_HEIGHT = 2.7
+
+_PREFIXES = {c.name.lower(): c for c in SurfaceClass}
+_PREFIX_RE = re.compile(r"^(" + "|".join(_PREFIXES) + r")(?=$|[_\-. 0-9])", re.IGNORECASE)
+_ROOM_RE = re.compile(r"(?:^|[_\-. ])room(\d+)(?=$|[_\-. ])", re.IGNORECASE)
+
+
+class UnlabelledPartsWarning(UserWarning):
+    """Parts of a mesh file whose names carry no class prefix; they were loaded as CLUTTER.
+
+    Attributes
+    ----------
+    source : str
+        The file.
+    names : tuple of str
+        The unlabelled part names, in file order.
+    """
+
+    def __init__(self, source: str, names: Sequence[str]) -> None:
+        self.source = str(source)
+        self.names = tuple(names)
+        prefixes = ", ".join(_PREFIXES)
+        super().__init__(
+            f"{self.source}: {len(self.names)} part(s) have no class prefix ({prefixes}) and were "
+            f"loaded as clutter: {', '.join(repr(n) for n in self.names)}"
+        )
+
+
+def parse_part_name(name: str) -> tuple[SurfaceClass | None, int]:
+    """Class and room number encoded in a part name.
+
+    Parameters
+    ----------
+    name : str
+        An object, group or node name such as ``"wall_room3_0"``.
+
+    Returns
+    -------
+    cls : SurfaceClass or None
+        The class given by the name's prefix, None when it has no recognised prefix.
+    room : int
+        ``N`` of the first ``room<N>`` token, -1 when there is none.
+    """
+    m = _PREFIX_RE.match(name.strip())
+    r = _ROOM_RE.search(name)
+    return (_PREFIXES[m.group(1).lower()] if m else None), (int(r.group(1)) if r else -1)
+
+
+def _classify(candidates: Sequence[str | None]) -> tuple[SurfaceClass | None, int]:
+    """First class and first room found among ``candidates``, tried in order."""
+    cls, room = None, -1
+    for cand in candidates:
+        if not cand:
+            continue
+        c, r = parse_part_name(cand)
+        if cls is None:
+            cls = c
+        if room < 0:
+            room = r
+    return cls, room
+
+
+# ---------------------------------------------------------------------------------------- loading
+def load_mesh_scene(path: str | Path, *, y_up: bool = False, name: str | None = None) -> Scene:
+    """Load a labelled mesh file as a :class:`~scenes.model.Scene`.
+
+    Parameters
+    ----------
+    path : str or Path
+        An ``.obj``, ``.glb``, ``.gltf`` or ``.ply`` file labelled as the module docstring describes.
+    y_up : bool
+        The file's up axis is +y; rotate to z up with ``(x, y, z) -> (x, -z, y)``.
+    name : str, optional
+        Name of the scene; defaults to the path. Error messages always name the file.
+
+    Returns
+    -------
+    Scene
+        ``face_labels`` (F,) uint8 from the names or the PLY ``label`` property, ``face_rooms`` (F,)
+        int32 renumbered room ids or -1, ``rooms`` derived from the floor faces, no doors, and
+        ``metadata`` ``{"source": str(path), "format": "obj" | "glb" | "gltf" | "ply"}``.
+
+    Raises
+    ------
+    SceneFileError
+        The file does not exist or cannot be read.
+    UnsupportedFormatError
+        The extension is none of :data:`SUPPORTED_EXTENSIONS`.
+    InvalidMeshError
+        The file cannot be parsed, holds no faces, has NaN or infinite vertices, or bad labels.
+    MissingStructureError
+        No floor or no wall faces.
+
+    Warns
+    -----
+    UnlabelledPartsWarning
+        Once, listing every part whose name has no class prefix (loaded as CLUTTER).
+    """
+    path = Path(path)
+    source = str(path)
+    ext = path.suffix.lower()
+    if ext not in SUPPORTED_EXTENSIONS:
+        raise UnsupportedFormatError(
+            source,
+            f"unsupported mesh format {path.suffix or '(no extension)'!r}; "
+            f"supported: {', '.join(SUPPORTED_EXTENSIONS)}",
+        )
+    if not path.is_file():
+        raise SceneFileError(source, "no such file" if not path.exists() else "not a regular file")
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise SceneFileError(source, f"cannot read the file: {exc.strerror or exc}") from exc
+
+    if ext == ".obj":
+        vertices, faces, labels, rooms, unlabelled = _read_obj(source, data)
+    elif ext == ".ply":
+        vertices, faces, labels, rooms, unlabelled = _read_ply(source, path)
+    else:
+        vertices, faces, labels, rooms, unlabelled = _read_gltf(source, path, ext)
+
+    if unlabelled:
+        warnings.warn(UnlabelledPartsWarning(source, unlabelled), stacklevel=2)
+    if len(faces) == 0:
+        raise InvalidMeshError(source, "the mesh is empty (no faces)")
+    out_of_range = (faces < 0) | (faces >= len(vertices))
+    if out_of_range.any():
+        bad = int(faces[out_of_range][0])
+        raise InvalidMeshError(
+            source,
+            f"{int(out_of_range.any(axis=1).sum())} face(s) refer to vertex {bad + 1} or other "
+            f"vertices outside 1..{len(vertices)}",
+        )
+    finite = np.isfinite(vertices).all(axis=1)
+    if not finite.all():
+        # Checked over every vertex of the file, used or not: a NaN anywhere means a broken export.
+        raise InvalidMeshError(
+            source, f"{int(np.count_nonzero(~finite))} of {len(vertices)} vertices are NaN or infinite"
+        )
+    if y_up:
+        vertices = vertices[:, [0, 2, 1]] * np.array([1.0, -1.0, 1.0])
+
+    # Drop vertices no face uses so that bounds describe the surfaces only.
+    used, inverse = np.unique(faces.reshape(-1), return_inverse=True)
+    mesh = trimesh.Trimesh(vertices[used], inverse.reshape(-1, 3), process=False, validate=False)
+    labels = labels.astype(np.uint8)
+    _require_structure(source, labels, hint=_STRUCTURE_HINT[ext])
+    face_rooms, room_list = _rooms_from_faces(source, mesh, labels, rooms)
+    return Scene(
+        mesh,
+        labels,
+        face_rooms,
+        rooms=room_list,
+        name=name if name is not None else source,
+        metadata={"source": source, "format": ext[1:]},
+    )
+
+
+_STRUCTURE_HINT = {
+    ".obj": "name the objects or groups wall_*, floor_*, ...",
+    ".glb": "name the nodes or meshes wall_*, floor_*, ...",
+    ".gltf": "name the nodes or meshes wall_*, floor_*, ...",
+    ".ply": "give the faces an integer 'label' property (0 = floor, 2 = wall, ...)",
+}
+
+
+def _require_structure(source: str, labels: np.ndarray, *, hint: str) -> None:
+    """Raise :class:`MissingStructureError` naming the file when floor or wall faces are missing."""
+    counts = np.bincount(labels, minlength=len(SurfaceClass))
+    for required in (SurfaceClass.FLOOR, SurfaceClass.WALL):
+        if counts[required] == 0:
+            found = ", ".join(f"{c.name.lower()}: {counts[c]}" for c in SurfaceClass if counts[c]) or "none"
+            raise MissingStructureError(
+                source,
+                f"the mesh has no {required.name.lower()} faces (faces per class: {found}); {hint}",
+            )
+
+
+# ------------------------------------------------------------------------------------------ OBJ
+def _read_obj(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """Parse OBJ text into vertices (V, 3), faces (F, 3), labels (F,), raw rooms (F,), unlabelled names."""
+    if b"\0" in data:
+        raise InvalidMeshError(source, "binary data: not an OBJ text file")
+    text = data.decode("utf-8", errors="replace").replace("\\\r\n", " ").replace("\\\n", " ")
+    coords: list[str] = []
+    tris: list[tuple[int, int, int]] = []
+    tri_part: list[int] = []
+    parts: dict[tuple[str | None, str | None], int] = {}
+    obj: str | None = None
+    group: str | None = None
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        if not line or line[0] == "#":
+            continue
+        key, _, rest = line.partition(" ")
+        if key == "v":
+            xyz = rest.split()
+            if len(xyz) < 3:
+                raise InvalidMeshError(source, f"line {lineno}: a vertex needs x y z, got {line!r}")
+            coords.append(" ".join(xyz[:3]))
+        elif key == "f":
+            refs = rest.split()
+            if len(refs) < 3:
+                raise InvalidMeshError(source, f"line {lineno}: a face needs 3 or more vertices: {line!r}")
+            idx = []
+            for ref in refs:
+                try:
+                    i = int(ref.split("/", 1)[0])
+                except ValueError:
+                    raise InvalidMeshError(source, f"line {lineno}: bad vertex reference {ref!r}") from None
+                if i == 0:
+                    raise InvalidMeshError(source, f"line {lineno}: vertex indices start at 1, got 0")
+                # Negative indices count back from the latest vertex.
+                idx.append(i - 1 if i > 0 else len(coords) + i)
+            part = parts.setdefault((obj, group), len(parts))
+            for k in range(1, len(idx) - 1):
+                tris.append((idx[0], idx[k], idx[k + 1]))
+                tri_part.append(part)
+        elif key == "o":
+            # A new object ends the group: a group left over from the previous object must not
+            # label this one.
+            obj, group = rest.strip() or None, None
+        elif key == "g":
+            group = rest.strip() or None
+        # Everything else (vt, vn, usemtl, mtllib, s, l, ...) does not matter for labelled geometry.
+
+    try:
+        vertices = np.array([c.split() for c in coords], dtype=float).reshape(-1, 3)
+    except ValueError:
+        bad = next(c for c in coords if not _floats_ok(c))
+        raise InvalidMeshError(source, f"a vertex has a non-numeric coordinate: 'v {bad}'") from None
+    faces = np.array(tris, dtype=np.int64).reshape(-1, 3)
+    part_of = np.array(tri_part, dtype=np.int64)
+
+    n_parts = len(parts)
+    part_cls = np.full(n_parts, SurfaceClass.CLUTTER.value, dtype=np.int64)
+    part_room = np.full(n_parts, -1, dtype=np.int64)
+    unlabelled = []
+    for (o, g), i in parts.items():
+        cls, room = _classify((g, o))
+        if cls is None:
+            unlabelled.append(" / ".join(n for n in (o, g) if n) or "(unnamed)")
+        else:
+            part_cls[i] = cls.value
+        part_room[i] = room
+    return vertices, faces, part_cls[part_of], part_room[part_of], unlabelled
+
+
+def _floats_ok(text: str) -> bool:
+    try:
+        [float(t) for t in text.split()]
+    except ValueError:
+        return False
+    return True
+
+
+# ------------------------------------------------------------------------------------- glTF/GLB
+def _read_gltf(source: str, path: Path, ext: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """Flatten a glTF scene graph into world-space vertices, faces, labels and raw rooms."""
+    try:
+        scene = trimesh.load(str(path), file_type=ext[1:], force="scene", process=False)
+    except Exception as exc:  # trimesh raises many types for malformed files
+        raise InvalidMeshError(source, f"cannot parse as {ext[1:]}: {type(exc).__name__}: {exc}") from exc
+    parents = scene.graph.transforms.parents
+    verts, faces, labels, rooms, unlabelled = [], [], [], [], []
+    offset = 0
+    for node in sorted(scene.graph.nodes_geometry):
+        transform, geom_name = scene.graph[node]
+        geom = scene.geometry.get(geom_name)
+        if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
+            continue  # point clouds and paths have no surfaces to scan
+        names = [node, geom_name]
+        parent = parents.get(node)
+        while parent is not None and parent != scene.graph.base_frame:
+            names.append(parent)
+            parent = parents.get(parent)
+        cls, room = _classify(names)
+        if cls is None:
+            unlabelled.append(str(node))
+            cls = SurfaceClass.CLUTTER
+        v = np.asarray(geom.vertices, dtype=float)
+        verts.append(v @ transform[:3, :3].T + transform[:3, 3])
+        faces.append(np.asarray(geom.faces, dtype=np.int64) + offset)
+        labels.append(np.full(len(geom.faces), cls.value, dtype=np.int64))
+        rooms.append(np.full(len(geom.faces), room, dtype=np.int64))
+        offset += len(v)
+    if not faces:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), []
+    return (
+        np.concatenate(verts),
+        np.concatenate(faces),
+        np.concatenate(labels),
+        np.concatenate(rooms),
+        unlabelled,
+    )
+
+
+# ------------------------------------------------------------------------------------------ PLY
+def _read_ply(source: str, path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """Read a PLY mesh with per-face ``label`` (and optional ``room``) properties."""
+    try:
+        mesh = trimesh.load(str(path), file_type="ply", force="mesh", process=False)
+    except Exception as exc:
+        raise InvalidMeshError(source, f"cannot parse as ply: {type(exc).__name__}: {exc}") from exc
+    if not isinstance(mesh, trimesh.Trimesh):
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), []
+    vertices = np.asarray(mesh.vertices, dtype=float)
+    raw = mesh.metadata.get("_ply_raw", {}).get("face", {})
+    data = raw.get("data")
+    props = list(raw.get("properties", {}))
+    n_raw = int(raw.get("length", 0) or 0)
+    if data is None or "label" not in props:
+        faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
+        # Without labels every face is clutter, which the structure check then reports with a hint.
+        n = len(faces)
+        return vertices, faces, np.full(n, SurfaceClass.CLUTTER.value), np.full(n, -1), []
+    # trimesh reorders mixed triangles and polygons, so triangulate the raw polygons here to keep
+    # each face next to its own label.
+    index_prop = next((p for p in props if p in ("vertex_indices", "vertex_index")), None)
+    if index_prop is None:
+        raise InvalidMeshError(source, "the PLY face element has no vertex_indices list")
+    polys = _ply_polygons(data[index_prop], n_raw)
+    label_raw = np.asarray(data["label"]).reshape(-1)
+    room_raw = np.asarray(data["room"]).reshape(-1) if "room" in props else np.full(n_raw, -1)
+    if not np.all(np.isin(label_raw, [c.value for c in SurfaceClass])):
+        bad = np.unique(label_raw[~np.isin(label_raw, [c.value for c in SurfaceClass])])
+        raise InvalidMeshError(
+            source,
+            f"face 'label' values {bad.tolist()} are no SurfaceClass "
+            f"({', '.join(f'{c.value} = {c.name.lower()}' for c in SurfaceClass)})",
+        )
+    faces, src = [], []
+    for i, poly in enumerate(polys):
+        if len(poly) < 3:
+            raise InvalidMeshError(source, f"PLY face {i} has {len(poly)} vertices; a face needs 3 or more")
+        for k in range(1, len(poly) - 1):
+            faces.append((poly[0], poly[k], poly[k + 1]))
+            src.append(i)
+    src_arr = np.array(src, dtype=np.int64)
+    room_arr = room_raw.astype(np.int64)[src_arr] if len(src_arr) else np.zeros(0, np.int64)
+    return (
+        vertices,
+        np.array(faces, dtype=np.int64).reshape(-1, 3),
+        label_raw.astype(np.int64)[src_arr] if len(src_arr) else np.zeros(0, np.int64),
+        np.where(room_arr < 0, -1, room_arr),
+        [],
+    )
+
+
+def _ply_polygons(column: np.ndarray, n: int) -> list[np.ndarray]:
+    """The vertex lists of the raw PLY face element, whatever layout trimesh left them in."""
+    col = np.asarray(column)
+    if col.dtype.names and "f1" in col.dtype.names:  # binary: (count, indices) records
+        return list(np.asarray(col["f1"]).reshape(n, -1))
+    if col.dtype == object:
+        return [np.asarray(p, dtype=np.int64) for p in col]
+    return list(col.reshape(n, -1))
+
+
+# ---------------------------------------------------------------------------------------- rooms
+def footprint_polygon(triangles: np.ndarray) -> np.ndarray | None:
+    """Outline of the union of triangles projected to xy.
+
+    Parameters
+    ----------
+    triangles : (n, 3, 2 or 3) float
+        Triangle corners; z, if present, is ignored.
+
+    Returns
+    -------
+    (m, 2) float or None
+        Exterior of the largest polygon of the union, counter-clockwise, without the closing point
+        and without collinear vertices; None when the triangles cover no area.
+    """
+    tris = np.asarray(triangles, dtype=float)[..., :2]
+    if len(tris) == 0:
+        return None
+    polys = shapely.polygons(tris)
+    polys = polys[shapely.area(polys) > 1e-12]
+    if len(polys) == 0:
+        return None
+    union = shapely.union_all(polys)
+    pieces = list(getattr(union, "geoms", [union]))
+    pieces = [p for p in pieces if isinstance(p, shapely.Polygon) and p.area > 0]
+    if not pieces:
+        return None
+    largest = max(pieces, key=lambda p: p.area)
+    # A tiny tolerance removes the collinear vertices left where triangles met along an edge.
+    outline = shapely.Polygon(largest.exterior).simplify(1e-9, preserve_topology=True)
+    outline = shapely.geometry.polygon.orient(outline, sign=1.0)
+    return np.asarray(outline.exterior.coords, dtype=float)[:-1]
+
+
+def _rooms_from_faces(
+    source: str, mesh: trimesh.Trimesh, labels: np.ndarray, raw_rooms: np.ndarray
+) -> tuple[np.ndarray, list[Room]]:
+    """Renumber raw room numbers to 0..k-1 and derive each room's ground truth from its faces."""
+    raw_rooms = np.asarray(raw_rooms, dtype=np.int64)
+    face_rooms = np.full(len(raw_rooms), -1, dtype=np.int32)
+    triangles = mesh.vertices[mesh.faces]
+    rooms: list[Room] = []
+    orphans = []
+    for number in np.unique(raw_rooms[raw_rooms >= 0]):
+        members = raw_rooms == number
+        floor = members & (labels == SurfaceClass.FLOOR)
+        polygon = footprint_polygon(triangles[floor]) if floor.any() else None
+        if polygon is None:
+            orphans.append(f"room{number}")
+            continue
+        floor_z = float(triangles[floor][..., 2].min())
+        ceiling = members & (labels == SurfaceClass.CEILING)
+        ceiling_z = float(triangles[ceiling][..., 2].max()) if ceiling.any() else floor_z + DEFAULT_ROOM_HEIGHT
+        face_rooms[members] = len(rooms)
+        rooms.append(Room(len(rooms), f"room{number}", polygon, floor_z, ceiling_z))
+    if orphans:
+        warnings.warn(
+            f"{source}: {', '.join(orphans)} have no floor faces to outline them; their faces get room -1",
+            UserWarning,
+            stacklevel=3,
+        )
+    return face_rooms, rooms
+
+
+# ---------------------------------------------------------------------------------------- export
+def export_scene(scene: Scene, path: str | Path) -> None:
+    """Write a scene as a labelled mesh that :func:`load_mesh_scene` reads back.
+
+    OBJ and GLB get one part per (class, room) pair, named ``<class>`` or ``<class>_room<id>`` with
+    the scene's room ids; PLY gets per-face ``label`` (uchar) and ``room`` (int) properties. The
+    coordinates are z up; OBJ (17 digits) and PLY (double) keep them exactly, GLB stores float32 as
+    glTF requires. Room outlines are re-derived from the floor faces when loading, so they
+    match the scene's rooms when those are the outlines of their floors; room names, doors, the
+    start position and metadata are not stored.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene to write.
+    path : str or Path
+        Destination; the extension (``.obj``, ``.glb`` or ``.ply``) picks the format.
+
+    Raises
+    ------
+    UnsupportedFormatError
+        The extension is none of :data:`EXPORT_EXTENSIONS`.
+    SceneFileError
+        The file cannot be written.
+    """
+    path = Path(path)
+    source = str(path)
+    ext = path.suffix.lower()
+    if ext not in EXPORT_EXTENSIONS:
+        raise UnsupportedFormatError(
+            source,
+            f"cannot export to {path.suffix or '(no extension)'!r}; supported: {', '.join(EXPORT_EXTENSIONS)}",
+        )
+    vertices = np.asarray(scene.mesh.vertices, dtype=float)
+    faces = np.asarray(scene.mesh.faces, dtype=np.int64)
+    try:
+        if ext == ".ply":
+            _write_ply(path, vertices, faces, scene.face_labels, scene.face_rooms)
+            return
+        parts = _export_parts(scene)
+        if ext == ".obj":
+            _write_obj(path, vertices, faces, parts)
+        else:
+            out = trimesh.Scene()
+            for part_name, sel in parts:
+                used, inverse = np.unique(faces[sel].reshape(-1), return_inverse=True)
+                sub = trimesh.Trimesh(vertices[used], inverse.reshape(-1, 3), process=False, validate=False)
+                out.add_geometry(sub, node_name=part_name, geom_name=part_name)
+            out.export(str(path), file_type="glb")
+    except OSError as exc:
+        raise SceneFileError(source, f"cannot write the file: {exc.strerror or exc}") from exc
+
+
+def _export_parts(scene: Scene) -> list[tuple[str, np.ndarray]]:
+    """(name, face indices) for every (class, room) pair present, classes in enum order."""
+    parts = []
+    for cls in SurfaceClass:
+        of_class = scene.face_labels == cls.value
+        for room in np.unique(scene.face_rooms[of_class]):
+            sel = np.flatnonzero(of_class & (scene.face_rooms == room))
+            parts.append((cls.name.lower() if room < 0 else f"{cls.name.lower()}_room{room}", sel))
+    return parts
+
+
+def _write_ply(path: Path, vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray, rooms: np.ndarray) -> None:
+    """Write a binary little-endian PLY with double coordinates and per-face ``label``/``room``.
+
+    Written here because trimesh 5.2 stores PLY coordinates as float32, which moves georeferenced
+    models (coordinates of 1e5 m and more) by centimetres, and would store the int64 attributes
+    as "int64", which is no PLY type.
+    """
+    header = (
+        "ply\nformat binary_little_endian 1.0\n"
+        "comment labelled scene written by nbs-env: face label = SurfaceClass, room = id or -1; z up\n"
+        f"element vertex {len(vertices)}\nproperty double x\nproperty double y\nproperty double z\n"
+        f"element face {len(faces)}\nproperty list uchar int vertex_indices\n"
+        "property uchar label\nproperty int room\nend_header\n"
+    )
+    records = np.zeros(
+        len(faces), dtype=[("n", "u1"), ("vertex_indices", "<i4", (3,)), ("label", "u1"), ("room", "<i4")]
+    )
+    records["n"] = 3
+    records["vertex_indices"] = faces
+    records["label"] = labels
+    records["room"] = rooms
+    with path.open("wb") as out:
+        out.write(header.encode("ascii"))
+        out.write(np.ascontiguousarray(vertices, dtype="<f8").tobytes())
+        out.write(records.tobytes())
+
+
+def _write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray, parts: list[tuple[str, np.ndarray]]) -> None:
+    """Write an OBJ with every vertex once and an ``o`` statement before each part's faces."""
+    lines = ["# labelled scene written by nbs-env: part names give the class (and room), z up"]
+    # 17 significant digits round-trip float64 exactly.
+    lines += [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in vertices.tolist()]
+    for part_name, sel in parts:
+        lines.append(f"o {part_name}")
+        lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces[sel].tolist()]
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")

@@ -1,0 +1,378 @@
+"""Tests of scenes.ifc: IFC storeys as labelled scenes (FZK-Haus and tiny generated models)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import ifcopenshell
+import ifcopenshell.api
+import numpy as np
+import pytest
+from ifcopenshell.api import aggregate, context, geometry, root, spatial, unit
+from ifcopenshell.api import project as api_project
+
+from scenes.errors import IfcError, MissingDependencyError, MissingStructureError, SceneFileError
+from scenes.ifc import DEFAULT_CLASS_MAP, load_ifc_scene
+from scenes.model import Scene, SurfaceClass
+
+DATA = Path(__file__).parent / "data"
+FZK = DATA / "AC20-FZK-Haus.ifc"
+F, C, W, D, WIN, CL = (
+    SurfaceClass.FLOOR,
+    SurfaceClass.CEILING,
+    SurfaceClass.WALL,
+    SurfaceClass.DOOR,
+    SurfaceClass.WINDOW,
+    SurfaceClass.CLUTTER,
+)
+GROUND_ROOMS = {"Schlafzimmer", "Bad", "Buero", "Wohnen", "Flur", "Küche"}
+
+
+@pytest.fixture(scope="module")
+def ground() -> Scene:
+    return load_ifc_scene(FZK)
+
+
+def signed_area(poly: np.ndarray) -> float:
+    x, y = poly[:, 0], poly[:, 1]
+    return float(0.5 * (np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+
+
+# ------------------------------------------------------------------------------------ FZK-Haus
+def test_default_storey_is_the_ground_floor(ground):
+    assert ground.metadata["storey"] == "Erdgeschoss"
+    assert ground.metadata["storey_index"] == 0
+    assert ground.metadata["elevation"] == pytest.approx(0.0)
+    assert ground.metadata["height"] == pytest.approx(2.7)
+    assert ground.metadata["source"] == str(FZK)
+    areas = ground.class_areas()
+    for cls in (F, C, W, D, WIN):
+        assert areas[cls] > 0, cls
+    # The 12 x 10 x 0.2 m base slab is the floor: top, bottom and edges.
+    assert areas[F] == pytest.approx(2 * 120 + 44 * 0.2, rel=1e-3)
+    assert areas[W] == pytest.approx(359.6, rel=0.02)
+    # The spiral stair is clutter.
+    assert areas[CL] > 1.0
+    assert np.all(np.isfinite(ground.mesh.vertices))
+    assert ground.bounds[0, 2] == pytest.approx(-0.2, abs=1e-6)  # bottom of the base slab
+
+
+def test_ground_floor_by_name_matches_default(ground):
+    by_name = load_ifc_scene(FZK, storey="Erdgeschoss", name="eg")
+    assert by_name.name == "eg"
+    assert by_name.metadata["storey"] == "Erdgeschoss"
+    assert len(by_name.mesh.faces) == len(ground.mesh.faces)
+    for cls, area in ground.class_areas().items():
+        assert by_name.class_areas()[cls] == pytest.approx(area, rel=1e-9)
+    assert np.array_equal(by_name.face_labels, ground.face_labels)
+    assert np.array_equal(by_name.face_rooms, ground.face_rooms)
+
+
+def test_ground_floor_ceiling_is_the_slab_above(ground):
+    # Slab-033 belongs to the upper storey; its underside at 2.5 m closes the ground floor rooms.
+    normals = ground.mesh.face_normals
+    centres = ground.mesh.triangles_center
+    underside = (ground.face_labels == C) & (normals[:, 2] < -0.99) & np.isclose(centres[:, 2], 2.5)
+    assert ground.face_areas[underside].sum() > 80
+    assert np.all(ground.face_rooms[underside & (ground.face_rooms >= 0)] >= 0)
+    assert ground.face_areas[underside & (ground.face_rooms >= 0)].sum() > 60
+    # No ceiling below the top of the storey's walls.
+    assert centres[ground.face_labels == C][:, 2].min() >= 2.26 - 1e-6  # the downstand beam
+
+
+def test_ground_floor_rooms(ground):
+    names = [r.name for r in ground.rooms]
+    assert set(names) == GROUND_ROOMS
+    assert [r.id for r in ground.rooms] == list(range(6))
+    areas = {r.name: r.area for r in ground.rooms}
+    assert areas["Flur"] == pytest.approx(11.53, rel=0.01)
+    assert areas["Wohnen"] == pytest.approx(25.99, rel=0.01)
+    assert sum(areas.values()) == pytest.approx(101.4, rel=0.01)
+    for room in ground.rooms:
+        assert signed_area(room.polygon) > 0  # counter-clockwise
+        assert not np.allclose(room.polygon[0], room.polygon[-1])
+        assert room.floor_z == pytest.approx(0.0, abs=1e-6)
+        assert room.ceiling_z == pytest.approx(2.5, abs=1e-6)
+    assert len(ground.room_by_name("Flur").polygon) == 6  # L-shaped hall
+
+
+def test_ground_floor_face_rooms(ground):
+    normals = ground.mesh.face_normals
+    labels, rooms, areas = ground.face_labels, ground.face_rooms, ground.face_areas
+    for room in ground.rooms:
+        mine = rooms == room.id
+        floor = areas[mine & (labels == F)].sum()
+        assert floor == pytest.approx(room.area, rel=0.2), room.name
+        assert areas[mine & (labels == W)].sum() > 20, room.name
+        assert areas[mine & (labels == C)].sum() > 5, room.name
+        # A room sees its floor from above and its ceiling (slab underside, beam and the edges of the
+        # stair opening) from below or the side, never the top of a slab.
+        assert np.all(normals[mine & (labels == F)][:, 2] > 0.99)
+        assert np.all(normals[mine & (labels == C)][:, 2] < 0.01)
+        assert areas[mine & (labels == C) & (normals[:, 2] < -0.99)].sum() > 5
+    # The underside of the base slab and the outside of the exterior walls belong to no room.
+    assert np.all(rooms[(labels == F) & (normals[:, 2] < -0.99)] == -1)
+    centres = ground.mesh.triangles_center
+    outer = (labels == W) & (np.abs(centres[:, 0]) < 1e-6) & (normals[:, 0] < -0.99)
+    assert outer.any() and np.all(rooms[outer] == -1)
+
+
+def test_ground_floor_doors(ground):
+    assert len(ground.doors) == 5
+    by_id = {r.id: r.name for r in ground.rooms}
+    by_id[-1] = "outside"
+    pairs = {tuple(sorted(by_id[i] for i in d.rooms)) for d in ground.doors}
+    assert pairs == {
+        ("Flur", "Schlafzimmer"),
+        ("Bad", "Flur"),
+        ("Buero", "Flur"),
+        ("Flur", "outside"),
+        ("Wohnen", "outside"),
+    }
+    assert sorted(round(d.width, 3) for d in ground.doors) == [0.885, 0.885, 0.885, 1.01, 2.01]
+    for door in ground.doors:
+        assert np.linalg.norm(door.normal) == pytest.approx(1.0)
+        assert min(abs(door.normal)) == pytest.approx(0.0, abs=1e-9)  # FZK's doors are axis-aligned
+        assert door.position[2] == pytest.approx(0.0, abs=1e-6)
+        assert door.height == pytest.approx(2.375 if door.width > 2 else 2.01)
+        # The normal points from rooms[0] to rooms[1].
+        a, b = door.rooms
+        ahead = door.position[:2] + 0.6 * door.normal
+        behind = door.position[:2] - 0.6 * door.normal
+        if b >= 0:
+            assert _inside(ground.rooms[b].polygon, ahead)
+        assert _inside(ground.rooms[a].polygon, behind)
+
+
+def _inside(polygon: np.ndarray, point: np.ndarray) -> bool:
+    import shapely
+
+    return bool(shapely.contains_xy(shapely.Polygon(polygon), *point))
+
+
+def test_upper_storey_by_index():
+    upper = load_ifc_scene(FZK, storey=1)
+    assert upper.metadata["storey"] == "Dachgeschoss"
+    assert upper.metadata["elevation"] == pytest.approx(2.7)
+    # The top storey reaches up to the top of its gable walls.
+    assert upper.metadata["height"] == pytest.approx(6.0868 - 2.7, abs=1e-3)
+    assert [r.name for r in upper.rooms] == ["Galerie"]
+    assert upper.doors == ()
+    areas = upper.class_areas()
+    assert areas[W] > 0 and areas[C] > 0 and areas[CL] > 0 and areas[D] == 0
+    # Its floor is Slab-033, whose top lies at the storey's elevation.
+    floor_top = (upper.face_labels == F) & (upper.mesh.face_normals[:, 2] > 0.99)
+    assert np.allclose(upper.mesh.triangles_center[floor_top][:, 2], 2.7)
+    # The base slab of the ground floor is not part of it.
+    assert upper.bounds[0, 2] >= 2.5 - 1e-6
+
+
+def test_class_map_override_relabels(ground):
+    areas = ground.class_areas()
+    as_wall = load_ifc_scene(FZK, class_map={"IfcDoor": SurfaceClass.WALL})
+    relabelled = as_wall.class_areas()
+    assert relabelled[D] == 0.0
+    assert relabelled[W] == pytest.approx(areas[W] + areas[D], rel=1e-9)
+    assert relabelled[F] == pytest.approx(areas[F], rel=1e-9)
+    assert len(as_wall.doors) == 5  # the ground truth does not depend on the labels
+    assert DEFAULT_CLASS_MAP["IfcDoor"] == D  # the default table is untouched
+
+
+def test_class_map_none_leaves_elements_out(ground):
+    open_doors = load_ifc_scene(FZK, class_map={"ifcdoor": None, "IfcStair": SurfaceClass.WALL})
+    areas = open_doors.class_areas()
+    assert areas[D] == 0.0
+    assert areas[W] == pytest.approx(ground.class_areas()[W] + ground.class_areas()[CL], rel=1e-9)
+    assert areas[CL] == 0.0
+    assert len(open_doors.mesh.faces) < len(ground.mesh.faces)
+    assert len(open_doors.doors) == 5
+
+
+def test_unknown_storey_name_lists_storeys():
+    with pytest.raises(IfcError) as info:
+        load_ifc_scene(FZK, storey="Keller")
+    message = str(info.value)
+    assert str(FZK) in message and "'Keller'" in message
+    assert "Erdgeschoss" in message and "Dachgeschoss" in message
+
+
+@pytest.mark.parametrize("bad", [2, -3, 99])
+def test_storey_index_out_of_range(bad):
+    with pytest.raises(IfcError, match=r"out of range.*Erdgeschoss.*Dachgeschoss"):
+        load_ifc_scene(FZK, storey=bad)
+
+
+def test_unknown_class_in_class_map():
+    with pytest.raises(IfcError, match="IfcWal"):
+        load_ifc_scene(FZK, class_map={"IfcWal": SurfaceClass.WALL})
+
+
+def test_licence_note_travels_with_the_model():
+    note = (DATA / "README.md").read_text(encoding="utf-8")
+    assert "AC20-FZK-Haus.ifc" in note and "KIT" in note
+
+
+# ------------------------------------------------------------------------------- tiny models
+def _matrix(x: float, y: float, z: float, angle: float = 0.0) -> np.ndarray:
+    m = np.eye(4)
+    a = np.radians(angle)
+    m[:2, :2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
+    m[:3, 3] = (x, y, z)
+    return m
+
+
+def tiny_ifc(
+    path: Path,
+    storeys: tuple[tuple[str, float], ...] = (("EG", 0.0),),
+    *,
+    walls: bool = True,
+    slab: bool = True,
+    host: int = 0,
+) -> Path:
+    """A 4 x 3 m room (four 0.2 m thick, 3 m high walls and a 0.2 m slab) in millimetre units.
+
+    The elements go on storey ``host`` (index into ``storeys``) at that storey's elevation, or on the
+    building when there is no storey.
+    """
+    f = api_project.create_file(version="IFC4")
+    proj = root.create_entity(f, ifc_class="IfcProject", name="tiny")
+    unit.assign_unit(f)  # millimetres, so the loader must convert
+    model = context.add_context(f, context_type="Model")
+    body = context.add_context(
+        f, context_type="Model", context_identifier="Body", target_view="MODEL_VIEW", parent=model
+    )
+    site = root.create_entity(f, ifc_class="IfcSite", name="site")
+    building = root.create_entity(f, ifc_class="IfcBuilding", name="house")
+    aggregate.assign_object(f, products=[site], relating_object=proj)
+    aggregate.assign_object(f, products=[building], relating_object=site)
+    created = []
+    for i, (name, z) in enumerate(storeys):
+        st = root.create_entity(f, ifc_class="IfcBuildingStorey", name=name)
+        st.LongName = f"Level {i}"
+        st.Elevation = z * 1000.0
+        geometry.edit_object_placement(f, product=st, matrix=_matrix(0, 0, z))
+        aggregate.assign_object(f, products=[st], relating_object=building)
+        created.append(st)
+    container = created[host] if created else building
+    z0 = storeys[host][1] if storeys else 0.0
+    if walls:
+        for x, y, angle, length in [(0, 0, 0, 4), (4, 0, 90, 3), (4, 3, 180, 4), (0, 3, 270, 3)]:
+            wall = root.create_entity(f, ifc_class="IfcWall", name=f"wall-{angle}")
+            rep = geometry.add_wall_representation(f, context=body, length=length, height=3.0, thickness=0.2)
+            geometry.assign_representation(f, product=wall, representation=rep)
+            geometry.edit_object_placement(f, product=wall, matrix=_matrix(x, y, z0, angle))
+            spatial.assign_container(f, products=[wall], relating_structure=container)
+    if slab:
+        plate = root.create_entity(f, ifc_class="IfcSlab", name="slab")
+        rep = geometry.add_slab_representation(f, context=body, depth=0.2, polyline=[(0, 0), (4, 0), (4, 3), (0, 3)])
+        geometry.assign_representation(f, product=plate, representation=rep)
+        geometry.edit_object_placement(f, product=plate, matrix=_matrix(0, 0, z0 - 0.2))
+        spatial.assign_container(f, products=[plate], relating_structure=container)
+    f.write(str(path))
+    return path
+
+
+# Four walls: two 4 m and two 3 m long, 0.2 m thick, 3 m high, all faces.
+TINY_WALL_AREA = 2 * (2 * 4 * 3 + 2 * 0.2 * 3 + 2 * 4 * 0.2) + 2 * (2 * 3 * 3 + 2 * 0.2 * 3 + 2 * 3 * 0.2)
+TINY_FLOOR_AREA = 2 * 12 + 14 * 0.2
+
+
+def test_tiny_model_in_millimetres(tmp_path):
+    scene = load_ifc_scene(tiny_ifc(tmp_path / "tiny.ifc"))
+    areas = scene.class_areas()
+    assert areas[W] == pytest.approx(TINY_WALL_AREA, rel=1e-6)
+    assert areas[F] == pytest.approx(TINY_FLOOR_AREA, rel=1e-6)
+    assert np.allclose(scene.bounds, [[0, 0, -0.2], [4, 3, 3]], atol=1e-6)
+    assert scene.rooms == () and scene.doors == ()
+    assert np.all(scene.face_rooms == -1)
+    # Faces longer than 1 m were split so that rooms can be told apart along them.
+    edges = np.linalg.norm(scene.mesh.triangles - np.roll(scene.mesh.triangles, 1, axis=1), axis=2)
+    assert edges.max() <= 1.0 + 1e-9
+
+
+def test_default_storey_nearest_zero_lower_on_tie(tmp_path):
+    p = tiny_ifc(tmp_path / "levels.ifc", (("Basement", -3.0), ("Upper", 3.0), ("Top", 6.0)), host=0)
+    scene = load_ifc_scene(p)
+    assert scene.metadata["storey"] == "Basement"
+    assert scene.metadata["height"] == pytest.approx(6.0)
+
+
+def test_storey_by_long_name_and_negative_index(tmp_path):
+    p = tiny_ifc(tmp_path / "levels.ifc", (("Top", 6.0), ("Ground", 0.0), ("Upper", 3.0)), host=2)
+    # Sorted by elevation: Ground (0), Upper (1), Top (2); "Level 2" is Upper's LongName.
+    assert load_ifc_scene(p, storey="Level 2").metadata["storey"] == "Upper"
+    assert load_ifc_scene(p, storey=1).metadata["storey"] == "Upper"
+    assert load_ifc_scene(p, storey=-2).metadata["storey"] == "Upper"
+    with pytest.raises(IfcError, match=r"no wall faces.*'Ground'.*'Upper'.*'Top'"):
+        load_ifc_scene(p, storey="Top")
+
+
+def test_slab_of_the_storey_below_closes_from_above(tmp_path):
+    # A slab filed under the upper storey whose underside lies 0.2 m below that storey's elevation
+    # closes the ground floor from above: it must come in as the ground floor's ceiling.
+    p = tiny_ifc(tmp_path / "two.ifc", (("Ground", 0.0), ("Upper", 3.2)), host=0)
+    f = ifcopenshell.open(str(p))
+    body = next(c for c in f.by_type("IfcGeometricRepresentationSubContext") if c.ContextIdentifier == "Body")
+    upper = next(s for s in f.by_type("IfcBuildingStorey") if s.Name == "Upper")
+    roof = root.create_entity(f, ifc_class="IfcSlab", name="roof")
+    rep = geometry.add_slab_representation(f, context=body, depth=0.2, polyline=[(0, 0), (4, 0), (4, 3), (0, 3)])
+    geometry.assign_representation(f, product=roof, representation=rep)
+    geometry.edit_object_placement(f, product=roof, matrix=_matrix(0, 0, 3.0))
+    spatial.assign_container(f, products=[roof], relating_structure=upper)
+    f.write(str(p))
+    scene = load_ifc_scene(p, storey="Ground")
+    assert scene.class_areas()[C] == pytest.approx(TINY_FLOOR_AREA, rel=1e-6)
+    assert scene.class_areas()[F] == pytest.approx(TINY_FLOOR_AREA, rel=1e-6)
+
+
+def test_no_storey(tmp_path):
+    p = tiny_ifc(tmp_path / "nostorey.ifc", storeys=())
+    with pytest.raises(IfcError, match=r"nostorey\.ifc: no storey"):
+        load_ifc_scene(p)
+
+
+def test_no_walls(tmp_path):
+    p = tiny_ifc(tmp_path / "nowalls.ifc", walls=False)
+    with pytest.raises(IfcError, match=r"nowalls\.ifc: storey 'EG' has no wall faces"):
+        load_ifc_scene(p)
+
+
+def test_no_floor(tmp_path):
+    p = tiny_ifc(tmp_path / "nofloor.ifc", slab=False)
+    with pytest.raises(MissingStructureError, match=r"nofloor\.ifc: storey 'EG' has no floor faces"):
+        load_ifc_scene(p, name="other name")
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(SceneFileError, match=r"absent\.ifc: no such file"):
+        load_ifc_scene(tmp_path / "absent.ifc")
+
+
+@pytest.mark.parametrize(
+    "content",
+    [b"\x00\xff garbage \x13\x37" * 50, b"solid cube\nendsolid cube\n", b"ISO-10303-21;\nHEADER;\nbroken"],
+)
+def test_not_ifc(tmp_path, content):
+    p = tmp_path / "bad.ifc"
+    p.write_bytes(content)
+    with pytest.raises(IfcError, match=r"bad\.ifc: cannot read as IFC"):
+        load_ifc_scene(p)
+
+
+def test_missing_ifcopenshell(monkeypatch):
+    # A None entry makes `import ifcopenshell` raise ImportError, as if it were not installed.
+    monkeypatch.setitem(sys.modules, "ifcopenshell", None)
+    with pytest.raises(MissingDependencyError, match=r"pip install 'nbs-env\[ifc\]'") as info:
+        load_ifc_scene(FZK)
+    assert str(FZK) in str(info.value)
+    assert isinstance(info.value, ImportError)
+
+
+def test_interior_only_structure_leaves_out_hidden_faces(ground):
+    scene = ground
+    inner = scene.structural_area(interior_only=True)
+    assert 0 < inner < 0.6 * scene.structural_area()
+    samples = scene.structure_samples(0.1, interior_only=True)
+    assert np.all(samples.rooms >= 0)
+    assert len(samples) == pytest.approx(inner / 0.01, abs=1)
