@@ -50,7 +50,7 @@ def main() -> None:
         # Interleave the two so that machine load affects both alike.
         ours, raw = [], []
         for _ in range(args.repeat):
-            raw.append(median_time(lambda rays=rays, scanner=scanner: scanner.cast(rays), 1))
+            raw.append(median_time(lambda rays=rays, scanner=scanner: scanner.raw_cast(rays), 1))
             ours.append(median_time(lambda scanner=scanner, rng=rng: scanner.scan(pose, rng), 1))
         t_ours, t_raw = statistics.median(ours), statistics.median(raw)
         n = cfg.n_rays
