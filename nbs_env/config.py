@@ -162,6 +162,10 @@ class RegistrationConfig:
         more, so a larger correction means ICP locked onto the wrong structure.
     target_radius : float
         Only the part of S(t) within this distance of the odometry pose is matched.
+    deterministic : bool
+        Run ICP on one thread so that a seed always gives the same poses. open3d's parallel
+        reductions vary in the last bits between runs, and ICP occasionally turns that into a
+        different result; one thread costs about 1.7x the ICP time (see benchmarks/README.md).
     """
 
     voxel_size: float = 0.05
@@ -173,6 +177,7 @@ class RegistrationConfig:
     max_correction_m: float = 0.75
     max_correction_deg: float = 10.0
     target_radius: float = 30.0
+    deterministic: bool = True
 
     def __post_init__(self) -> None:
         _finite(

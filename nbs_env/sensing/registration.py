@@ -6,7 +6,9 @@ voxel-downsampled working copy with normals (for ICP and perception), for the st
 
 from __future__ import annotations
 
+import contextlib
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,6 +35,21 @@ def _downsample_with_normals(points: np.ndarray, origin: np.ndarray, voxel: floa
     # Normals face the scanner, so that averaging over scans does not cancel them.
     pc.orient_normals_towards_camera_location(np.asarray(origin, dtype=np.float64))
     return pc
+
+
+@contextlib.contextmanager
+def _open3d_threads(n: int | None) -> Iterator[None]:
+    """Run open3d with ``n`` threads (None: leave as is), restoring the previous count afterwards."""
+    if n is None:
+        yield
+        return
+    utility = open3d().utility
+    previous = utility.get_max_threads()
+    utility.set_max_threads(n)
+    try:
+        yield
+    finally:
+        utility.set_max_threads(previous)
 
 
 class AccumulatedCloud:
@@ -185,17 +202,20 @@ def register(
     reg = o3d.pipelines.registration
     pose = initial.copy()
     fitness, rmse = 0.0, float("inf")
-    for distance in cfg.max_correspondence:
-        result = reg.registration_icp(
-            source,
-            target,
-            distance,
-            pose,
-            reg.TransformationEstimationPointToPlane(),
-            reg.ICPConvergenceCriteria(relative_fitness=1e-7, relative_rmse=1e-7, max_iteration=cfg.max_iterations),
-        )
-        pose = np.asarray(result.transformation).copy()
-        fitness, rmse = float(result.fitness), float(result.inlier_rmse)
+    # Parallel reductions in open3d's ICP differ in the last bits from run to run, and ICP can
+    # amplify that into a different local minimum; one thread makes a seed give the same poses.
+    with _open3d_threads(1 if cfg.deterministic else None):
+        for distance in cfg.max_correspondence:
+            result = reg.registration_icp(
+                source,
+                target,
+                distance,
+                pose,
+                reg.TransformationEstimationPointToPlane(),
+                reg.ICPConvergenceCriteria(relative_fitness=1e-7, relative_rmse=1e-7, max_iteration=cfg.max_iterations),
+            )
+            pose = np.asarray(result.transformation).copy()
+            fitness, rmse = float(result.fitness), float(result.inlier_rmse)
     moved_m, moved_deg = pose_error(pose, initial)
     reason = ""
     if fitness < cfg.min_fitness:
