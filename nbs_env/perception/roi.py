@@ -1,0 +1,505 @@
+"""The dynamic region of interest (RoI): the prism over the current room, found from S(t) alone.
+
+Paper §3.1 and METHOD §3. After each scan:
+
+1. Floor and ceiling heights are the z-histogram peaks of the room's points.
+2. The top projection is quantised on a ~5 cm grid into a binary image. What is projected is the
+   room's *seen free space*: from every scan position, the horizontal distance, per azimuth, to the
+   nearest point in a band just below the ceiling. That band lies above every door, so the lintel
+   stops the view through a door and points seen through it never pull the RoI into the next room;
+   it also lies above most furniture, which therefore does not cut into the RoI.
+3. Harris corners (scikit-image) find the polygon's vertices on the image's outer boundary and
+   probabilistic Hough lines give each edge its line, refitted to the boundary pixels; consecutive
+   intersections are the vertices. The polygon may be concave and have any angles.
+4. Each polygon edge gives a vertical wall face from floor to ceiling; the polygon at floor and at
+   ceiling height gives the floor and the ceiling.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import shapely
+from scipy import ndimage
+from shapely.geometry import Point, Polygon
+from shapely.geometry.polygon import orient
+
+from nbs_env.errors import NBSError
+from nbs_env.perception.faces import WallFace
+
+__all__ = ["RoI", "RoIConfig", "RoIError", "RoIScan", "compute_roi", "floor_and_ceiling", "polygon_from_image"]
+
+
+class RoIError(NBSError, ValueError):
+    """The points do not define a room (too few, or no floor/ceiling found)."""
+
+
+@dataclass(frozen=True)
+class RoIConfig:
+    """Options of the RoI computation.
+
+    Attributes
+    ----------
+    pixel : float
+        Grid size of the top projection, metres.
+    histogram_bin : float
+        Bin width of the z histogram, metres.
+    band_above_floor : float
+        Lower edge of the band whose points bound the seen free space, metres above the floor. It
+        must clear door heads (2.0-2.1 m in most buildings) and tall furniture, yet stay inside the
+        scanner's +60° field of view from the robot's 0.45 m clearance to a wall: at 2.25 m the wall
+        above a door is seen from 0.45 m away (59°).
+    band_below_ceiling : float
+        Upper edge of that band, metres below the ceiling.
+    azimuth_bins : int
+        Angular bins per scan for the free-space outline.
+    max_range : float
+        Free space farther than this from a scan position is ignored, metres.
+    corner_distance : float
+        Least distance between two polygon vertices, metres.
+    collinear_deg : float
+        Consecutive edges closer than this in direction merge into one.
+    """
+
+    pixel: float = 0.05
+    histogram_bin: float = 0.02
+    band_above_floor: float = 2.25
+    band_below_ceiling: float = 0.05
+    azimuth_bins: int = 1440
+    max_range: float = 30.0
+    corner_distance: float = 0.30
+    collinear_deg: float = 8.0
+
+
+@dataclass(frozen=True)
+class RoI:
+    """The region of interest of the current room.
+
+    Attributes
+    ----------
+    polygon : (n, 2) float
+        Counter-clockwise outline, not closed.
+    floor_z, ceiling_z : float
+        Heights of the prism's bottom and top.
+    image : (h, w) bool
+        The binary top projection the polygon was found in.
+    origin : (2,) float
+        World xy of the image's pixel (0, 0) corner; rows grow with y, columns with x.
+    pixel : float
+        Pixel size in metres.
+    """
+
+    polygon: np.ndarray
+    floor_z: float
+    ceiling_z: float
+    image: np.ndarray = field(repr=False)
+    origin: np.ndarray = field(repr=False)
+    pixel: float = 0.05
+
+    @property
+    def wall_faces(self) -> list[WallFace]:
+        """One vertical face per polygon edge, room on its left."""
+        p = self.polygon
+        return [WallFace(p[k], p[(k + 1) % len(p)], self.floor_z, self.ceiling_z) for k in range(len(p))]
+
+    @property
+    def area(self) -> float:
+        return float(Polygon(self.polygon).area)
+
+    def contains(self, xy: np.ndarray) -> np.ndarray:
+        """(n,) bool: which of the (n, 2) points lie inside the polygon."""
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        return shapely.contains_xy(Polygon(self.polygon), xy[:, 0], xy[:, 1])
+
+
+@dataclass(frozen=True)
+class RoIScan:
+    """What the RoI needs of one registered scan, all from the robot's own measurements.
+
+    Attributes
+    ----------
+    points : (n, 3) float
+        The scan's points placed with the robot's pose estimate.
+    origin : (3,) float
+        The estimated scanner position.
+    near_directions : (m, 3) float
+        World directions of the pattern's upward rays that returned nothing. Indoors every ray
+        hits something, so these hit an obstacle closer than the scanner's minimum range: a wall
+        the robot stands next to, which it cannot measure but must not look through.
+    min_range : float
+        The scanner's minimum range in metres.
+    """
+
+    points: np.ndarray
+    origin: np.ndarray
+    near_directions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    min_range: float = 1.5
+
+    @classmethod
+    def from_scan(cls, scan, pose: np.ndarray) -> RoIScan:
+        """Build from a :class:`~nbs_env.sensing.scanner.Scan` and the robot's estimate of its pose."""
+        from nbs_env.sensing.scanner import ray_pattern
+
+        directions, _, _ = ray_pattern(scan.config)
+        returned = np.zeros(len(directions), dtype=bool)
+        returned[scan.rows.astype(np.int64) * scan.shape[1] + scan.cols] = True
+        up = ~returned & (directions[:, 2] > 0)
+        pose = np.asarray(pose, dtype=float)
+        return cls(
+            points=scan.to_world(pose),
+            origin=pose[:3, 3].copy(),
+            near_directions=directions[up].astype(np.float64) @ pose[:3, :3].T,
+            min_range=scan.config.min_range,
+        )
+
+
+def floor_and_ceiling(z: np.ndarray, sensor_z: float, bin_size: float = 0.02) -> tuple[float, float]:
+    """Floor and ceiling heights: the z-histogram peaks below and above the scanner.
+
+    Parameters
+    ----------
+    z : (n,) float
+        Heights of the room's points.
+    sensor_z : float
+        Height of the scanner (the robot's estimate).
+
+    Raises
+    ------
+    RoIError
+        No points below or above the scanner.
+    """
+    z = np.asarray(z, dtype=float)
+    below, above = z[z < sensor_z - 0.5], z[z > sensor_z + 0.3]
+    if len(below) < 10 or len(above) < 10:
+        raise RoIError(f"cannot find floor and ceiling: {len(below)} points below and {len(above)} above the scanner")
+
+    def peak(values: np.ndarray) -> float:
+        edges = np.arange(values.min(), values.max() + 2 * bin_size, bin_size)
+        counts, edges = np.histogram(values, bins=edges)
+        k = int(np.argmax(counts))
+        near = values[(values >= edges[k] - bin_size) & (values < edges[k + 1] + bin_size)]
+        return float(np.median(near))
+
+    return peak(below), peak(above)
+
+
+def _free_space_outline(
+    points: np.ndarray, origin: np.ndarray, bins: int, max_range: float, blocks: np.ndarray | None = None
+) -> Polygon | None:
+    """The star-shaped outline of the free space seen from ``origin`` (points are the band's).
+
+    ``blocks`` are (k, 2) xy positions that bound the free space like points do (obstacles closer
+    than the minimum range).
+    """
+    if blocks is not None and len(blocks):
+        points = np.concatenate([points[:, :2], blocks[:, :2]])
+    rel = points[:, :2] - origin[:2]
+    r = np.hypot(rel[:, 0], rel[:, 1])
+    keep = (r > 0.05) & (r < max_range)
+    if keep.sum() < 50:
+        return None
+    rel, r = rel[keep], r[keep]
+    b = ((np.arctan2(rel[:, 1], rel[:, 0]) + np.pi) / (2 * np.pi) * bins).astype(int) % bins
+    nearest = np.full(bins, np.inf)
+    np.minimum.at(nearest, b, r)
+    seen = np.isfinite(nearest)
+    if seen.sum() < bins // 4:
+        return None
+    # Bins with no point (beyond the scanner's reach) take the nearer of their seen neighbours.
+    idx = np.arange(bins)
+    prev_seen = np.maximum.accumulate(np.where(seen, idx, -bins * 2))
+    prev_seen = np.where(prev_seen < 0, prev_seen + bins, prev_seen)
+    nxt = np.minimum.accumulate(np.where(seen, idx, bins * 3)[::-1])[::-1]
+    fill = np.minimum(nearest[prev_seen % bins], nearest[np.where(nxt >= bins * 3, nxt % bins, nxt) % bins])
+    nearest = np.where(seen, nearest, fill)
+    theta = (idx + 0.5) / bins * 2 * np.pi - np.pi
+    outline = np.column_stack([origin[0] + nearest * np.cos(theta), origin[1] + nearest * np.sin(theta)])
+    poly = Polygon(outline)
+    return poly if poly.is_valid else poly.buffer(0)
+
+
+def compute_roi(scans: Sequence[RoIScan], config: RoIConfig | None = None) -> RoI:
+    """The RoI of the current room from its registered scans.
+
+    Parameters
+    ----------
+    scans : sequence of RoIScan
+        Every registered scan of the current room (points placed with the robot's estimates).
+    config : RoIConfig
+
+    Raises
+    ------
+    RoIError
+        When the scans do not bound a room.
+    """
+    cfg = config or RoIConfig()
+    if not scans:
+        raise RoIError("no scans: the RoI needs at least one registered scan of the room")
+    all_z = np.concatenate([np.asarray(s.points)[:, 2] for s in scans])
+    sensor_z = float(np.mean([s.origin[2] for s in scans]))
+    floor_z, ceiling_z = floor_and_ceiling(all_z, sensor_z, cfg.histogram_bin)
+    hi = ceiling_z - cfg.band_below_ceiling
+    lo = min(floor_z + cfg.band_above_floor, hi - 0.10)
+    outlines = []
+    band_points = []
+    for scan in scans:
+        points = np.asarray(scan.points)
+        origin = np.asarray(scan.origin, dtype=float)
+        band = points[(points[:, 2] >= lo) & (points[:, 2] <= hi)]
+        band_points.append(band[:, :2])
+        # An upward ray with no return met something within the minimum range. If it would have
+        # reached the band by then but not the ceiling, that something is a wall next to the robot
+        # and bounds the band; if it would have reached the ceiling, the ceiling explains it.
+        d = np.asarray(scan.near_directions, dtype=float).reshape(-1, 3)
+        reach = origin[2] + scan.min_range * d[:, 2]
+        wall = (reach >= lo) & (reach < ceiling_z - cfg.histogram_bin)
+        blocks = origin[:2] + scan.min_range * d[wall][:, :2]
+        outline = _free_space_outline(band, origin, cfg.azimuth_bins, cfg.max_range, blocks)
+        if outline is not None:
+            outlines.append(outline)
+    if not outlines:
+        raise RoIError("no scan saw enough of the band under the ceiling to outline the room")
+    region = shapely.union_all(outlines)
+    image, origin_xy = _rasterise(region, cfg.pixel)
+    # What one scan claims as free beyond a wall it could not measure (too close), another scan may
+    # have seen as wall: the band's points cut such claims off from the room.
+    band_xy = np.concatenate([b for b in band_points if len(b)]) if any(len(b) for b in band_points) else None
+    walls = np.zeros_like(image)
+    if band_xy is not None:
+        cols = np.floor((band_xy[:, 0] - origin_xy[0]) / cfg.pixel).astype(int)
+        rows = np.floor((band_xy[:, 1] - origin_xy[1]) / cfg.pixel).astype(int)
+        ok = (rows >= 0) & (rows < image.shape[0]) & (cols >= 0) & (cols < image.shape[1])
+        walls[rows[ok], cols[ok]] = True
+        walls = ndimage.binary_dilation(walls)
+    last = np.asarray(scans[-1].origin, dtype=float)
+    seed = ((last[1] - origin_xy[1]) / cfg.pixel, (last[0] - origin_xy[0]) / cfg.pixel)
+    image = _clean(image, seed, max(1, round(0.10 / cfg.pixel)))
+    room = _component(image & ~walls, seed)
+    # Give back the pixels the wall cut took from the room's own side.
+    image = ndimage.binary_fill_holes(ndimage.binary_dilation(room, iterations=2) & image)
+    polygon = polygon_from_image(image, origin_xy, cfg.pixel, cfg.corner_distance, cfg.collinear_deg)
+    return RoI(polygon=polygon, floor_z=floor_z, ceiling_z=ceiling_z, image=image, origin=origin_xy, pixel=cfg.pixel)
+
+
+def _rasterise(region, pixel: float) -> tuple[np.ndarray, np.ndarray]:
+    from skimage.draw import polygon as fill_polygon
+
+    x0, y0, x1, y1 = region.bounds
+    origin = np.array([x0 - 4 * pixel, y0 - 4 * pixel])
+    shape = (int(np.ceil((y1 - origin[1]) / pixel)) + 5, int(np.ceil((x1 - origin[0]) / pixel)) + 5)
+    image = np.zeros(shape, dtype=bool)
+    for part in getattr(region, "geoms", [region]):
+        ring = np.asarray(part.exterior.coords)
+        rr, cc = fill_polygon((ring[:, 1] - origin[1]) / pixel - 0.5, (ring[:, 0] - origin[0]) / pixel - 0.5, shape)
+        image[rr, cc] = True
+    return image, origin
+
+
+def _clean(image: np.ndarray, seed: tuple[float, float], radius: int) -> np.ndarray:
+    """Remove slivers and spikes, fill holes, keep the component around the last scan position."""
+    from skimage.morphology import disk
+
+    se = disk(radius)
+    image = ndimage.binary_opening(image, structure=se)
+    image = ndimage.binary_closing(image, structure=se)
+    return _component(ndimage.binary_fill_holes(image), seed)
+
+
+def _component(image: np.ndarray, seed: tuple[float, float]) -> np.ndarray:
+    """The connected component at ``seed`` (row, col), or the largest one if the seed is outside all."""
+    labels, n = ndimage.label(image)
+    if n <= 1:
+        return image
+    r, c = round(seed[0]), round(seed[1])
+    inside = 0 <= r < image.shape[0] and 0 <= c < image.shape[1]
+    keep = labels[r, c] if inside and labels[r, c] > 0 else np.argmax(np.bincount(labels.ravel())[1:]) + 1
+    return labels == keep
+
+
+def _fit_line(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Total-least-squares line through (n, 2) points: (a point on it, unit direction)."""
+    centre = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - centre, full_matrices=False)
+    return centre, vt[0]
+
+
+def _intersect(p: np.ndarray, d: np.ndarray, q: np.ndarray, e: np.ndarray) -> np.ndarray | None:
+    m = np.array([d, -e]).T
+    if abs(np.linalg.det(m)) < 1e-9:
+        return None
+    s = np.linalg.solve(m, q - p)
+    return p + s[0] * d
+
+
+def polygon_from_image(
+    image: np.ndarray,
+    origin: np.ndarray,
+    pixel: float,
+    corner_distance: float = 0.30,
+    collinear_deg: float = 8.0,
+) -> np.ndarray:
+    """The closed polygon of a binary image's outer boundary, by Harris corners and Hough lines.
+
+    Parameters
+    ----------
+    image : (h, w) bool
+        One filled region; rows grow with y, columns with x.
+    origin : (2,) float
+        World xy of the image's (0, 0) pixel corner.
+    pixel : float
+        Pixel size in metres.
+
+    Returns
+    -------
+    (n, 2) float
+        Counter-clockwise vertices in world coordinates.
+    """
+    from skimage.feature import corner_harris, corner_peaks
+    from skimage.measure import find_contours
+    from skimage.transform import probabilistic_hough_line
+
+    padded = np.pad(image, 2)
+    contours = find_contours(padded.astype(float), 0.5)
+    if not contours:
+        raise RoIError("the top projection is empty")
+    contour = max(contours, key=len)[:-1] - 2.0  # (row, col) at pixel centres, closed → open
+    # Pixel (i, j) has its centre at origin + (j + 0.5, i + 0.5) * pixel.
+    boundary = np.column_stack([origin[0] + (contour[:, 1] + 0.5) * pixel, origin[1] + (contour[:, 0] + 0.5) * pixel])
+    min_px = max(2, round(corner_distance / pixel))
+
+    # Harris corners of the filled region, snapped to the nearest boundary sample.
+    response = corner_harris(image.astype(float), sigma=1.5)
+    peaks = corner_peaks(response, min_distance=min_px // 2, threshold_rel=0.02)
+    vertex_idx: list[int] = []
+    for r, c in peaks:
+        d = np.hypot(contour[:, 0] - r, contour[:, 1] - c)
+        k = int(np.argmin(d))
+        if d[k] <= 3.0:
+            vertex_idx.append(k)
+    vertex_idx = sorted(set(vertex_idx))
+    if len(vertex_idx) < 3:
+        return _fallback(boundary, pixel)
+
+    # Hough segments of the boundary pixels give the candidate edge lines.
+    edges_img = image & ~ndimage.binary_erosion(image)
+    segments = probabilistic_hough_line(edges_img, threshold=8, line_length=min_px, line_gap=2, rng=0)
+    hough_lines = []
+    for (c0, r0), (c1, r1) in segments:
+        a = np.array([origin[0] + (c0 + 0.5) * pixel, origin[1] + (r0 + 0.5) * pixel])
+        b = np.array([origin[0] + (c1 + 0.5) * pixel, origin[1] + (r1 + 0.5) * pixel])
+        if np.linalg.norm(b - a) > 0:
+            hough_lines.append((a, (b - a) / np.linalg.norm(b - a)))
+
+    n = len(boundary)
+    lines: list[tuple[np.ndarray, np.ndarray, int]] = []
+    for k, start in enumerate(vertex_idx):
+        end = vertex_idx[(k + 1) % len(vertex_idx)]
+        span = np.arange(start, end + (n if end <= start else 0)) % n
+        # Leave out the samples next to the corners, where the boundary rounds off.
+        trim = max(1, len(span) // 8)
+        pts = boundary[span[trim:-trim]] if len(span) > 2 * trim + 2 else boundary[span]
+        if len(pts) < 2:
+            continue
+        centre, direction = _fit_line(pts)
+        best, best_count = None, 0
+        for a, d in hough_lines:
+            if abs(d @ direction) < np.cos(np.radians(10)):
+                continue
+            dist = np.abs((pts - a) @ np.array([-d[1], d[0]]))
+            count = int(np.count_nonzero(dist < 1.5 * pixel))
+            if count > best_count:
+                best, best_count = (a, d), count
+        if best is not None and best_count >= 0.5 * len(pts):
+            a, d = best
+            inliers = pts[np.abs((pts - a) @ np.array([-d[1], d[0]])) < 2.0 * pixel]
+            if len(inliers) >= 2:
+                centre, direction = _fit_line(inliers)
+        lines.append((centre, direction, len(span)))
+    lines = _merge_collinear(lines, collinear_deg, 1.5 * pixel)
+    if len(lines) < 3:
+        return _fallback(boundary, pixel)
+    vertices = []
+    for k in range(len(lines)):
+        p, d, _ = lines[k - 1]
+        q, e, _ = lines[k]
+        x = _intersect(p, d, q, e)
+        if x is None:
+            return _fallback(boundary, pixel)
+        vertices.append(x)
+    vertices = _drop_small_notches(np.asarray(vertices), min_area=(2 * corner_distance) ** 2 / 2)
+    poly = Polygon(vertices)
+    region = Polygon(boundary)
+    if not poly.is_valid or abs(poly.area - region.area) > 0.15 * region.area:
+        return _fallback(boundary, pixel)
+    return np.asarray(orient(poly, 1.0).exterior.coords)[:-1]
+
+
+def _drop_small_notches(vertices: np.ndarray, min_area: float) -> np.ndarray:
+    """Visvalingam-Whyatt: drop the vertex of least triangle area while that area is below ``min_area``.
+
+    Shadows of columns and the ends of furniture leave small steps in the outline; a step smaller
+    than a robot footprint is no wall of the room.
+    """
+    v = list(vertices)
+    while len(v) > 3:
+        n = len(v)
+        a = np.asarray(v)
+        u, w = a - np.roll(a, 1, axis=0), np.roll(a, -1, axis=0) - np.roll(a, 1, axis=0)
+        areas = 0.5 * np.abs(u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0])
+        k = int(np.argmin(areas))
+        if areas[k] >= min_area:
+            break
+        del v[k]
+    return np.asarray(v)
+
+
+def _merge_collinear(lines: list, max_deg: float, max_offset: float) -> list:
+    """Merge consecutive edge lines of nearly the same direction and offset (spurious corners)."""
+    changed = True
+    while changed and len(lines) > 3:
+        changed = False
+        for k in range(len(lines)):
+            p, d, n1 = lines[k]
+            q, e, n2 = lines[(k + 1) % len(lines)]
+            normal = np.array([-d[1], d[0]])
+            if abs(d @ e) >= np.cos(np.radians(max_deg)) and abs((q - p) @ normal) < max(max_offset, 0.1):
+                w = n1 / (n1 + n2)
+                e = e if d @ e > 0 else -e
+                direction = w * d + (1 - w) * e
+                merged = (w * p + (1 - w) * q, direction / np.linalg.norm(direction), n1 + n2)
+                lines = [*lines[:k], merged, *lines[k + 2 :]] if k + 1 < len(lines) else [merged, *lines[1:k]]
+                changed = True
+                break
+    return lines
+
+
+def _fallback(boundary: np.ndarray, pixel: float) -> np.ndarray:
+    """Douglas-Peucker outline when corners and lines do not close a valid polygon."""
+    from skimage.measure import approximate_polygon
+
+    poly = approximate_polygon(boundary, tolerance=2.0 * pixel)
+    out = Polygon(poly)
+    if not out.is_valid:
+        out = out.buffer(0)
+        if out.geom_type != "Polygon":
+            out = max(out.geoms, key=lambda g: g.area)
+    return np.asarray(orient(out, 1.0).exterior.coords)[:-1]
+
+
+def roi_iou(polygon: np.ndarray, truth: np.ndarray) -> float:
+    """Intersection over union of two (n, 2) polygons (an evaluation helper)."""
+    a, b = Polygon(polygon).buffer(0), Polygon(truth).buffer(0)
+    union = a.union(b).area
+    return float(a.intersection(b).area / union) if union > 0 else 0.0
+
+
+def leaked_area(polygon: np.ndarray, others: Sequence[np.ndarray]) -> float:
+    """Area in m² of ``polygon`` that lies inside any of the ``others`` (an evaluation helper)."""
+    a = Polygon(polygon).buffer(0)
+    return float(sum(a.intersection(Polygon(o).buffer(0)).area for o in others))
+
+
+def point_in(polygon: np.ndarray, xy: np.ndarray) -> bool:
+    return bool(Polygon(polygon).contains(Point(float(xy[0]), float(xy[1]))))

@@ -1,0 +1,104 @@
+"""The dynamic RoI: polygons from binary images, floor/ceiling, IoU on rooms, no leak through doors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from shapely.geometry import Polygon
+from skimage.draw import polygon as fill_polygon
+
+from nbs_env.config import ScannerConfig
+from nbs_env.perception.roi import (
+    RoIError,
+    RoIScan,
+    compute_roi,
+    floor_and_ceiling,
+    leaked_area,
+    polygon_from_image,
+    roi_iou,
+)
+from nbs_env.sensing.pose import pose_from_xyz_rpy
+from nbs_env.sensing.scanner import Scanner
+from scenes import load_scene
+
+
+def rasterise(vertices: np.ndarray, pixel: float, origin: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    image = np.zeros(shape, dtype=bool)
+    rr, cc = fill_polygon((vertices[:, 1] - origin[1]) / pixel - 0.5, (vertices[:, 0] - origin[0]) / pixel - 0.5, shape)
+    image[rr, cc] = True
+    return image
+
+
+def match_vertices(found: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    return np.array([np.min(np.linalg.norm(found - t, axis=1)) for t in truth])
+
+
+def test_l_shaped_projection_gives_six_vertices_within_10cm():
+    truth = np.array([[0.3, 0.4], [6.3, 0.4], [6.3, 3.4], [3.1, 3.4], [3.1, 7.0], [0.3, 7.0]])
+    origin, pixel = np.array([-0.5, -0.5]), 0.05
+    image = rasterise(truth, pixel, origin, (170, 150))
+    found = polygon_from_image(image, origin, pixel)
+    assert len(found) == 6
+    assert match_vertices(found, truth).max() < 0.10
+    assert Polygon(found).exterior.is_ccw
+
+
+def test_non_right_angles_and_concave_polygons():
+    truth = np.array([[0.0, 0.0], [7.0, 0.0], [7.0, 2.5], [5.0, 4.5], [2.5, 4.5], [2.5, 3.0], [0.0, 3.0]])
+    origin, pixel = np.array([-0.5, -0.5]), 0.05
+    image = rasterise(truth, pixel, origin, (120, 170))
+    found = polygon_from_image(image, origin, pixel)
+    assert len(found) == len(truth)
+    assert match_vertices(found, truth).max() < 0.10
+
+
+def test_floor_and_ceiling_peaks():
+    rng = np.random.default_rng(0)
+    z = np.concatenate([rng.normal(0.0, 0.005, 5000), rng.normal(2.8, 0.005, 4000), rng.uniform(0, 2.8, 3000)])
+    floor, ceiling = floor_and_ceiling(z, 1.5)
+    assert floor == pytest.approx(0.0, abs=0.01) and ceiling == pytest.approx(2.8, abs=0.01)
+    with pytest.raises(RoIError, match="floor and ceiling"):
+        floor_and_ceiling(np.full(100, 2.0), 1.5)
+
+
+def roi_after(scene, positions, seed=0, yaw=0.3):
+    scanner = Scanner(scene, ScannerConfig())
+    rng = np.random.default_rng(seed)
+    scans = []
+    for x, y in positions:
+        pose = pose_from_xyz_rpy(x, y, 1.5, 0.0, 0.0, yaw)
+        scans.append(RoIScan.from_scan(scanner.scan(pose, rng), pose))
+    return compute_roi(scans)
+
+
+def test_roi_of_the_l_room_after_three_scans():
+    scene = load_scene("l_room")
+    roi = roi_after(scene, [(3.0, 4.5), (6.5, 1.2), (1.5, 6.8)])
+    assert roi_iou(roi.polygon, scene.rooms[0].polygon) >= 0.9
+    assert roi.floor_z == pytest.approx(0.0, abs=0.02) and roi.ceiling_z == pytest.approx(2.6, abs=0.02)
+    assert len(roi.wall_faces) == len(roi.polygon)
+    face = roi.wall_faces[0]
+    assert face.z0 == roi.floor_z and face.z1 == roi.ceiling_z
+
+
+def test_one_scan_sees_only_part_of_the_l():
+    scene = load_scene("l_room")
+    roi = roi_after(scene, [(6.5, 1.2)])
+    truth = Polygon(scene.rooms[0].polygon)
+    assert Polygon(roi.polygon).area < 0.9 * truth.area  # the far arm is hidden
+    assert Polygon(roi.polygon).difference(truth.buffer(0.1)).area < 0.2
+
+
+def test_roi_stays_out_of_the_next_room():
+    scene = load_scene("five_rooms")
+    hall = scene.room_by_name("hall")
+    # One stop 0.6 m from the door to the living room, others in the hall.
+    roi = roi_after(scene, [(7.7, 1.75), (9.0, 2.5), (6.5, 5.5)])
+    others = [r.polygon for r in scene.rooms if r.id != hall.id]
+    assert leaked_area(roi.polygon, others) < 0.5
+    assert roi_iou(roi.polygon, hall.polygon) > 0.8
+
+
+def test_no_scans_is_an_error():
+    with pytest.raises(RoIError, match="no scans"):
+        compute_roi([])
