@@ -13,3 +13,7 @@ class ConfigError(NBSError, ValueError):
 
 class InvalidPoseError(NBSError, ValueError):
     """A pose that is not a finite rigid transform (NaN, infinite, not a rotation)."""
+
+
+class ModelFileError(NBSError, ValueError):
+    """A stored model file that is missing, not JSON, malformed, or modified after it was written."""

@@ -444,7 +444,6 @@ def _drop_small_notches(vertices: np.ndarray, min_area: float) -> np.ndarray:
     """
     v = list(vertices)
     while len(v) > 3:
-        n = len(v)
         a = np.asarray(v)
         u, w = a - np.roll(a, 1, axis=0), np.roll(a, -1, axis=0) - np.roll(a, 1, axis=0)
         areas = 0.5 * np.abs(u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0])
