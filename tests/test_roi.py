@@ -8,6 +8,7 @@ from shapely.geometry import Polygon
 from skimage.draw import polygon as fill_polygon
 
 from nbs_env.config import ScannerConfig
+from nbs_env.perception.faces import WallFace
 from nbs_env.perception.roi import (
     RoIError,
     RoIScan,
@@ -102,3 +103,32 @@ def test_roi_stays_out_of_the_next_room():
 def test_no_scans_is_an_error():
     with pytest.raises(RoIError, match="no scans"):
         compute_roi([])
+
+
+def test_shipped_classifier_on_real_scans_and_the_figure(tmp_path):
+    from nbs_env.perception.structure import SEClassifier, label_points
+    from nbs_env.render import save_roi_png
+
+    model = SEClassifier.load_default()
+    assert model.training["report"]["held_out"]["f1"] >= 0.9
+    scene = load_scene("l_room")
+    scanner = Scanner(scene, ScannerConfig())
+    rng = np.random.default_rng(1)
+    scans = []
+    for x, y in [(3.0, 4.5), (6.5, 1.2), (1.5, 6.8)]:
+        pose = pose_from_xyz_rpy(x, y, 1.5, 0.0, 0.0, 0.0)
+        scans.append((scanner.scan(pose, rng), pose))
+    roi = compute_roi([RoIScan.from_scan(s, p) for s, p in scans])
+    points = np.concatenate([s.to_world(p) for s, p in scans])
+    se = model.classify_faces(roi.wall_faces, points)
+    assert se.all()  # the L room's six faces are all walls
+    labels = label_points(points, roi.wall_faces, roi.floor_z, roi.ceiling_z, roi.polygon)
+    truth = np.concatenate([np.isin(s.truth.labels, [0, 1, 2]) for s, _ in scans])
+    assert np.mean(labels == truth) > 0.95
+    # A face across the room, through the table and the column, is not a wall.
+    cut = WallFace(np.array([0.5, 2.3]), np.array([7.5, 2.3]), roi.floor_z, roi.ceiling_z)
+    assert not model.classify_faces([cut], points)[0]
+    out = save_roi_png(roi, se, tmp_path / "roi.png", points=points, origins=[p[:3, 3] for _, p in scans])
+    from PIL import Image
+
+    assert Image.open(out).size[0] > 400
