@@ -171,6 +171,8 @@ def floor_and_ceiling(z: np.ndarray, sensor_z: float, bin_size: float = 0.02) ->
         No points below or above the scanner.
     """
     z = np.asarray(z, dtype=float)
+    # A regular subsample finds the same peaks at a fraction of the cost.
+    z = z[:: max(1, len(z) // 100_000)]
     below, above = z[z < sensor_z - 0.5], z[z > sensor_z + 0.3]
     if len(below) < 10 or len(above) < 10:
         raise RoIError(f"cannot find floor and ceiling: {len(below)} points below and {len(above)} above the scanner")
@@ -185,13 +187,14 @@ def floor_and_ceiling(z: np.ndarray, sensor_z: float, bin_size: float = 0.02) ->
     return peak(below), peak(above)
 
 
-def _free_space_outline(
+def _free_space_radii(
     points: np.ndarray, origin: np.ndarray, bins: int, max_range: float, blocks: np.ndarray | None = None
-) -> Polygon | None:
-    """The star-shaped outline of the free space seen from ``origin`` (points are the band's).
+) -> np.ndarray | None:
+    """Per azimuth bin, the horizontal distance from ``origin`` to the nearest band point.
 
-    ``blocks`` are (k, 2) xy positions that bound the free space like points do (obstacles closer
-    than the minimum range).
+    ``points`` are the band's (k, >=2) points; ``blocks`` are (k, 2) xy positions that bound the
+    free space like points do (obstacles closer than the minimum range). Returns ``bins`` radii, the
+    outline of a star-shaped region, or None when too little was seen.
     """
     if blocks is not None and len(blocks):
         points = np.concatenate([points[:, :2], blocks[:, :2]])
@@ -207,17 +210,37 @@ def _free_space_outline(
     seen = np.isfinite(nearest)
     if seen.sum() < bins // 4:
         return None
-    # Bins with no point (beyond the scanner's reach) take the nearer of their seen neighbours.
-    idx = np.arange(bins)
-    prev_seen = np.maximum.accumulate(np.where(seen, idx, -bins * 2))
-    prev_seen = np.where(prev_seen < 0, prev_seen + bins, prev_seen)
-    nxt = np.minimum.accumulate(np.where(seen, idx, bins * 3)[::-1])[::-1]
-    fill = np.minimum(nearest[prev_seen % bins], nearest[np.where(nxt >= bins * 3, nxt % bins, nxt) % bins])
-    nearest = np.where(seen, nearest, fill)
-    theta = (idx + 0.5) / bins * 2 * np.pi - np.pi
-    outline = np.column_stack([origin[0] + nearest * np.cos(theta), origin[1] + nearest * np.sin(theta)])
-    poly = Polygon(outline)
-    return poly if poly.is_valid else poly.buffer(0)
+    # Bins with no point (beyond the scanner's reach) take the nearer of their closest seen neighbours.
+    idx = np.arange(3 * bins)
+    tiled = np.tile(seen, 3)
+    prev = np.maximum.accumulate(np.where(tiled, idx, 0))[bins : 2 * bins] % bins
+    nxt = np.minimum.accumulate(np.where(tiled, idx, 3 * bins - 1)[::-1])[::-1][bins : 2 * bins] % bins
+    return np.where(seen, nearest, np.minimum(nearest[prev], nearest[nxt]))
+
+
+def _rasterise_stars(stars: list[tuple[np.ndarray, np.ndarray]], pixel: float) -> tuple[np.ndarray, np.ndarray]:
+    """Union of star-shaped regions (origin, radii per azimuth bin) as a binary image.
+
+    A pixel is inside a star when its distance to the star's origin is at most the radius of its
+    azimuth bin: one vectorised pass per star over the pixel centres.
+    """
+    lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
+    for origin, radii in stars:
+        theta = (np.arange(len(radii)) + 0.5) / len(radii) * 2 * np.pi - np.pi
+        xy = origin[:2] + radii[:, None] * np.column_stack([np.cos(theta), np.sin(theta)])
+        lo, hi = np.minimum(lo, xy.min(axis=0)), np.maximum(hi, xy.max(axis=0))
+    corner = lo - 4 * pixel
+    shape = (int(np.ceil((hi[1] - corner[1]) / pixel)) + 5, int(np.ceil((hi[0] - corner[0]) / pixel)) + 5)
+    ys = (corner[1] + (np.arange(shape[0]) + 0.5) * pixel).astype(np.float32)
+    xs = (corner[0] + (np.arange(shape[1]) + 0.5) * pixel).astype(np.float32)
+    image = np.zeros(shape, dtype=bool)
+    for origin, radii in stars:
+        dx = xs[None, :] - np.float32(origin[0])
+        dy = ys[:, None] - np.float32(origin[1])
+        bins = len(radii)
+        b = ((np.arctan2(dy, dx) + np.pi) * (bins / (2 * np.pi))).astype(np.int32) % bins
+        image |= np.hypot(dx, dy) <= radii.astype(np.float32)[b]
+    return image, corner
 
 
 def compute_roi(scans: Sequence[RoIScan], config: RoIConfig | None = None) -> RoI:
@@ -242,7 +265,7 @@ def compute_roi(scans: Sequence[RoIScan], config: RoIConfig | None = None) -> Ro
     floor_z, ceiling_z = floor_and_ceiling(all_z, sensor_z, cfg.histogram_bin)
     hi = ceiling_z - cfg.band_below_ceiling
     lo = min(floor_z + cfg.band_above_floor, hi - 0.10)
-    outlines = []
+    stars: list[tuple[np.ndarray, np.ndarray]] = []
     band_points = []
     for scan in scans:
         points = np.asarray(scan.points)
@@ -256,13 +279,12 @@ def compute_roi(scans: Sequence[RoIScan], config: RoIConfig | None = None) -> Ro
         reach = origin[2] + scan.min_range * d[:, 2]
         wall = (reach >= lo) & (reach < ceiling_z - cfg.histogram_bin)
         blocks = origin[:2] + scan.min_range * d[wall][:, :2]
-        outline = _free_space_outline(band, origin, cfg.azimuth_bins, cfg.max_range, blocks)
-        if outline is not None:
-            outlines.append(outline)
-    if not outlines:
+        radii = _free_space_radii(band, origin, cfg.azimuth_bins, cfg.max_range, blocks)
+        if radii is not None:
+            stars.append((origin, radii))
+    if not stars:
         raise RoIError("no scan saw enough of the band under the ceiling to outline the room")
-    region = shapely.union_all(outlines)
-    image, origin_xy = _rasterise(region, cfg.pixel)
+    image, origin_xy = _rasterise_stars(stars, cfg.pixel)
     # What one scan claims as free beyond a wall it could not measure (too close), another scan may
     # have seen as wall: the band's points cut such claims off from the room.
     band_xy = np.concatenate([b for b in band_points if len(b)]) if any(len(b) for b in band_points) else None
@@ -281,20 +303,6 @@ def compute_roi(scans: Sequence[RoIScan], config: RoIConfig | None = None) -> Ro
     image = ndimage.binary_fill_holes(ndimage.binary_dilation(room, iterations=2) & image)
     polygon = polygon_from_image(image, origin_xy, cfg.pixel, cfg.corner_distance, cfg.collinear_deg)
     return RoI(polygon=polygon, floor_z=floor_z, ceiling_z=ceiling_z, image=image, origin=origin_xy, pixel=cfg.pixel)
-
-
-def _rasterise(region, pixel: float) -> tuple[np.ndarray, np.ndarray]:
-    from skimage.draw import polygon as fill_polygon
-
-    x0, y0, x1, y1 = region.bounds
-    origin = np.array([x0 - 4 * pixel, y0 - 4 * pixel])
-    shape = (int(np.ceil((y1 - origin[1]) / pixel)) + 5, int(np.ceil((x1 - origin[0]) / pixel)) + 5)
-    image = np.zeros(shape, dtype=bool)
-    for part in getattr(region, "geoms", [region]):
-        ring = np.asarray(part.exterior.coords)
-        rr, cc = fill_polygon((ring[:, 1] - origin[1]) / pixel - 0.5, (ring[:, 0] - origin[0]) / pixel - 0.5, shape)
-        image[rr, cc] = True
-    return image, origin
 
 
 def _clean(image: np.ndarray, seed: tuple[float, float], radius: int) -> np.ndarray:
