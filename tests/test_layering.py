@@ -47,3 +47,10 @@ def test_ruff_is_clean():
         pytest.skip("ruff is not installed (it is in the 'test' extra)")
     proc = subprocess.run([ruff, "check", "--no-cache", str(ROOT)], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_perception_and_policies_never_import_ground_truth():
+    """Honest simulation: perception sees measured points only, so it never imports the scene model."""
+    for folder in (ROOT / "nbs_env" / "perception", ROOT / "policies"):
+        for path in folder.rglob("*.py"):
+            assert "scenes" not in imported_packages(path), f"{path} imports scenes (ground truth)"
