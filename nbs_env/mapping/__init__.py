@@ -1,0 +1,1 @@
+"""Mapping: the labelled voxel space V(t)."""

@@ -1,0 +1,333 @@
+"""The labelled voxel space V(t) (paper §4, METHOD §5): a dense uint8 grid that grows with the RoI.
+
+Everything here works on the robot's belief: registered points, its point labels, its own pose
+estimate, its RoI. Labels are :class:`~nbs_env.labels.VoxelLabel` values.
+
+- **Carving** (free space) is projective: a voxel is EMPTY when it lies inside the field of view and
+  its far corner is nearer to the scanner than the measured range along its direction. The depth
+  image is min-pooled over the voxel's angular footprint first, so a voxel is carved only if every
+  ray that could cross it went beyond it.
+- **Occupied** voxels take STRUCTURE or CLUTTER from the labels of their points (Structure wins).
+  Occupied voxels are never carved again: a return is stronger evidence than a pass-through.
+- **Occluded** labels are recomputed from the current RoI and its SE faces after each scan: an
+  unsensed voxel inside the RoI prism is OCCLUDED_STRUCTURE when an SE face passes through it, else
+  OCCLUDED_CLUTTER.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import shapely
+from scipy import ndimage
+from shapely.geometry import Polygon
+
+from nbs_env.config import ScannerConfig
+from nbs_env.labels import VoxelLabel
+from nbs_env.perception.faces import WallFace
+from nbs_env.sensing.pose import check_pose
+
+__all__ = ["LABEL_COLOURS", "IntegrationStats", "VoxelGrid"]
+
+#: RGB colours of the labels in PLY exports (Structure blue, Occluded-structure green as in Fig. 4).
+LABEL_COLOURS = np.array(
+    [
+        [200, 200, 200],  # unknown
+        [255, 255, 255],  # empty
+        [214, 39, 40],  # clutter
+        [31, 119, 180],  # structure
+        [255, 127, 14],  # occluded clutter
+        [44, 160, 44],  # occluded structure
+    ],
+    dtype=np.uint8,
+)
+
+_POOL_SIZES = (1, 3, 5, 9, 17, 33, 65)
+
+
+@dataclass(frozen=True)
+class IntegrationStats:
+    """What one scan changed: voxels newly EMPTY, newly occupied, and newly STRUCTURE."""
+
+    carved: int
+    occupied: int
+    structure: int
+
+
+class VoxelGrid:
+    """A dense grid of voxel labels over an axis-aligned box.
+
+    Parameters
+    ----------
+    origin : (3,) float
+        World position of the corner of voxel (0, 0, 0); a multiple of ``voxel_size`` so that grids
+        that grow keep their voxel boundaries.
+    voxel_size : float
+        Edge of a voxel in metres.
+    labels : (nx, ny, nz) uint8
+        VoxelLabel values; voxel (i, j, k) has its centre at ``origin + (i, j, k) + 0.5`` voxels.
+    """
+
+    def __init__(self, origin: np.ndarray, voxel_size: float, labels: np.ndarray) -> None:
+        if not (np.isfinite(voxel_size) and voxel_size > 0):
+            raise ValueError(f"voxel_size must be a positive number of metres, got {voxel_size}")
+        labels = np.asarray(labels)
+        if labels.ndim != 3 or labels.dtype != np.uint8:
+            raise ValueError(f"labels must be a 3-D uint8 array, got {labels.dtype} of shape {labels.shape}")
+        if labels.size and labels.max() > max(VoxelLabel):
+            raise ValueError(f"labels hold {int(labels.max())}, which is no VoxelLabel")
+        origin = np.asarray(origin, dtype=float).reshape(3)
+        if not np.all(np.isfinite(origin)):
+            raise ValueError(f"origin must be finite, got {origin}")
+        self.origin = origin
+        self.voxel_size = float(voxel_size)
+        self.labels = labels
+
+    # ------------------------------------------------------------------ construction and growth
+    @classmethod
+    def covering(cls, lo: np.ndarray, hi: np.ndarray, voxel_size: float = 0.05) -> VoxelGrid:
+        """An all-UNKNOWN grid whose voxels cover the box [lo, hi], aligned to multiples of the voxel size."""
+        lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+        if np.any(hi < lo):
+            raise ValueError(f"empty box: lo {lo} above hi {hi}")
+        first = np.floor(lo / voxel_size).astype(np.int64)
+        last = np.ceil(hi / voxel_size).astype(np.int64)
+        shape = tuple(np.maximum(last - first, 1))
+        return cls(first * voxel_size, voxel_size, np.zeros(shape, dtype=np.uint8))
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return tuple(self.labels.shape)  # type: ignore[return-value]
+
+    @property
+    def upper(self) -> np.ndarray:
+        """(3,) float: world position of the far corner of the grid."""
+        return self.origin + np.asarray(self.shape) * self.voxel_size
+
+    def ensure_covers(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Grow the grid (never shrink) so that it covers [lo, hi]; labels keep their world place.
+
+        Returns
+        -------
+        (3,) int
+            Where the old voxel (0, 0, 0) now is (the offset to add to old indices).
+        """
+        s = self.voxel_size
+        first_old = np.rint(self.origin / s).astype(np.int64)
+        last_old = first_old + np.asarray(self.shape)
+        first = np.minimum(first_old, np.floor(np.asarray(lo, dtype=float) / s).astype(np.int64))
+        last = np.maximum(last_old, np.ceil(np.asarray(hi, dtype=float) / s).astype(np.int64))
+        offset = first_old - first
+        if np.all(offset == 0) and np.all(last == last_old):
+            return offset
+        grown = np.zeros(tuple(last - first), dtype=np.uint8)
+        nx, ny, nz = self.shape
+        grown[offset[0] : offset[0] + nx, offset[1] : offset[1] + ny, offset[2] : offset[2] + nz] = self.labels
+        self.labels = grown
+        self.origin = first * s
+        return offset
+
+    # ------------------------------------------------------------------ coordinates
+    def index_of(self, points: np.ndarray) -> np.ndarray:
+        """(n, 3) int64: the voxel index of each of the (n, 3) world points (may lie outside the grid)."""
+        return np.floor((np.asarray(points, dtype=float) - self.origin) / self.voxel_size).astype(np.int64)
+
+    def centres(self, index: np.ndarray) -> np.ndarray:
+        """(n, 3) float: world centres of the (n, 3) voxel indices."""
+        return self.origin + (np.asarray(index, dtype=float) + 0.5) * self.voxel_size
+
+    def inside(self, index: np.ndarray) -> np.ndarray:
+        """(n,) bool: which of the (n, 3) indices lie in the grid."""
+        index = np.asarray(index)
+        return np.all((index >= 0) & (index < np.asarray(self.shape)), axis=1)
+
+    def count(self, label: VoxelLabel) -> int:
+        return int(np.count_nonzero(self.labels == label))
+
+    # ------------------------------------------------------------------ integrating a scan
+    def integrate(
+        self,
+        points: np.ndarray,
+        structure: np.ndarray,
+        pose: np.ndarray,
+        depth: np.ndarray,
+        config: ScannerConfig,
+    ) -> IntegrationStats:
+        """Carve free space and mark occupied voxels from one registered scan.
+
+        Parameters
+        ----------
+        points : (n, 3) float
+            The scan's points in the world (placed with the robot's pose estimate).
+        structure : (n,) bool
+            Point labels: True Structure, False Clutter.
+        pose : (4, 4) float
+            The estimated sensor pose.
+        depth : (rows, cols) float
+            The scan's depth image (NaN where no return).
+        config : ScannerConfig
+            The scanner's pattern.
+        """
+        points = np.asarray(points, dtype=float)
+        structure = np.asarray(structure, dtype=bool)
+        if points.ndim != 2 or points.shape[1] != 3 or structure.shape != (len(points),):
+            raise ValueError(f"points must be (n, 3) and structure (n,), got {points.shape} and {structure.shape}")
+        T = check_pose(pose, "sensor pose")
+        if depth.shape != (config.n_rows, config.n_cols):
+            raise ValueError(f"depth image has shape {depth.shape}, the pattern is {(config.n_rows, config.n_cols)}")
+        # The grid spans the RoI plus a margin (the caller grows it); points beyond it are not mapped.
+        carved = self._carve(T, depth, config)
+        occupied, new_structure = self._occupy(points, structure)
+        return IntegrationStats(carved=carved, occupied=occupied, structure=new_structure)
+
+    def _carve(self, T: np.ndarray, depth: np.ndarray, config: ScannerConfig) -> int:
+        s = self.voxel_size
+        measured = np.nan_to_num(depth, nan=0.0).astype(np.float32)
+        if not np.any(measured > 0):
+            return 0
+        reach = float(measured.max())
+        centre = T[:3, 3]
+        # Only voxels within the farthest return can be carved.
+        first = np.maximum(np.floor((centre - reach - self.origin) / s).astype(np.int64), 0)
+        last = np.minimum(np.ceil((centre + reach - self.origin) / s).astype(np.int64), np.asarray(self.shape))
+        if np.any(last <= first):
+            return 0
+        gi = [np.arange(first[a], last[a]) for a in range(3)]
+        axes = [(self.origin[a] + (gi[a] + 0.5) * s - centre[a]).astype(np.float32) for a in range(3)]
+        R = T[:3, :3].astype(np.float32)
+        # Sensor-frame coordinates by broadcasting the three axes: no (n, 3) temporary of all voxels.
+        sx = axes[0][:, None, None] * R[0, 0] + axes[1][None, :, None] * R[1, 0] + axes[2][None, None, :] * R[2, 0]
+        sy = axes[0][:, None, None] * R[0, 1] + axes[1][None, :, None] * R[1, 1] + axes[2][None, None, :] * R[2, 1]
+        sz = axes[0][:, None, None] * R[0, 2] + axes[1][None, :, None] * R[1, 2] + axes[2][None, None, :] * R[2, 2]
+        horizontal = np.hypot(sx, sy)
+        r = np.hypot(horizontal, sz)
+        step = np.float32(np.radians(config.angular_step))
+        half_diagonal = np.float32(s * np.sqrt(3) / 2)
+        elevation = np.arctan2(sz, horizontal)
+        half_angle = half_diagonal / np.maximum(r, np.float32(1e-3))
+        # The whole voxel must lie within the vertical field of view, not just its centre.
+        lowest = np.float32(np.radians(config.elevation_min))
+        highest = np.float32(np.radians(config.elevation_min + (config.n_rows - 1) * config.angular_step))
+        in_fov = (elevation - half_angle >= lowest) & (elevation + half_angle <= highest)
+        row = np.rint((elevation - lowest) / step)
+        col = np.rint((np.arctan2(sy, sx) + np.float32(np.pi)) / np.float32(2 * np.pi / config.n_cols)) % config.n_cols
+        row = np.clip(row, 0, config.n_rows - 1).astype(np.int32)
+        col = col.astype(np.int32)
+        # The voxel's angular footprint in pixels picks how wide a window of rays must all pass it.
+        footprint = 2 * half_diagonal / np.maximum(r, np.float32(1e-3)) / step
+        limit = np.zeros(r.shape, dtype=np.float32)
+        unassigned = np.ones(r.shape, dtype=bool)
+        for size in _POOL_SIZES:
+            pooled = ndimage.minimum_filter(measured, size=size, mode=("nearest", "wrap"))
+            pick = unassigned & (footprint <= size - 1 if size > 1 else footprint <= 1)
+            limit[pick] = pooled[row[pick], col[pick]]
+            unassigned &= ~pick
+        # Footprints wider than the widest window (voxels right at the scanner) are not carved.
+        carve = in_fov & ~unassigned & (r + half_diagonal < limit)
+        block = self.labels[first[0] : last[0], first[1] : last[1], first[2] : last[2]]
+        carve &= (block != VoxelLabel.CLUTTER) & (block != VoxelLabel.STRUCTURE)
+        newly = int(np.count_nonzero(carve & (block != VoxelLabel.EMPTY)))
+        block[carve] = VoxelLabel.EMPTY
+        return newly
+
+    def _occupy(self, points: np.ndarray, structure: np.ndarray) -> tuple[int, int]:
+        if not len(points):
+            return 0, 0
+        idx = self.index_of(points)
+        ok = self.inside(idx)
+        idx, structure = idx[ok], structure[ok]
+        flat = np.ravel_multi_index(idx.T, self.shape)
+        labels = self.labels.reshape(-1)
+        before = labels[flat].copy()
+        clutter = flat[~structure]
+        labels[clutter[labels[clutter] != VoxelLabel.STRUCTURE]] = VoxelLabel.CLUTTER
+        labels[flat[structure]] = VoxelLabel.STRUCTURE
+        after = labels[flat]
+        was_occupied = (before == VoxelLabel.CLUTTER) | (before == VoxelLabel.STRUCTURE)
+        occupied = len(np.unique(flat[~was_occupied]))
+        structure_new = len(np.unique(flat[(after == VoxelLabel.STRUCTURE) & (before != VoxelLabel.STRUCTURE)]))
+        return occupied, structure_new
+
+    # ------------------------------------------------------------------ occlusion labels
+    def update_occlusion(
+        self,
+        polygon: np.ndarray,
+        floor_z: float,
+        ceiling_z: float,
+        se_faces: Sequence[WallFace],
+    ) -> None:
+        """Recompute OCCLUDED_STRUCTURE / OCCLUDED_CLUTTER from the current RoI.
+
+        Unsensed voxels (UNKNOWN or previously occluded) whose centre lies inside the RoI prism become
+        OCCLUDED_STRUCTURE when an SE face (an SE wall face, the floor or the ceiling) passes through
+        the voxel, else OCCLUDED_CLUTTER. Occluded voxels outside the current RoI return to UNKNOWN.
+        """
+        s = self.voxel_size
+        lo = np.array([*np.min(polygon, axis=0), floor_z]) - s
+        hi = np.array([*np.max(polygon, axis=0), ceiling_z]) + s
+        self.ensure_covers(lo, hi)
+        labels = self.labels
+        occluded = (labels == VoxelLabel.OCCLUDED_CLUTTER) | (labels == VoxelLabel.OCCLUDED_STRUCTURE)
+        labels[occluded] = VoxelLabel.UNKNOWN
+        nx, ny, nz = self.shape
+        xs = self.origin[0] + (np.arange(nx) + 0.5) * s
+        ys = self.origin[1] + (np.arange(ny) + 0.5) * s
+        zs = self.origin[2] + (np.arange(nz) + 0.5) * s
+        gx, gy = np.meshgrid(xs, ys, indexing="ij")
+        prism = Polygon(polygon).buffer(s / 2)
+        in_plan = shapely.contains_xy(prism, gx, gy)  # (nx, ny)
+        in_height = (zs >= floor_z - s / 2) & (zs <= ceiling_z + s / 2)
+        inside = in_plan[:, :, None] & in_height[None, None, :]
+        # A face "passes through" a voxel when it comes within half a voxel of its centre.
+        slab = np.zeros(self.shape, dtype=bool)
+        half = s / 2 * (1 + 1e-6)  # a face on a voxel boundary passes through both voxels
+        near_floor = np.abs(zs - floor_z) <= half
+        near_ceiling = np.abs(zs - ceiling_z) <= half
+        slab |= in_plan[:, :, None] & (near_floor | near_ceiling)[None, None, :]
+        for face in se_faces:
+            rel_x, rel_y = gx - face.p0[0], gy - face.p0[1]
+            u = rel_x * face.direction[0] + rel_y * face.direction[1]
+            w = rel_x * face.normal[0] + rel_y * face.normal[1]
+            on = (np.abs(w) <= half) & (u >= -half) & (u <= face.length + half)
+            slab |= on[:, :, None] & ((zs >= face.z0 - half) & (zs <= face.z1 + half))[None, None, :]
+        unsensed = labels == VoxelLabel.UNKNOWN
+        labels[inside & unsensed & slab] = VoxelLabel.OCCLUDED_STRUCTURE
+        labels[inside & unsensed & ~slab] = VoxelLabel.OCCLUDED_CLUTTER
+
+    # ------------------------------------------------------------------ export
+    def to_npz(self, path: str | Path) -> Path:
+        """Write labels, origin and voxel size to an NPZ file (no pickles)."""
+        path = Path(path)
+        np.savez_compressed(path, labels=self.labels, origin=self.origin, voxel_size=np.float64(self.voxel_size))
+        return path
+
+    @classmethod
+    def from_npz(cls, path: str | Path) -> VoxelGrid:
+        """Read a grid written by :meth:`to_npz`.
+
+        Raises
+        ------
+        ValueError
+            A file that is not such an NPZ, naming the path and the problem.
+        """
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                return cls(data["origin"], float(data["voxel_size"]), data["labels"])
+        except (OSError, KeyError, ValueError) as exc:
+            raise ValueError(f"{path}: not a voxel grid NPZ ({exc})") from None
+
+    def to_ply(self, path: str | Path, *, include: Sequence[VoxelLabel] | None = None) -> Path:
+        """Write the centres of the voxels (all but UNKNOWN and EMPTY by default) as a coloured PLY."""
+        import trimesh
+
+        include = include or [v for v in VoxelLabel if v not in (VoxelLabel.UNKNOWN, VoxelLabel.EMPTY)]
+        mask = np.isin(self.labels, [int(v) for v in include])
+        idx = np.argwhere(mask)
+        colours = np.column_stack([LABEL_COLOURS[self.labels[mask]], np.full(len(idx), 255, np.uint8)])
+        cloud = trimesh.PointCloud(self.centres(idx), colors=colours)
+        path = Path(path)
+        cloud.export(path)
+        return path

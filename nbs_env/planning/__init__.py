@@ -1,0 +1,1 @@
+"""Planning: traversability, next valid positions (NVPs) and paths, and the NBS gain."""

@@ -1,0 +1,143 @@
+"""The labelled voxel grid: growth, carving, occupied and occluded labels, export."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nbs_env.config import ScannerConfig
+from nbs_env.labels import VoxelLabel
+from nbs_env.mapping.voxels import VoxelGrid
+from nbs_env.perception.faces import WallFace
+from nbs_env.sensing.pose import pose_from_xyz_rpy
+from nbs_env.sensing.scanner import Scanner
+from scenes import FloorPlan, RoomPlan
+
+A, B, H = 4.0, 3.0, 2.5
+
+
+@pytest.fixture(scope="module")
+def box_scene():
+    t = 0.2
+    plan = FloorPlan(
+        rooms=(RoomPlan("box", ((-t / 2, -t / 2), (A + t / 2, -t / 2), (A + t / 2, B + t / 2), (-t / 2, B + t / 2))),),
+        ceiling_height=H,
+        wall_thickness=t,
+        start=(2.0, 1.5),
+    )
+    return plan.to_scene()
+
+
+def analytic_range(origin, directions):
+    hi = np.array([A, B, H])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(directions > 0, (hi - origin) / directions, np.where(directions < 0, -origin / directions, np.inf))
+    return t.min(axis=1)
+
+
+def test_labels_survive_growth():
+    grid = VoxelGrid.covering([0, 0, 0], [1, 1, 1], 0.1)
+    rng = np.random.default_rng(0)
+    grid.labels[:] = rng.integers(0, 6, grid.shape, dtype=np.uint8)
+    centres = grid.centres(np.argwhere(np.ones(grid.shape, bool)))
+    before = grid.labels.reshape(-1).copy()
+    offset = grid.ensure_covers([-0.55, -0.2, 0.0], [1.3, 2.0, 1.25])
+    assert tuple(offset) == (6, 2, 0)
+    assert grid.shape == (19, 22, 13)
+    after = grid.labels[tuple(grid.index_of(centres).T)]
+    assert np.array_equal(after, before)
+    # Voxel boundaries stay on multiples of the voxel size.
+    assert np.allclose(grid.origin / 0.1, np.round(grid.origin / 0.1))
+    # New voxels are UNKNOWN.
+    assert grid.labels.sum() == before.sum()
+
+
+def test_carving_never_goes_beyond_the_measured_range(box_scene):
+    cfg = ScannerConfig(angular_step=1.0, range_noise=0.0, min_range=0.5)
+    pose = pose_from_xyz_rpy(1.3, 1.1, 1.5, 0.0, 0.0, 0.4)
+    scan = Scanner(box_scene, cfg).scan(pose)
+    grid = VoxelGrid.covering([-0.3, -0.3, -0.3], [A + 0.3, B + 0.3, H + 0.3], 0.05)
+    stats = grid.integrate(scan.to_world(pose), np.ones(len(scan), bool), pose, scan.depth_image(), cfg)
+    empty = grid.centres(np.argwhere(grid.labels == VoxelLabel.EMPTY))
+    assert stats.carved == len(empty) > 0.5 * (A * B * H / 0.05**3)  # most of the room is carved
+    rel = empty - pose[:3, 3]
+    r = np.linalg.norm(rel, axis=1)
+    half_diagonal = 0.05 * np.sqrt(3) / 2
+    # Along its own direction, every Empty voxel's far corner is nearer than the wall.
+    assert np.all(r + half_diagonal <= analytic_range(pose[:3, 3], rel / r[:, None]) + 1e-6)
+    # And nothing outside the room is Empty.
+    assert np.all((empty > 0) & (empty < [A, B, H]))
+
+
+def test_voxels_outside_the_field_of_view_are_not_carved(box_scene):
+    cfg = ScannerConfig(angular_step=1.0, range_noise=0.0, elevation_min=-10.0, elevation_max=10.0)
+    pose = pose_from_xyz_rpy(2.0, 1.5, 1.25)
+    scan = Scanner(box_scene, cfg).scan(pose)
+    grid = VoxelGrid.covering([0, 0, 0], [A, B, H], 0.05)
+    grid.integrate(scan.to_world(pose), np.ones(len(scan), bool), pose, scan.depth_image(), cfg)
+    empty = grid.centres(np.argwhere(grid.labels == VoxelLabel.EMPTY))
+    rel = empty - pose[:3, 3]
+    elevation = np.degrees(np.arctan2(rel[:, 2], np.hypot(rel[:, 0], rel[:, 1])))
+    # A voxel is carved only if its whole footprint is seen: its centre lies inside the field of view.
+    assert len(empty) > 0 and np.all(np.abs(elevation) <= 10.0 + 1e-6)
+
+
+def test_occupied_labels_and_structure_priority():
+    grid = VoxelGrid.covering([0, 0, 0], [1, 1, 1], 0.1)
+    points = np.array([[0.05, 0.05, 0.05], [0.06, 0.04, 0.05], [0.55, 0.55, 0.55], [0.95, 0.95, 0.95]])
+    structure = np.array([False, True, False, True])
+    cfg = ScannerConfig(angular_step=10.0)
+    depth = np.full((cfg.n_rows, cfg.n_cols), np.nan)
+    stats = grid.integrate(points, structure, pose_from_xyz_rpy(0.5, 0.5, 0.5), depth, cfg)
+    assert grid.labels[0, 0, 0] == VoxelLabel.STRUCTURE  # a Structure point wins its voxel
+    assert grid.labels[5, 5, 5] == VoxelLabel.CLUTTER
+    assert grid.labels[9, 9, 9] == VoxelLabel.STRUCTURE
+    assert stats.occupied == 3 and stats.structure == 2
+    # Points outside the grid are ignored, not an error.
+    grid.integrate(np.array([[5.0, 5.0, 5.0]]), np.array([True]), pose_from_xyz_rpy(0.5, 0.5, 0.5), depth, cfg)
+
+
+def test_occlusion_labels_follow_the_roi_and_se_faces():
+    grid = VoxelGrid.covering([-1, -1, 0], [3, 3, 1], 0.1)
+    polygon = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
+    east = WallFace(np.array([2.0, 0.0]), np.array([2.0, 2.0]), 0.0, 1.0)
+
+    def label_at(x, y, z):
+        return grid.labels[tuple(grid.index_of(np.array([[x, y, z]]))[0])]
+
+    grid.labels[tuple(grid.index_of(np.array([[0.55, 0.55, 0.55]]))[0])] = VoxelLabel.EMPTY
+    grid.update_occlusion(polygon, 0.0, 1.0, [east])
+    assert label_at(0.55, 0.55, 0.55) == VoxelLabel.EMPTY  # sensed voxels keep their label
+    assert label_at(1.95, 0.55, 0.55) == VoxelLabel.OCCLUDED_STRUCTURE  # the SE east face passes through
+    assert label_at(0.05, 0.55, 0.55) == VoxelLabel.OCCLUDED_CLUTTER  # the west face is not SE
+    assert label_at(1.05, 1.05, 0.55) == VoxelLabel.OCCLUDED_CLUTTER  # the middle of the room
+    assert label_at(0.55, 0.55, 0.05) == VoxelLabel.OCCLUDED_STRUCTURE  # the floor is SE
+    assert label_at(0.55, 0.55, 0.95) == VoxelLabel.OCCLUDED_STRUCTURE  # the ceiling too
+    assert label_at(2.55, 0.55, 0.55) == VoxelLabel.UNKNOWN  # outside the RoI
+    # A smaller RoI returns the occluded voxels it no longer covers to UNKNOWN.
+    grid.update_occlusion(polygon / 2, 0.0, 1.0, [])
+    assert label_at(1.55, 1.55, 0.55) == VoxelLabel.UNKNOWN
+
+
+def test_npz_round_trip_and_ply(tmp_path):
+    grid = VoxelGrid.covering([0, 0, 0], [1, 1, 1], 0.1)
+    grid.labels[2:4, 2:4, 2:4] = VoxelLabel.STRUCTURE
+    grid.labels[5, 5, 5] = VoxelLabel.OCCLUDED_STRUCTURE
+    again = VoxelGrid.from_npz(grid.to_npz(tmp_path / "v.npz"))
+    assert np.array_equal(again.labels, grid.labels) and np.allclose(again.origin, grid.origin)
+    import trimesh
+
+    cloud = trimesh.load(grid.to_ply(tmp_path / "v.ply"))
+    assert len(cloud.vertices) == 9
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match=r"bad\.npz: not a voxel grid"):
+        VoxelGrid.from_npz(tmp_path / "bad.npz")
+
+
+def test_bad_grid_input():
+    with pytest.raises(ValueError, match="voxel_size"):
+        VoxelGrid([0, 0, 0], 0.0, np.zeros((2, 2, 2), np.uint8))
+    with pytest.raises(ValueError, match="uint8"):
+        VoxelGrid([0, 0, 0], 0.1, np.zeros((2, 2, 2)))
+    with pytest.raises(ValueError, match="no VoxelLabel"):
+        VoxelGrid([0, 0, 0], 0.1, np.full((2, 2, 2), 9, np.uint8))
