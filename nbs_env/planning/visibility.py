@@ -1,0 +1,154 @@
+"""The greedy NBS gain (paper §4, METHOD §7): predicted Occluded-structure→Structure conversions.
+
+For each next valid position, the scanner is placed there and the OCCLUDED_STRUCTURE voxels it
+would see are counted: a voxel counts when it lies inside the field of view and the range limits,
+and the line of sight to its centre meets no occupied voxel on the way. Lines of sight are cast with
+Embree against a mesh of the occupied voxels' exposed faces, built once per grid; only V(t) is used,
+never the scene.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from nbs_env.config import ScannerConfig
+from nbs_env.labels import VoxelLabel
+from scenes._open3d import open3d
+
+__all__ = ["GainConfig", "VisibilityModel", "greedy_order", "occupied_surface"]
+
+
+@dataclass(frozen=True)
+class GainConfig:
+    """Options of the gain.
+
+    Attributes
+    ----------
+    occluded_clutter_blocks : bool
+        Whether OCCLUDED_CLUTTER voxels block lines of sight as occupied ones do. Unsensed space
+        may hold furniture; blocking is the pessimistic reading (see benchmarks/README.md for the
+        measurement that chose the default).
+    tolerance_voxels : float
+        A line of sight that reaches within this many voxels of the target counts: the target's own
+        neighbours on the same wall must not hide it at grazing angles.
+    """
+
+    occluded_clutter_blocks: bool = False
+    tolerance_voxels: float = 1.0
+
+
+def occupied_surface(blocking: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The exposed faces of the blocking voxels as a triangle mesh in voxel units.
+
+    Parameters
+    ----------
+    blocking : (nx, ny, nz) bool
+
+    Returns
+    -------
+    vertices : (v, 3) float32
+        Corners in voxel units (voxel (i, j, k) spans [i, i+1] x [j, j+1] x [k, k+1]).
+    triangles : (t, 3) uint32
+    """
+    padded = np.pad(blocking, 1)
+    quads = []
+    # For each axis and direction, a face is exposed where the neighbour is not blocking.
+    corners = {
+        0: np.array([[0, 0, 0], [0, 1, 0], [0, 1, 1], [0, 0, 1]]),
+        1: np.array([[0, 0, 0], [0, 0, 1], [1, 0, 1], [1, 0, 0]]),
+        2: np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]),
+    }
+    for axis in range(3):
+        for side in (0, 1):
+            shift = [0, 0, 0]
+            shift[axis] = 1 if side else -1
+            neighbour = np.roll(padded, -shift[axis], axis=axis)
+            exposed = padded & ~neighbour
+            idx = np.argwhere(exposed[1:-1, 1:-1, 1:-1])
+            if not len(idx):
+                continue
+            base = idx.astype(np.float32)
+            base[:, axis] += side
+            quads.append(base[:, None, :] + corners[axis][None, :, :])
+    if not quads:
+        return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint32)
+    q = np.concatenate(quads).astype(np.float32)  # (m, 4, 3)
+    vertices = q.reshape(-1, 3)
+    base = np.arange(len(q), dtype=np.uint32)[:, None] * 4
+    triangles = np.concatenate([base + np.array([0, 1, 2]), base + np.array([0, 2, 3])]).astype(np.uint32)
+    return vertices, triangles
+
+
+class VisibilityModel:
+    """Lines of sight through one state of the voxel grid.
+
+    Parameters
+    ----------
+    labels : (nx, ny, nz) uint8
+        VoxelLabel values of V(t).
+    origin : (3,) float
+        World position of the corner of voxel (0, 0, 0).
+    voxel_size : float
+    config : GainConfig
+    """
+
+    def __init__(self, labels: np.ndarray, origin: np.ndarray, voxel_size: float, config: GainConfig | None = None):
+        self.config = config or GainConfig()
+        self.origin = np.asarray(origin, dtype=float)
+        self.voxel_size = float(voxel_size)
+        blocking = (labels == VoxelLabel.CLUTTER) | (labels == VoxelLabel.STRUCTURE)
+        if self.config.occluded_clutter_blocks:
+            blocking |= labels == VoxelLabel.OCCLUDED_CLUTTER
+        targets = np.argwhere(labels == VoxelLabel.OCCLUDED_STRUCTURE)
+        self.targets = self.origin + (targets + 0.5) * self.voxel_size  # (n, 3) world centres
+        vertices, triangles = occupied_surface(blocking)
+        o3d = open3d()
+        self._o3d = o3d
+        self._scene = o3d.t.geometry.RaycastingScene()
+        if len(triangles):
+            world = (self.origin + vertices.astype(np.float64) * self.voxel_size).astype(np.float32)
+            self._scene.add_triangles(o3d.core.Tensor(world), o3d.core.Tensor(triangles))
+        self.n_triangles = len(triangles)
+
+    def visible(self, sensor: np.ndarray, scanner: ScannerConfig) -> np.ndarray:
+        """(n,) bool: which OCCLUDED_STRUCTURE voxels a scanner at ``sensor`` (3,) would see."""
+        sensor = np.asarray(sensor, dtype=float)
+        rel = self.targets - sensor
+        dist = np.linalg.norm(rel, axis=1)
+        elevation = np.degrees(np.arcsin(np.clip(rel[:, 2] / np.maximum(dist, 1e-9), -1.0, 1.0)))
+        candidate = (
+            (dist >= scanner.min_range)
+            & (dist <= scanner.max_range)
+            & (elevation >= scanner.elevation_min)
+            & (elevation <= scanner.elevation_max)
+        )
+        out = np.zeros(len(self.targets), dtype=bool)
+        idx = np.flatnonzero(candidate)
+        if not len(idx):
+            return out
+        if self.n_triangles == 0:
+            out[idx] = True
+            return out
+        rays = np.empty((len(idx), 6), dtype=np.float32)
+        rays[:, :3] = sensor
+        rays[:, 3:] = rel[idx] / dist[idx, None]
+        t_hit = self._scene.cast_rays(self._o3d.core.Tensor(rays))["t_hit"].numpy()
+        out[idx] = t_hit >= dist[idx] - self.config.tolerance_voxels * self.voxel_size
+        return out
+
+    def gains(self, sensors: np.ndarray, scanner: ScannerConfig) -> np.ndarray:
+        """(m,) int: predicted conversions for each of the (m, 3) scanner positions."""
+        sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
+        if not len(self.targets):
+            return np.zeros(len(sensors), dtype=np.int64)
+        return np.array([int(self.visible(s, scanner).sum()) for s in sensors], dtype=np.int64)
+
+
+def greedy_order(gains: np.ndarray, path_lengths: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+    """Candidate indices ranked by gain, ties to the shorter path; masked-out entries last."""
+    gains = np.asarray(gains, dtype=float)
+    path_lengths = np.asarray(path_lengths, dtype=float)
+    valid = np.ones(len(gains), dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    return np.lexsort((path_lengths, -gains, ~valid))

@@ -1,0 +1,86 @@
+"""The greedy NBS gain on hand-built grids: occlusion, field of view, range, ranking."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from nbs_env.config import ScannerConfig
+from nbs_env.labels import VoxelLabel
+from nbs_env.planning.visibility import GainConfig, VisibilityModel, greedy_order, occupied_surface
+
+S = 0.1
+
+
+def room_with_cabinet() -> tuple[np.ndarray, np.ndarray]:
+    """A 6 x 6 x 3 m grid at 10 cm: the wall at x = 5.95 m is still Occluded-structure, and a cabinet
+    (Clutter, 0.5 m deep, 1.5 m wide, 2 m tall) stands 0.3 m in front of it for y in [1, 2.5]."""
+    labels = np.full((60, 60, 30), VoxelLabel.EMPTY, dtype=np.uint8)
+    labels[59, :, :] = VoxelLabel.OCCLUDED_STRUCTURE
+    labels[51:56, 10:25, 0:20] = VoxelLabel.CLUTTER
+    return labels, np.zeros(3)
+
+
+def test_exposed_faces_of_a_single_voxel_and_a_block():
+    one = np.zeros((3, 3, 3), bool)
+    one[1, 1, 1] = True
+    vertices, triangles = occupied_surface(one)
+    assert len(triangles) == 12 and vertices.min() == 1 and vertices.max() == 2
+    block = np.ones((2, 2, 2), bool)
+    _, triangles = occupied_surface(block)
+    assert len(triangles) == 6 * 4 * 2  # inner faces are not exposed
+
+
+def test_a_wall_hidden_behind_a_cabinet_favours_the_far_side():
+    labels, origin = room_with_cabinet()
+    model = VisibilityModel(labels, origin, S)
+    scanner = ScannerConfig(min_range=0.5)
+    behind = model.targets[(model.targets[:, 1] > 1.1) & (model.targets[:, 1] < 2.4) & (model.targets[:, 2] < 1.9)]
+    assert len(behind) > 0
+    # In front of the cabinet, looking at it: the wall part behind it is hidden.
+    front = np.array([3.0, 1.75, 1.5])
+    # Beside the cabinet, close to the wall: the wall part behind the cabinet is seen at an angle.
+    side = np.array([5.4, 4.0, 1.5])
+    vis_front = model.visible(front, scanner)
+    vis_side = model.visible(side, scanner)
+    hidden = (model.targets[:, 1] > 1.2) & (model.targets[:, 1] < 2.3) & (model.targets[:, 2] < 1.9)
+    assert not vis_front[hidden].any()
+    assert vis_side[hidden].sum() > 0
+    gains = model.gains(np.array([front, side]), scanner)
+    # Count only the wall part behind the cabinet: the far side wins.
+    assert vis_side[hidden].sum() > vis_front[hidden].sum()
+    assert gains.shape == (2,)
+
+
+def test_field_of_view_and_range_limits_are_never_counted():
+    labels, origin = room_with_cabinet()
+    model = VisibilityModel(labels, origin, S)
+    scanner = ScannerConfig(min_range=1.5, elevation_min=-40.0, elevation_max=60.0)
+    sensor = np.array([4.8, 4.0, 1.5])
+    visible = model.visible(sensor, scanner)
+    rel = model.targets[visible] - sensor
+    dist = np.linalg.norm(rel, axis=1)
+    elevation = np.degrees(np.arcsin(rel[:, 2] / dist))
+    assert visible.sum() > 100
+    assert dist.min() >= 1.5
+    assert elevation.min() >= -40.0 and elevation.max() <= 60.0
+    # Some wall voxels are close enough, or steep enough, to be left out.
+    rel_all = model.targets - sensor
+    d_all = np.linalg.norm(rel_all, axis=1)
+    assert np.any(d_all < 1.5) and not visible[d_all < 1.5].any()
+
+
+def test_occluded_clutter_switch_blocks_lines_of_sight():
+    labels, origin = room_with_cabinet()
+    labels[40:45, 30:40, :25] = VoxelLabel.OCCLUDED_CLUTTER
+    sensor = np.array([2.0, 3.5, 1.5])
+    scanner = ScannerConfig(min_range=0.5)
+    free = VisibilityModel(labels, origin, S, GainConfig(occluded_clutter_blocks=False)).gains(sensor[None], scanner)
+    blocked = VisibilityModel(labels, origin, S, GainConfig(occluded_clutter_blocks=True)).gains(sensor[None], scanner)
+    assert blocked[0] < free[0]
+
+
+def test_greedy_order_ties_go_to_the_shorter_path():
+    gains = np.array([10, 30, 30, 5, 99])
+    paths = np.array([1.0, 4.0, 2.0, 0.5, 0.1])
+    mask = np.array([True, True, True, True, False])
+    assert greedy_order(gains, paths, mask).tolist() == [2, 1, 0, 3, 4]
