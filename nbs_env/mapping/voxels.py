@@ -48,6 +48,27 @@ LABEL_COLOURS = np.array(
 _POOL_SIZES = (1, 3, 5, 9, 17, 33, 65)
 
 
+def _pooled_lookup(image: np.ndarray, size: int, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """The minimum of ``image`` over a window of at least ``size`` pixels around each (row, col).
+
+    Wide windows are taken on a block-minimum copy of the image (blocks of ``f`` pixels, then a
+    5-block window), which covers at least the requested window: conservative, and the cost of a
+    minimum filter no longer grows with the window. Columns wrap (azimuth), rows do not.
+    """
+    if size <= 5:
+        return ndimage.minimum_filter(image, size=size, mode=("nearest", "wrap"))[rows, cols]
+    half = (size - 1) // 2
+    f = max(1, half // 2)
+    h, w = image.shape
+    ph, pw = -h % f, -w % f
+    padded = np.pad(image, ((0, ph), (0, 0)), mode="edge")
+    padded = np.pad(padded, ((0, 0), (0, pw)), mode="wrap")
+    blocks = padded.reshape(padded.shape[0] // f, f, padded.shape[1] // f, f).min(axis=(1, 3))
+    reach = -(-half // f)  # ceil(half / f) blocks on each side
+    pooled = ndimage.minimum_filter(blocks, size=2 * reach + 1, mode=("nearest", "wrap"))
+    return pooled[rows // f, cols // f]
+
+
 @dataclass(frozen=True)
 class IntegrationStats:
     """What one scan changed: voxels newly EMPTY, newly occupied, and newly STRUCTURE."""
@@ -221,9 +242,11 @@ class VoxelGrid:
         limit = np.zeros(r.shape, dtype=np.float32)
         unassigned = np.ones(r.shape, dtype=bool)
         for size in _POOL_SIZES:
-            pooled = ndimage.minimum_filter(measured, size=size, mode=("nearest", "wrap"))
             pick = unassigned & (footprint <= size - 1 if size > 1 else footprint <= 1)
-            limit[pick] = pooled[row[pick], col[pick]]
+            if not pick.any():
+                continue
+            rows_p, cols_p = row[pick], col[pick]
+            limit[pick] = _pooled_lookup(measured, size, rows_p, cols_p)
             unassigned &= ~pick
         # Footprints wider than the widest window (voxels right at the scanner) are not carved.
         carve = in_fov & ~unassigned & (r + half_diagonal < limit)
@@ -236,20 +259,26 @@ class VoxelGrid:
     def _occupy(self, points: np.ndarray, structure: np.ndarray) -> tuple[int, int]:
         if not len(points):
             return 0, 0
-        idx = self.index_of(points)
-        ok = self.inside(idx)
+        # float32 is exact enough to pick a 5 cm voxel within hundreds of metres, and twice as fast.
+        rel = (points.astype(np.float32) - self.origin.astype(np.float32)) / np.float32(self.voxel_size)
+        idx = np.floor(rel).astype(np.int32)
+        shape = np.asarray(self.shape, dtype=np.int32)
+        ok = ((idx >= 0) & (idx < shape)).all(axis=1)
         idx, structure = idx[ok], structure[ok]
-        flat = np.ravel_multi_index(idx.T, self.shape)
+        flat = (idx[:, 0].astype(np.int64) * shape[1] + idx[:, 1]) * shape[2] + idx[:, 2]
         labels = self.labels.reshape(-1)
-        before = labels[flat].copy()
-        clutter = flat[~structure]
-        labels[clutter[labels[clutter] != VoxelLabel.STRUCTURE]] = VoxelLabel.CLUTTER
-        labels[flat[structure]] = VoxelLabel.STRUCTURE
-        after = labels[flat]
-        was_occupied = (before == VoxelLabel.CLUTTER) | (before == VoxelLabel.STRUCTURE)
-        occupied = len(np.unique(flat[~was_occupied]))
-        structure_new = len(np.unique(flat[(after == VoxelLabel.STRUCTURE) & (before != VoxelLabel.STRUCTURE)]))
-        return occupied, structure_new
+        before_occupied = (labels == VoxelLabel.CLUTTER) | (labels == VoxelLabel.STRUCTURE)
+        before_structure = labels == VoxelLabel.STRUCTURE
+        # Whole-grid masks count distinct voxels without sorting the points.
+        hit = np.zeros(labels.size, dtype=bool)
+        hit[flat] = True
+        hit_structure = np.zeros(labels.size, dtype=bool)
+        hit_structure[flat[structure]] = True
+        labels[hit & ~hit_structure & ~before_structure] = VoxelLabel.CLUTTER
+        labels[hit_structure] = VoxelLabel.STRUCTURE
+        occupied = int(np.count_nonzero(hit & ~before_occupied))
+        new_structure = int(np.count_nonzero(hit_structure & ~before_structure))
+        return occupied, new_structure
 
     # ------------------------------------------------------------------ occlusion labels
     def update_occlusion(
