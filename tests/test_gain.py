@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from nbs_env.config import ScannerConfig
 from nbs_env.labels import VoxelLabel
@@ -84,3 +85,13 @@ def test_greedy_order_ties_go_to_the_shorter_path():
     paths = np.array([1.0, 4.0, 2.0, 0.5, 0.1])
     mask = np.array([True, True, True, True, False])
     assert greedy_order(gains, paths, mask).tolist() == [2, 1, 0, 3, 4]
+
+
+@pytest.mark.expensive
+def test_predicted_gain_ranks_like_realised_conversions_on_generated_rooms():
+    from train.evaluate_gain import room_correlations
+
+    rows = room_correlations(20, GainConfig())
+    rho = [r["spearman"] for r in rows]
+    assert len(rho) == 20
+    assert np.mean(rho) >= 0.7, rho

@@ -45,7 +45,7 @@ LABEL_COLOURS = np.array(
     dtype=np.uint8,
 )
 
-_POOL_SIZES = (1, 3, 5, 9, 17, 33, 65)
+_POOL_SIZES = (1, 3, 5, 7, 9, 13, 17, 25, 33, 49, 65)
 
 
 def _pooled_lookup(image: np.ndarray, size: int, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:

@@ -44,6 +44,7 @@ __all__ = [
     "Geodesic",
     "NavigationConfig",
     "TraversabilityMap",
+    "assume_blind_zone_free",
     "candidates",
     "geodesic",
     "path_to",
@@ -742,3 +743,49 @@ def candidates(
         tmap=tmap,
         points=points,
     )
+
+
+def assume_blind_zone_free(
+    labels: np.ndarray,
+    origin: np.ndarray,
+    voxel_size: float,
+    sensors: Sequence[Sequence[float]] | np.ndarray,
+    elevation_min: float,
+) -> np.ndarray:
+    """A copy of ``labels`` with the unsensed voxels under each stop's field of view taken as EMPTY.
+
+    Unsensed means UNKNOWN or OCCLUDED_CLUTTER; OCCLUDED_STRUCTURE (the floor's slab) stays.
+
+    The scanner sees nothing below ``elevation_min`` (-40°), so after a stop every column within
+    about 1.8 m of it has an unseen foot, and the strict column test of :func:`traversability` would
+    leave the robot unable to move from its first stop. This copy, for navigation only (V(t) keeps
+    its labels), assumes that cone below the scanner free: anything in it taller than the cone is
+    seen, so only low objects close to the robot could be missed, which a real base's bumpers or
+    2-D lidar would catch.
+
+    Parameters
+    ----------
+    labels : (nx, ny, nz) uint8
+    origin : (3,) float
+    voxel_size : float
+    sensors : (m, 3) float
+        Scanner positions of the stops (the robot's estimates).
+    elevation_min : float
+        Lower limit of the field of view in degrees (negative).
+    """
+    out = np.array(labels, copy=True)
+    nx, ny, nz = out.shape
+    s = float(voxel_size)
+    xs = origin[0] + (np.arange(nx) + 0.5) * s
+    ys = origin[1] + (np.arange(ny) + 0.5) * s
+    zs = origin[2] + (np.arange(nz) + 0.5) * s
+    slope = np.tan(np.radians(-elevation_min))
+    for sensor in np.asarray(sensors, dtype=float).reshape(-1, 3):
+        d = np.hypot(xs[:, None] - sensor[0], ys[None, :] - sensor[1])  # (nx, ny)
+        # Partly below the lowest ray (z < sensor_z - d * tan(-elevation_min)): carving needs the
+        # whole voxel in view, so a voxel that straddles the cone is never carved either.
+        ceiling = sensor[2] - d * slope + s * np.sqrt(3) / 2
+        below = zs[None, None, :] < ceiling[:, :, None]
+        unsensed = (out == VoxelLabel.UNKNOWN) | (out == VoxelLabel.OCCLUDED_CLUTTER)
+        out[below & unsensed] = VoxelLabel.EMPTY
+    return out

@@ -33,10 +33,15 @@ class GainConfig:
     tolerance_voxels : float
         A line of sight that reaches within this many voxels of the target counts: the target's own
         neighbours on the same wall must not hide it at grazing angles.
+    group : int
+        Occluded-structure voxels are cast to in groups of ``group``³ voxels: one line of sight to
+        the mean centre of a group's members stands for all of them. Surfaces are thin, so groups of
+        2 cut the rays about fourfold at 5 cm (measured in benchmarks/gain.py); 1 casts to every voxel.
     """
 
     occluded_clutter_blocks: bool = False
     tolerance_voxels: float = 1.0
+    group: int = 2
 
 
 def occupied_surface(blocking: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -103,6 +108,18 @@ class VisibilityModel:
             blocking |= labels == VoxelLabel.OCCLUDED_CLUTTER
         targets = np.argwhere(labels == VoxelLabel.OCCLUDED_STRUCTURE)
         self.targets = self.origin + (targets + 0.5) * self.voxel_size  # (n, 3) world centres
+        # Groups of voxels share one line of sight (see GainConfig.group).
+        g = max(1, int(self.config.group))
+        if len(targets):
+            _, inverse, counts = np.unique(targets // g, axis=0, return_inverse=True, return_counts=True)
+            inverse = inverse.reshape(-1)
+            sums = np.zeros((len(counts), 3))
+            np.add.at(sums, inverse, self.targets)
+            self.group_centres = sums / counts[:, None]
+            self.group_counts = counts.astype(np.int64)
+        else:
+            self.group_centres = np.zeros((0, 3))
+            self.group_counts = np.zeros(0, dtype=np.int64)
         vertices, triangles = occupied_surface(blocking)
         o3d = open3d()
         self._o3d = o3d
@@ -138,12 +155,41 @@ class VisibilityModel:
         out[idx] = t_hit >= dist[idx] - self.config.tolerance_voxels * self.voxel_size
         return out
 
-    def gains(self, sensors: np.ndarray, scanner: ScannerConfig) -> np.ndarray:
-        """(m,) int: predicted conversions for each of the (m, 3) scanner positions."""
+    def gains(self, sensors: np.ndarray, scanner: ScannerConfig, chunk: int = 16) -> np.ndarray:
+        """(m,) int: predicted conversions for each of the (m, 3) scanner positions.
+
+        The lines of sight of ``chunk`` candidates go to Embree in one call: one large cast keeps
+        both cores busy where many small ones do not.
+        """
         sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
-        if not len(self.targets):
-            return np.zeros(len(sensors), dtype=np.int64)
-        return np.array([int(self.visible(s, scanner).sum()) for s in sensors], dtype=np.int64)
+        out = np.zeros(len(sensors), dtype=np.int64)
+        if not len(self.targets) or not len(sensors):
+            return out
+        targets = self.group_centres.astype(np.float32)
+        weights = self.group_counts
+        lo = np.float32(np.sin(np.radians(scanner.elevation_min)))
+        hi = np.float32(np.sin(np.radians(scanner.elevation_max)))
+        tolerance = np.float32(self.config.tolerance_voxels * self.voxel_size)
+        for start in range(0, len(sensors), chunk):
+            block = sensors[start : start + chunk].astype(np.float32)
+            rel = targets[None, :, :] - block[:, None, :]  # (c, n, 3)
+            dist = np.sqrt(np.einsum("cni,cni->cn", rel, rel))
+            sine = rel[..., 2] / np.maximum(dist, np.float32(1e-9))
+            ok = (dist >= scanner.min_range) & (dist <= scanner.max_range) & (sine >= lo) & (sine <= hi)
+            which, idx = np.nonzero(ok)
+            if not len(idx):
+                continue
+            if self.n_triangles == 0:
+                out[start : start + chunk] = (ok * weights[None, :]).sum(axis=1)
+                continue
+            d = dist[which, idx]
+            rays = np.empty((len(idx), 6), dtype=np.float32)
+            rays[:, :3] = block[which]
+            rays[:, 3:] = rel[which, idx] / d[:, None]
+            t_hit = self._scene.cast_rays(self._o3d.core.Tensor.from_numpy(rays))["t_hit"].numpy()
+            seen = t_hit >= d - tolerance
+            out[start : start + chunk] = np.bincount(which[seen], weights=weights[idx[seen]], minlength=len(block))
+        return out
 
 
 def greedy_order(gains: np.ndarray, path_lengths: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:

@@ -1,0 +1,151 @@
+"""The robot's belief about the current room, updated scan by scan (paper Fig. 2, stages 2-4).
+
+A :class:`RoomBelief` holds what the robot has measured in the room it is scanning and what it has
+derived from that: the scans (S(t) of the room), the RoI, the SE classification of its faces, the
+point labels and the labelled voxel space V(t). It never sees the scene: scans come in with the
+robot's own pose estimates.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from nbs_env.config import ScannerConfig
+from nbs_env.labels import VoxelLabel
+from nbs_env.mapping.voxels import IntegrationStats, VoxelGrid
+from nbs_env.perception.faces import WallFace
+from nbs_env.perception.roi import RoI, RoIConfig, RoIScan, compute_roi
+from nbs_env.perception.structure import SEClassifier, label_points
+from nbs_env.sensing.registration import AccumulatedCloud
+from nbs_env.sensing.scanner import Scan
+
+__all__ = ["BeliefUpdate", "RoomBelief"]
+
+
+@dataclass(frozen=True)
+class BeliefUpdate:
+    """What one scan changed, and how long each stage took (seconds)."""
+
+    integration: IntegrationStats
+    structure_points: int
+    clutter_points: int
+    times: dict[str, float] = field(default_factory=dict)
+
+
+class RoomBelief:
+    """The robot's knowledge of the room it is scanning.
+
+    Parameters
+    ----------
+    scanner : ScannerConfig
+        The scanner's pattern (for carving).
+    classifier : SEClassifier, optional
+        The SE classifier; the packaged model by default.
+    voxel_size : float
+        Edge of the voxels of V(t), metres.
+    margin : float
+        How far V(t) extends beyond the RoI prism, metres.
+    roi_config : RoIConfig, optional
+    """
+
+    def __init__(
+        self,
+        scanner: ScannerConfig,
+        classifier: SEClassifier | None = None,
+        voxel_size: float = 0.05,
+        margin: float = 0.3,
+        roi_config: RoIConfig | None = None,
+    ) -> None:
+        self.scanner = scanner
+        self.classifier = classifier or SEClassifier.load_default()
+        self.voxel_size = voxel_size
+        self.margin = margin
+        self.roi_config = roi_config or RoIConfig()
+        self.scans: list[RoIScan] = []
+        self.cloud = AccumulatedCloud(voxel_size=voxel_size)
+        self.grid: VoxelGrid | None = None
+        self.roi: RoI | None = None
+        self.se: np.ndarray = np.zeros(0, dtype=bool)
+
+    @property
+    def se_faces(self) -> list[WallFace]:
+        """The RoI wall faces classified SE."""
+        if self.roi is None:
+            return []
+        return [f for f, s in zip(self.roi.wall_faces, self.se, strict=True) if s]
+
+    def add_scan(self, scan: Scan, pose: np.ndarray) -> BeliefUpdate:
+        """Take in a registered scan: RoI, SE classification, point labels, V(t).
+
+        Parameters
+        ----------
+        scan : Scan
+            The new scan (its measured part only is read).
+        pose : (4, 4) float
+            The robot's estimate of the scan's pose (after registration).
+        """
+        times: dict[str, float] = {}
+        t = time.perf_counter()
+        new = RoIScan.from_scan(scan, pose)
+        self.scans.append(new)
+        self.cloud.add(new.points, new.origin)
+        roi = compute_roi(self.scans, self.roi_config)
+        times["roi"] = time.perf_counter() - t
+
+        t = time.perf_counter()
+        working = self.cloud.working_points()
+        self.se = self.classifier.classify_faces(roi.wall_faces, working)
+        self.roi = roi
+        se_faces = self.se_faces
+        labels = label_points(new.points, se_faces, roi.floor_z, roi.ceiling_z, roi.polygon)
+        times["classification"] = time.perf_counter() - t
+
+        t = time.perf_counter()
+        lo = np.array([*roi.polygon.min(axis=0), roi.floor_z]) - self.margin
+        hi = np.array([*roi.polygon.max(axis=0), roi.ceiling_z]) + self.margin
+        if self.grid is None:
+            self.grid = VoxelGrid.covering(lo, hi, self.voxel_size)
+        else:
+            self.grid.ensure_covers(lo, hi)
+        stats = self.grid.integrate(new.points, labels, pose, scan.depth_image(), self.scanner)
+        self._relabel_occupied(working, se_faces, roi)
+        self.grid.update_occlusion(roi.polygon, roi.floor_z, roi.ceiling_z, se_faces)
+        times["voxels"] = time.perf_counter() - t
+        return BeliefUpdate(stats, int(labels.sum()), int((~labels).sum()), times)
+
+    def _relabel_occupied(self, working: np.ndarray, se_faces: list[WallFace], roi: RoI) -> None:
+        """Bring earlier occupied voxels in line with the current SE faces (the RoI and its
+        classification change as the room is discovered)."""
+        grid = self.grid
+        assert grid is not None
+        idx = grid.index_of(working)
+        ok = grid.inside(idx)
+        idx = idx[ok]
+        structure = label_points(working[ok], se_faces, roi.floor_z, roi.ceiling_z, roi.polygon)
+        flat = np.ravel_multi_index(idx.T, grid.shape)
+        labels = grid.labels.reshape(-1)
+        occupied = (labels[flat] == VoxelLabel.CLUTTER) | (labels[flat] == VoxelLabel.STRUCTURE)
+        # A voxel is Structure when any of its points is.
+        has_structure = np.zeros(labels.size, dtype=bool)
+        has_structure[flat[structure]] = True
+        target = flat[occupied]
+        labels[target] = np.where(has_structure[target], VoxelLabel.STRUCTURE, VoxelLabel.CLUTTER)
+
+    def occluded_structure_centres(self) -> np.ndarray:
+        """(n, 3) float: world centres of the OCCLUDED_STRUCTURE voxels."""
+        if self.grid is None:
+            return np.zeros((0, 3))
+        return self.grid.centres(np.argwhere(self.grid.labels == VoxelLabel.OCCLUDED_STRUCTURE))
+
+    def labels_at(self, points: np.ndarray) -> np.ndarray:
+        """(n,) uint8: the current labels at world points (UNKNOWN outside the grid)."""
+        out = np.zeros(len(points), dtype=np.uint8)
+        if self.grid is None:
+            return out
+        idx = self.grid.index_of(points)
+        ok = self.grid.inside(idx)
+        out[ok] = self.grid.labels[tuple(idx[ok].T)]
+        return out
