@@ -46,10 +46,15 @@ def test_a_wall_hidden_behind_a_cabinet_favours_the_far_side():
     hidden = (model.targets[:, 1] > 1.2) & (model.targets[:, 1] < 2.3) & (model.targets[:, 2] < 1.9)
     assert not vis_front[hidden].any()
     assert vis_side[hidden].sum() > 0
-    gains = model.gains(np.array([front, side]), scanner)
-    # Count only the wall part behind the cabinet: the far side wins.
     assert vis_side[hidden].sum() > vis_front[hidden].sum()
-    assert gains.shape == (2,)
+    # When the rest of the wall is already Structure, the whole gain is the hidden part: the far side wins.
+    seen = labels.copy()
+    wall = seen[59]
+    wall[wall == VoxelLabel.OCCLUDED_STRUCTURE] = VoxelLabel.STRUCTURE
+    wall[10:25, 0:20] = VoxelLabel.OCCLUDED_STRUCTURE
+    gains = VisibilityModel(seen, origin, S).gains(np.array([front, side]), scanner)
+    assert gains[1] > gains[0]
+    assert gains[0] < 0.1 * 15 * 20
 
 
 def test_field_of_view_and_range_limits_are_never_counted():
