@@ -22,7 +22,6 @@ from pathlib import Path
 
 import numpy as np
 import shapely
-from scipy import ndimage
 from shapely.geometry import Polygon
 
 from nbs_env.config import ScannerConfig
@@ -48,25 +47,30 @@ LABEL_COLOURS = np.array(
 _POOL_SIZES = (1, 3, 5, 7, 9, 13, 17, 25, 33, 49, 65)
 
 
-def _pooled_lookup(image: np.ndarray, size: int, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """The minimum of ``image`` over a window of at least ``size`` pixels around each (row, col).
+def _sliding_min(a: np.ndarray, size: int, axis: int) -> np.ndarray:
+    """Minimum over windows of ``size`` consecutive entries along ``axis`` (output shorter by size - 1).
 
-    Wide windows are taken on a block-minimum copy of the image (blocks of ``f`` pixels, then a
-    5-block window), which covers at least the requested window: conservative, and the cost of a
-    minimum filter no longer grows with the window. Columns wrap (azimuth), rows do not.
+    Windows of doubling length (van Herk's idea without the blocks): log2(size) element-wise minima
+    of shifted views, several times faster than scipy's minimum_filter here.
     """
-    if size <= 5:
-        return ndimage.minimum_filter(image, size=size, mode=("nearest", "wrap"))[rows, cols]
-    half = (size - 1) // 2
-    f = max(1, half // 2)
-    h, w = image.shape
-    ph, pw = -h % f, -w % f
-    padded = np.pad(image, ((0, ph), (0, 0)), mode="edge")
-    padded = np.pad(padded, ((0, 0), (0, pw)), mode="wrap")
-    blocks = padded.reshape(padded.shape[0] // f, f, padded.shape[1] // f, f).min(axis=(1, 3))
-    reach = -(-half // f)  # ceil(half / f) blocks on each side
-    pooled = ndimage.minimum_filter(blocks, size=2 * reach + 1, mode=("nearest", "wrap"))
-    return pooled[rows // f, cols // f]
+    a = np.moveaxis(a, axis, 0)
+    cur, length = a, 1
+    while 2 * length <= size:
+        cur = np.minimum(cur[:-length], cur[length:])
+        length *= 2
+    n = a.shape[0] - size + 1
+    out = np.minimum(cur[:n], cur[size - length : size - length + n])
+    return np.moveaxis(out, 0, axis)
+
+
+def _min_filter(image: np.ndarray, size: int) -> np.ndarray:
+    """Minimum over a ``size`` x ``size`` window centred on each pixel; rows clamp, columns wrap."""
+    if size <= 1:
+        return image
+    half = size // 2
+    padded = np.pad(image, ((half, half), (0, 0)), mode="edge")
+    padded = np.pad(padded, ((0, 0), (half, half)), mode="wrap")
+    return _sliding_min(_sliding_min(padded, size, 0), size, 1)
 
 
 @dataclass(frozen=True)
@@ -239,17 +243,17 @@ class VoxelGrid:
         col = col.astype(np.int32)
         # The voxel's angular footprint in pixels picks how wide a window of rays must all pass it.
         footprint = 2 * half_diagonal / np.maximum(r, np.float32(1e-3)) / step
-        limit = np.zeros(r.shape, dtype=np.float32)
-        unassigned = np.ones(r.shape, dtype=bool)
-        for size in _POOL_SIZES:
-            pick = unassigned & (footprint <= size - 1 if size > 1 else footprint <= 1)
-            if not pick.any():
-                continue
-            rows_p, cols_p = row[pick], col[pick]
-            limit[pick] = _pooled_lookup(measured, size, rows_p, cols_p)
-            unassigned &= ~pick
-        # Footprints wider than the widest window (voxels right at the scanner) are not carved.
-        carve = in_fov & ~unassigned & (r + half_diagonal < limit)
+        # Each voxel reads the depth image pooled over the smallest window covering its footprint.
+        sizes = np.asarray(_POOL_SIZES)
+        which = np.searchsorted(np.maximum(sizes - 1, 1), footprint)  # first size with size - 1 >= footprint
+        wide = which >= len(sizes)  # voxels right at the scanner: no window is wide enough
+        which = np.minimum(which, len(sizes) - 1)
+        needed = np.flatnonzero(np.bincount(which[in_fov & ~wide], minlength=len(sizes)))
+        stack = np.zeros((len(sizes), *measured.shape), dtype=np.float32)
+        for k in needed:
+            stack[k] = _min_filter(measured, int(sizes[k]))
+        limit = stack[which, row, col]
+        carve = in_fov & ~wide & (r + half_diagonal < limit)
         block = self.labels[first[0] : last[0], first[1] : last[1], first[2] : last[2]]
         carve &= (block != VoxelLabel.CLUTTER) & (block != VoxelLabel.STRUCTURE)
         newly = int(np.count_nonzero(carve & (block != VoxelLabel.EMPTY)))
