@@ -12,10 +12,9 @@ Usage: python benchmarks/gain.py [--repeat 5]
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
 
 import numpy as np
+from _timing import median_seconds
 
 from nbs_env.belief import RoomBelief
 from nbs_env.config import ScannerConfig
@@ -61,16 +60,6 @@ def state(voxel_size: float):
     return grid, sensors, cfg
 
 
-def timed(fn, repeat: int) -> float:
-    fn()
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5)
@@ -82,13 +71,17 @@ def main() -> None:
             f"voxel {voxel * 100:.1f} cm: grid {grid.shape} = {grid.labels.size:,} voxels, "
             f"{targets:,} Occluded-structure, {len(sensors)} candidates"
         )
-        build = timed(lambda grid=grid: VisibilityModel(grid.labels, grid.origin, grid.voxel_size), args.repeat)
+        build = median_seconds(
+            lambda grid=grid: VisibilityModel(grid.labels, grid.origin, grid.voxel_size), args.repeat
+        )
         model = VisibilityModel(grid.labels, grid.origin, grid.voxel_size)
         print(f"  build the occupied-face mesh ({model.n_triangles:,} triangles): {build * 1e3:7.1f} ms")
         for n in (8, 16, 32, 64):
             if n > len(sensors):
                 break
-            t = timed(lambda n=n, model=model, sensors=sensors, cfg=cfg: model.gains(sensors[:n], cfg), args.repeat)
+            t = median_seconds(
+                lambda n=n, model=model, sensors=sensors, cfg=cfg: model.gains(sensors[:n], cfg), args.repeat
+            )
             total = build + t
             print(f"  gain of {n:2d} candidates: {t * 1e3:7.1f} ms (with the build {total * 1e3:7.1f} ms)")
 

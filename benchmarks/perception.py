@@ -12,10 +12,9 @@ Usage: python benchmarks/perception.py [--repeat 15]
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
 
 import numpy as np
+from _timing import median_seconds
 
 from nbs_env.config import ScannerConfig
 from nbs_env.perception.roi import RoIScan, compute_roi
@@ -24,16 +23,6 @@ from nbs_env.sensing.pose import pose_from_xyz_rpy
 from nbs_env.sensing.registration import AccumulatedCloud
 from nbs_env.sensing.scanner import Scanner
 from scenes import load_scene
-
-
-def median_ms(fn, repeat: int) -> float:
-    fn()
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * statistics.median(times)
 
 
 def main() -> None:
@@ -59,26 +48,32 @@ def main() -> None:
     se = model.classify_faces(roi.wall_faces, working)
     se_faces = [f for f, s in zip(roi.wall_faces, se, strict=True) if s]
     rays = scanner.rays(scans[0][1])
-    cast = median_ms(lambda: scanner.raw_cast(rays), args.repeat)
+    cast = 1e3 * median_seconds(lambda: scanner.raw_cast(rays), args.repeat)
     rows = [
-        ("RoIScan.from_scan (one scan)", median_ms(lambda: RoIScan.from_scan(*scans[0]), args.repeat)),
-        ("compute_roi, 1 scan", median_ms(lambda: compute_roi(roi_scans[:1]), args.repeat)),
-        ("compute_roi, 3 scans", median_ms(lambda: compute_roi(roi_scans), args.repeat)),
+        ("RoIScan.from_scan (one scan)", 1e3 * median_seconds(lambda: RoIScan.from_scan(*scans[0]), args.repeat)),
+        ("compute_roi, 1 scan", 1e3 * median_seconds(lambda: compute_roi(roi_scans[:1]), args.repeat)),
+        ("compute_roi, 3 scans", 1e3 * median_seconds(lambda: compute_roi(roi_scans), args.repeat)),
         (
             f"classify faces, full resolution ({len(full):,} pts)",
-            median_ms(lambda: model.classify_faces(roi.wall_faces, full), args.repeat),
+            1e3 * median_seconds(lambda: model.classify_faces(roi.wall_faces, full), args.repeat),
         ),
         (
             f"classify faces, working copy ({len(working):,} pts)",
-            median_ms(lambda: model.classify_faces(roi.wall_faces, working), args.repeat),
+            1e3 * median_seconds(lambda: model.classify_faces(roi.wall_faces, working), args.repeat),
         ),
         (
             "label points, full resolution",
-            median_ms(lambda: label_points(full, se_faces, roi.floor_z, roi.ceiling_z, roi.polygon), args.repeat),
+            1e3
+            * median_seconds(
+                lambda: label_points(full, se_faces, roi.floor_z, roi.ceiling_z, roi.polygon), args.repeat
+            ),
         ),
         (
             "label points, working copy",
-            median_ms(lambda: label_points(working, se_faces, roi.floor_z, roi.ceiling_z, roi.polygon), args.repeat),
+            1e3
+            * median_seconds(
+                lambda: label_points(working, se_faces, roi.floor_z, roi.ceiling_z, roi.polygon), args.repeat
+            ),
         ),
     ]
     print(f"reference: raw cast_rays of one 0.5° scan ({len(rays):,} rays): {cast:7.1f} ms")

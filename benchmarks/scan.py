@@ -13,25 +13,15 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import time
 
 import numpy as np
+from _timing import median_seconds
 
 from nbs_env.config import ScannerConfig
 from nbs_env.sensing.pose import planar, pose_from_xyz_rpy
 from nbs_env.sensing.registration import AccumulatedCloud, register
 from nbs_env.sensing.scanner import Scanner
 from scenes import load_scene
-
-
-def median_time(fn, repeat: int) -> float:
-    fn()
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def main() -> None:
@@ -50,8 +40,8 @@ def main() -> None:
         # Interleave the two so that machine load affects both alike.
         ours, raw = [], []
         for _ in range(args.repeat):
-            raw.append(median_time(lambda rays=rays, scanner=scanner: scanner.raw_cast(rays), 1))
-            ours.append(median_time(lambda scanner=scanner, rng=rng: scanner.scan(pose, rng), 1))
+            raw.append(median_seconds(lambda rays=rays, scanner=scanner: scanner.raw_cast(rays), 1))
+            ours.append(median_seconds(lambda scanner=scanner, rng=rng: scanner.scan(pose, rng), 1))
         t_ours, t_raw = statistics.median(ours), statistics.median(raw)
         n = cfg.n_rays
         print(f"{label} ({step}°, {n:,} rays)")
@@ -64,7 +54,7 @@ def main() -> None:
         second_pose = pose_from_xyz_rpy(start[0] + 0.8, start[1] + 0.4, 1.5, 0.001, 0.002, 0.9)
         second = scanner.scan(second_pose, rng)
         guess = planar(second_pose[0, 3] + 0.1, second_pose[1, 3] - 0.1, 0.95, 1.5)
-        t_icp = median_time(lambda second=second, cloud=cloud, guess=guess: register(second.points, guess, cloud), 5)
+        t_icp = median_seconds(lambda second=second, cloud=cloud, guess=guess: register(second.points, guess, cloud), 5)
         result = register(second.points, guess, cloud)
         print(
             f"  ICP per scan            : {t_icp * 1e3:7.1f} ms"

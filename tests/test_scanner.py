@@ -4,36 +4,26 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import box_ranges
+from helpers import box_room as make_box_room
 
 from nbs_env.config import ScannerConfig
 from nbs_env.errors import ConfigError, InvalidPoseError
 from nbs_env.sensing.pose import pose_from_xyz_rpy
 from nbs_env.sensing.scanner import Scanner, ray_pattern
-from scenes import FloorPlan, RoomPlan, SurfaceClass, load_scene
+from scenes import SurfaceClass, load_scene
 
 A, B, H = 6.0, 4.0, 3.0  # clear inner size of the box room
 
 
 @pytest.fixture(scope="module")
 def box_room():
-    t = 0.2
-    plan = FloorPlan(
-        rooms=(RoomPlan("box", ((-t / 2, -t / 2), (A + t / 2, -t / 2), (A + t / 2, B + t / 2), (-t / 2, B + t / 2))),),
-        ceiling_height=H,
-        wall_thickness=t,
-        start=(2.0, 1.5),
-    )
-    return plan.to_scene()
+    return make_box_room(A, B, H)
 
 
 def analytic_ranges(origin: np.ndarray, directions: np.ndarray) -> np.ndarray:
     """Distance from ``origin`` inside [0, A] x [0, B] x [0, H] to the box along each direction."""
-    hi = np.array([A, B, H])
-    with np.errstate(divide="ignore"):
-        t_hi = (hi - origin) / directions
-        t_lo = (0.0 - origin) / directions
-    t = np.where(directions > 0, t_hi, np.where(directions < 0, t_lo, np.inf))
-    return t.min(axis=1)
+    return box_ranges(origin, directions, (A, B, H))
 
 
 @pytest.fixture(scope="module")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import box_ranges, box_room
 
 from nbs_env.config import ScannerConfig
 from nbs_env.labels import VoxelLabel
@@ -11,28 +12,17 @@ from nbs_env.mapping.voxels import VoxelGrid
 from nbs_env.perception.faces import WallFace
 from nbs_env.sensing.pose import pose_from_xyz_rpy
 from nbs_env.sensing.scanner import Scanner
-from scenes import FloorPlan, RoomPlan
 
 A, B, H = 4.0, 3.0, 2.5
 
 
 @pytest.fixture(scope="module")
 def box_scene():
-    t = 0.2
-    plan = FloorPlan(
-        rooms=(RoomPlan("box", ((-t / 2, -t / 2), (A + t / 2, -t / 2), (A + t / 2, B + t / 2), (-t / 2, B + t / 2))),),
-        ceiling_height=H,
-        wall_thickness=t,
-        start=(2.0, 1.5),
-    )
-    return plan.to_scene()
+    return box_room(A, B, H)
 
 
 def analytic_range(origin, directions):
-    hi = np.array([A, B, H])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(directions > 0, (hi - origin) / directions, np.where(directions < 0, -origin / directions, np.inf))
-    return t.min(axis=1)
+    return box_ranges(origin, directions, (A, B, H))
 
 
 def test_labels_survive_growth():
