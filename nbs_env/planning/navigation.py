@@ -751,6 +751,7 @@ def assume_blind_zone_free(
     voxel_size: float,
     sensors: Sequence[Sequence[float]] | np.ndarray,
     elevation_min: float,
+    min_range: float = 0.0,
 ) -> np.ndarray:
     """A copy of ``labels`` with the unsensed voxels under each stop's field of view taken as EMPTY.
 
@@ -772,6 +773,10 @@ def assume_blind_zone_free(
         Scanner positions of the stops (the robot's estimates).
     elevation_min : float
         Lower limit of the field of view in degrees (negative).
+    min_range : float
+        The scanner's minimum range. Nothing closer than it is ever measured, so the unsensed space
+        within it of a stop is taken as free too (same reasoning: the robot's own near-field
+        sensing, not simulated, would stop it).
     """
     out = np.array(labels, copy=True)
     nx, ny, nz = out.shape
@@ -786,6 +791,9 @@ def assume_blind_zone_free(
         # whole voxel in view, so a voxel that straddles the cone is never carved either.
         ceiling = sensor[2] - d * slope + s * np.sqrt(3) / 2
         below = zs[None, None, :] < ceiling[:, :, None]
+        if min_range > 0:
+            near = np.hypot(d[:, :, None], zs[None, None, :] - sensor[2]) < min_range
+            below |= near
         unsensed = (out == VoxelLabel.UNKNOWN) | (out == VoxelLabel.OCCLUDED_CLUTTER)
         out[below & unsensed] = VoxelLabel.EMPTY
     return out

@@ -1,0 +1,78 @@
+"""The robot's cycle in one room, and the coverage metric."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nbs_env.config import ScannerConfig
+from nbs_env.metrics import CoverageMeter
+from nbs_env.planning.visibility import greedy_order
+from nbs_env.robot import Robot, RobotConfig
+from scenes import SurfaceClass, load_scene
+
+
+def test_coverage_meter_counts_against_the_full_surface():
+    scene = load_scene("office")
+    meter = CoverageMeter(scene, spacing=0.1)
+    assert meter.percent() == 0.0
+    floor = meter.samples.points[meter.samples.labels == SurfaceClass.FLOOR]
+    newly = meter.add(floor)
+    # The floor samples, plus the wall samples within 5 cm of the floor.
+    assert len(floor) <= newly < 1.05 * len(floor)
+    assert meter.percent(label=SurfaceClass.FLOOR) == pytest.approx(100.0)
+    assert 0.0 < meter.percent(label=SurfaceClass.WALL) < 5.0
+    assert meter.percent() == pytest.approx(100 * newly / len(meter.samples))
+    # Points 10 cm off the surface sense nothing.
+    ceiling = meter.samples.points[meter.samples.labels == SurfaceClass.CEILING]
+    meter.add(ceiling - [0, 0, 0.1])
+    assert meter.percent(label=SurfaceClass.CEILING) == 0.0
+    meter.add(meter.samples.points)
+    assert meter.percent(room=0) == pytest.approx(100.0)
+
+
+def greedy_run(scene_name: str, seed: int, config: RobotConfig | None = None, max_scans: int = 10):
+    scene = load_scene(scene_name)
+    robot = Robot(scene, config or RobotConfig(), np.random.default_rng(seed))
+    meter = CoverageMeter(scene)
+    robot.scan()
+    meter.add(robot.cloud.storey_points())
+    while not robot.room_complete() and len(robot.stops) < max_scans:
+        cands, gains = robot.candidates()
+        best = int(greedy_order(gains[: cands.count], cands.path_length[: cands.count])[0])
+        report = robot.move_to(best)
+        assert report.predicted_gain == gains[best]
+        meter.add(robot.cloud.storey_points()[-report.points :])
+    return robot, meter
+
+
+@pytest.mark.expensive
+def test_greedy_scans_the_l_room():
+    robot, meter = greedy_run("l_room", seed=0)
+    assert len(robot.stops) <= 10
+    assert meter.percent() >= 90.0
+    assert robot.path_length > 3.0
+    dt, dr = robot.registration_error()
+    assert dt < 0.02 and dr < 0.2
+    # Every stop keeps the robot's clearance from the true furniture and walls.
+    from scenes.geometry import point_is_free
+
+    assert all(point_is_free(robot._scanner.scene, stop[:2], 0.0, clearance=0.40) for stop in robot.stops)
+
+
+def test_same_seed_same_trajectory():
+    config = RobotConfig(scanner=ScannerConfig(angular_step=1.0), voxel_size=0.1, perfect_localisation=True)
+    a, _ = greedy_run("office", seed=3, config=config, max_scans=3)
+    b, _ = greedy_run("office", seed=3, config=config, max_scans=3)
+    assert len(a.stops) == len(b.stops) >= 2
+    assert all(np.array_equal(x, y) for x, y in zip(a.stops, b.stops, strict=True))
+    # Perfect localisation: the belief is the truth.
+    assert a.registration_error() == (0.0, 0.0)
+
+
+def test_invalid_candidate_index():
+    config = RobotConfig(scanner=ScannerConfig(angular_step=1.0), voxel_size=0.1, perfect_localisation=True)
+    robot = Robot(load_scene("office"), config, np.random.default_rng(0))
+    robot.scan()
+    with pytest.raises(IndexError, match="not valid"):
+        robot.move_to(999)
