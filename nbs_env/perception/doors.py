@@ -1,0 +1,166 @@
+"""Door detection in the SE wall faces of the RoI (METHOD §8), from measured points only.
+
+An opening is an empty rectangle of a wall face's image (points within ±10 cm of the face, 5 cm
+pixels) that stands on the floor, is 0.6-1.5 m wide and 1.8-2.3 m high (a lintel was seen above it),
+and through which the scanner saw: registered points lie behind the face plane within the opening.
+That last test tells a door from the shadow a cabinet casts on the wall behind it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from nbs_env.perception.faces import WallFace
+from nbs_env.perception.structure import face_image
+
+__all__ = ["DetectedDoor", "DoorConfig", "detect_doors"]
+
+
+@dataclass(frozen=True)
+class DoorConfig:
+    """Limits of a door opening (METHOD §8).
+
+    Attributes
+    ----------
+    min_width, max_width : float
+        Clear width, metres.
+    min_height, max_height : float
+        Clear height, metres; the lintel must have been seen within this range.
+    floor_gap : float
+        How far above the floor the opening must start at the latest (a threshold), metres.
+    behind : float
+        Points at least this far behind the face plane count as seen through the opening, metres.
+    min_behind_points : int
+        Least number of such points.
+    pixel : float
+        Pixel size of the face image, metres.
+    """
+
+    min_width: float = 0.6
+    max_width: float = 1.5
+    min_height: float = 1.8
+    max_height: float = 2.3
+    floor_gap: float = 0.15
+    behind: float = 0.3
+    min_behind_points: int = 50
+    pixel: float = 0.05
+
+
+@dataclass(frozen=True)
+class DetectedDoor:
+    """A door found in a wall face.
+
+    Attributes
+    ----------
+    face : int
+        Index of the wall face in the list given.
+    centre : (3,) float
+        Centre of the opening's bottom edge on the face plane (world).
+    width, height : float
+        Clear opening, metres.
+    outward : (2,) float
+        Horizontal unit normal pointing out of the room, through the door.
+    behind_points : int
+        Points seen through it.
+    """
+
+    face: int
+    centre: np.ndarray
+    width: float
+    height: float
+    outward: np.ndarray
+    behind_points: int
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) of the runs of True in a 1-D boolean array."""
+    padded = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    edges = np.flatnonzero(np.diff(padded))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
+
+
+def _seen_through(
+    face: WallFace,
+    scans: Sequence[tuple[np.ndarray, np.ndarray]],
+    u0: float,
+    u1: float,
+    height: float,
+    behind: float,
+) -> int:
+    """How many points lie ``behind`` m beyond the face and were seen through [u0, u1] x [0, height]."""
+    count = 0
+    for points, origin in scans:
+        local = face.local(np.asarray(points, dtype=float))
+        o = face.local(np.asarray(origin, dtype=float).reshape(1, 3))[0]
+        far = local[local[:, 2] < -behind]
+        if not len(far) or o[2] <= 0:
+            continue
+        # Where the ray from the scanner to the point crosses the face plane (w = 0).
+        t = o[2] / (o[2] - far[:, 2])
+        u = o[0] + t * (far[:, 0] - o[0])
+        v = o[1] + t * (far[:, 1] - o[1])
+        count += int(np.count_nonzero((u > u0) & (u < u1) & (v > 0.0) & (v < height)))
+    return count
+
+
+def detect_doors(
+    faces: Sequence[WallFace],
+    scans: Sequence[tuple[np.ndarray, np.ndarray]],
+    config: DoorConfig | None = None,
+) -> list[DetectedDoor]:
+    """Find door openings in the given (SE) wall faces.
+
+    Parameters
+    ----------
+    faces : sequence of WallFace
+        The RoI's wall faces classified SE (the room lies to their left).
+    scans : sequence of (points, origin)
+        The room's registered scans: (n, 3) world points and the (3,) scanner position, both the
+        robot's estimates. A point counts as seen through an opening when the ray from its scan's
+        origin crosses the face plane inside the opening.
+    config : DoorConfig
+
+    Returns
+    -------
+    list of DetectedDoor
+    """
+    cfg = config or DoorConfig()
+    points = np.concatenate([np.asarray(p, dtype=float) for p, _ in scans]) if scans else np.zeros((0, 3))
+    doors: list[DetectedDoor] = []
+    px = cfg.pixel
+    for k, face in enumerate(faces):
+        image = face_image(face, points, pixel=px)  # (rows from the floor, columns along the face)
+        rows = image.shape[0]
+        # Height of the empty run from the floor (allowing a threshold) in every column.
+        start = int(np.ceil(cfg.floor_gap / px))
+        above = image[start:, :]
+        first_white = np.where(above.any(axis=0), above.argmax(axis=0), rows - start)
+        empty_height = (start + first_white) * px
+        lintel_seen = above.any(axis=0)
+        tall = (empty_height >= cfg.min_height) & (empty_height <= cfg.max_height + px) & lintel_seen
+        for a, b in _runs(tall):
+            width = (b - a) * px
+            if not (cfg.min_width <= width <= cfg.max_width + px):
+                continue
+            height = float(np.median(empty_height[a:b]))
+            u0, u1 = a * px, b * px
+            behind = _seen_through(face, scans, u0, u1, height, cfg.behind)
+            if behind < cfg.min_behind_points:
+                continue
+            width = width + px  # the run counts whole pixels; the opening's edges fall inside its end pixels
+            mid = (u0 + u1) / 2
+            xy = np.asarray(face.p0, dtype=float) + mid * face.direction
+            doors.append(
+                DetectedDoor(
+                    face=k,
+                    centre=np.array([xy[0], xy[1], face.z0]),
+                    width=float(width),
+                    height=height,
+                    outward=-face.normal,
+                    behind_points=behind,
+                )
+            )
+    return doors

@@ -1,0 +1,82 @@
+"""Door detection in SE wall faces: an opening seen through is a door; a cabinet's shadow is not."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nbs_env.perception.doors import DoorConfig, detect_doors
+from nbs_env.perception.faces import WallFace
+
+
+def wall_scan(door: tuple[float, float] | None, shadow: tuple[float, float] | None, through: bool):
+    """Points of a 6 m x 2.6 m wall at y = 0 seen from (3, 2, 1.5), with a door opening and/or a
+    cabinet shadow (both 0.9 m wide, the door 2.05 m high, the shadow 1.9 m), and points beyond the
+    door (y < -1) when ``through``."""
+    origin = np.array([3.0, 2.0, 1.5])
+    u, v = np.meshgrid(np.arange(0.01, 6.0, 0.02), np.arange(0.01, 2.6, 0.02))
+    u, v = u.ravel(), v.ravel()
+    keep = np.ones(len(u), bool)
+    if door is not None:
+        keep &= ~((u > door[0]) & (u < door[1]) & (v < 2.05))
+    if shadow is not None:
+        keep &= ~((u > shadow[0]) & (u < shadow[1]) & (v < 1.9))
+    points = [np.column_stack([u[keep], np.zeros(keep.sum()), v[keep]])]
+    if door is not None and through:
+        # The far room's wall at y = -3, seen through the opening: the rays from the origin to
+        # these points cross y = 0 inside the door.
+        du, dv = np.meshgrid(np.linspace(door[0] + 0.05, door[1] - 0.05, 20), np.linspace(0.1, 1.9, 20))
+        cross = np.column_stack([du.ravel(), np.zeros(du.size), dv.ravel()])
+        far = origin + (cross - origin) * (5.0 / 2.0)  # extend the ray to y = -3
+        points.append(far)
+    return [(np.concatenate(points), origin)]
+
+
+FACE = WallFace(np.array([0.0, 0.0]), np.array([6.0, 0.0]), 0.0, 2.6)  # the room (y > 0) on its left
+
+
+def test_a_door_seen_through_is_found_and_measured():
+    doors = detect_doors([FACE], wall_scan((1.0, 1.9), None, through=True))
+    assert len(doors) == 1
+    d = doors[0]
+    assert d.width == pytest.approx(0.9, abs=0.051)  # within one 5 cm pixel
+    assert d.height == pytest.approx(2.05, abs=0.1)
+    assert np.allclose(d.centre[:2], [1.45, 0.0], atol=0.05)
+    assert np.allclose(d.outward, [0.0, -1.0])
+
+
+def test_a_cabinet_shadow_is_not_a_door():
+    assert detect_doors([FACE], wall_scan(None, (3.5, 4.4), through=False)) == []
+
+
+def test_an_opening_nobody_saw_through_is_not_a_door():
+    assert detect_doors([FACE], wall_scan((1.0, 1.9), None, through=False)) == []
+
+
+def test_size_limits():
+    wide = detect_doors([FACE], wall_scan((1.0, 3.0), None, through=True))
+    assert wide == []  # 2 m is wider than any door
+    narrow = detect_doors([FACE], wall_scan((1.0, 1.9), None, through=True), DoorConfig(min_width=1.2))
+    assert narrow == []
+
+
+@pytest.mark.expensive
+def test_the_living_room_of_five_rooms_has_its_two_doors():
+    from nbs_env.planning.visibility import greedy_order
+    from nbs_env.robot import Robot, RobotConfig
+    from scenes import load_scene
+
+    scene = load_scene("five_rooms")
+    robot = Robot(scene, RobotConfig(), np.random.default_rng(0))
+    robot.scan()
+    while not robot.room_complete():
+        cands, gains = robot.candidates()
+        robot.move_to(int(greedy_order(gains[: cands.count], cands.path_length[: cands.count])[0]))
+    belief = robot.belief
+    found = detect_doors(belief.se_faces, [(s.points, s.origin) for s in belief.scans])
+    truth = [d for d in scene.doors if 0 in d.rooms]  # evaluation: the living room's true doors
+    assert len(found) == len(truth) == 2
+    for door in truth:
+        nearest = min(found, key=lambda f: np.linalg.norm(f.centre[:2] - door.position[:2]))
+        assert np.linalg.norm(nearest.centre[:2] - door.position[:2]) < 0.2
+        assert nearest.width == pytest.approx(door.width, abs=0.1)
