@@ -77,7 +77,7 @@ class RoomBelief:
             return []
         return [f for f, s in zip(self.roi.wall_faces, self.se, strict=True) if s]
 
-    def add_scan(self, scan: Scan, pose: np.ndarray) -> BeliefUpdate:
+    def add_scan(self, scan: Scan, pose: np.ndarray, keep_direction: np.ndarray | None = None) -> BeliefUpdate:
         """Take in a registered scan: RoI, SE classification, point labels, V(t).
 
         Parameters
@@ -86,10 +86,12 @@ class RoomBelief:
             The new scan (its measured part only is read).
         pose : (4, 4) float
             The robot's estimate of the scan's pose (after registration).
+        keep_direction : (2,) float, optional
+            For the first scan of a room taken in its door frame: the direction into the room.
         """
         times: dict[str, float] = {}
         t = time.perf_counter()
-        new = RoIScan.from_scan(scan, pose)
+        new = RoIScan.from_scan(scan, pose, keep_direction)
         self.scans.append(new)
         self.cloud.add(new.points, new.origin)
         roi = compute_roi(self.scans, self.roi_config)

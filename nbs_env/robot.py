@@ -4,25 +4,30 @@ The :class:`Robot` couples the simulator (the true scene, the true pose, the sca
 robot's belief (its pose estimate, S(t), the current room's RoI and V(t), its candidates). Everything
 the robot decides from is in its belief; the simulator's state is kept in attributes named ``true_*``.
 
-Scope so far: the scanning of the room the robot is in (METHOD §6-7). Door detection and the hand-over
-to the next room (METHOD §8) come with the environment.
+It scans the room it is in (METHOD §6-7); when the room is complete, :meth:`Robot.finish_room`
+detects its doors, and :meth:`Robot.cross_door` drives to the nearest unvisited one, stands under its
+frame and takes the first scan of the next room (METHOD §8).
 """
 
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from shapely.geometry import Point, Polygon
 
 from nbs_env.belief import BeliefUpdate, RoomBelief
 from nbs_env.config import OdometryConfig, RegistrationConfig, ScannerConfig
 from nbs_env.labels import VoxelLabel
+from nbs_env.perception.doors import detect_doors
 from nbs_env.planning.navigation import (
     Candidates,
     NavigationConfig,
     assume_blind_zone_free,
     candidates,
+    geodesic,
     traversability,
 )
 from nbs_env.planning.visibility import GainConfig, VisibilityModel
@@ -32,7 +37,7 @@ from nbs_env.sensing.registration import AccumulatedCloud, RegistrationResult, r
 from nbs_env.sensing.scanner import Scan, Scanner
 from scenes import Scene
 
-__all__ = ["Robot", "RobotConfig", "StepReport"]
+__all__ = ["KnownDoor", "Robot", "RobotConfig", "StepReport"]
 
 
 @dataclass(frozen=True)
@@ -59,6 +64,19 @@ class RobotConfig:
     completion_fraction: float = 0.01
     max_scans_per_room: int = 12
     perfect_localisation: bool = False
+
+
+@dataclass
+class KnownDoor:
+    """A door the robot detected (its own estimate), and whether it went through it."""
+
+    centre: np.ndarray
+    outward: np.ndarray
+    width: float
+    found_in_room: int
+    visited: bool = False
+    failed: bool = False
+    entered_room: int | None = None
 
 
 @dataclass(frozen=True)
@@ -109,9 +127,15 @@ class Robot:
         self.pose = planar(start[0], start[1], 0.0, self._floor_z + self.config.scanner.height)
         self._candidates: Candidates | None = None
         self._gains: np.ndarray | None = None
+        self.doors: list[KnownDoor] = []
+        self.room_index = 0
+        self.rooms_done: list[int] = []
+        self.room_polygons: dict[int, Polygon] = {}
 
     # ------------------------------------------------------------------ the cycle
-    def scan(self, path_length: float = 0.0, predicted_gain: int = 0) -> StepReport:
+    def scan(
+        self, path_length: float = 0.0, predicted_gain: int = 0, keep_direction: np.ndarray | None = None
+    ) -> StepReport:
         """Scan from where the robot truly is, register, and update the belief."""
         times: dict[str, float] = {}
         t = time.perf_counter()
@@ -126,7 +150,7 @@ class Robot:
             self.pose = result.pose
         times["registration"] = time.perf_counter() - t
         self.cloud.add(scan.to_world(self.pose), self.pose[:3, 3])
-        update = self.belief.add_scan(scan, self.pose)
+        update = self.belief.add_scan(scan, self.pose, keep_direction)
         times.update(update.times)
         self.visited.append(self.pose[:2, 3].copy())
         self.stops.append(self.pose[:3, 3].copy())
@@ -174,12 +198,14 @@ class Robot:
         if not (0 <= index < cands.count):
             raise IndexError(f"candidate {index} is not valid: {cands.count} candidates")
         path = cands.path(index)
-        distance = float(cands.path_length[index])
         heading = path[-1] - path[-2] if len(path) >= 2 else np.array([1.0, 0.0])
-        yaw = float(np.arctan2(heading[1], heading[0]))
-        # The robot executes the motion it planned in its belief; the true robot moves by the same
-        # displacement from where it truly is, and odometry reports it with drift.
-        planned = planar(*cands.points[index], yaw, self.pose[2, 3])
+        self._drive(cands.points[index], float(np.arctan2(heading[1], heading[0])), float(cands.path_length[index]))
+        return self.scan(float(cands.path_length[index]), int(gains[index]))
+
+    def _drive(self, target_xy: np.ndarray, yaw: float, distance: float) -> None:
+        """Execute a planned motion: the true robot moves by the planned displacement from where it
+        truly is, and odometry reports it with drift."""
+        planned = planar(float(target_xy[0]), float(target_xy[1]), yaw, self.pose[2, 3])
         motion = np.linalg.inv(planar(*self.pose[:2, 3], yaw_of(self.pose))) @ planned
         true_from = self.true_pose
         true_planar = planar(*true_from[:2, 3], yaw_of(true_from)) @ motion
@@ -189,7 +215,114 @@ class Robot:
         self.pose = self._odometry.drive(self.pose, true_from, true_to, distance)
         self.true_pose = true_to
         self.path_length += distance
-        return self.scan(distance, int(gains[index]))
+
+    # ------------------------------------------------------------------ doors and rooms (METHOD §8)
+    def finish_room(self) -> list[KnownDoor]:
+        """Detect the doors of the room just completed and add the new ones to the storey's list."""
+        belief = self.belief
+        found = detect_doors(belief.se_faces, [(s.points, s.origin) for s in belief.scans])
+        polygon = Polygon(belief.roi.polygon) if belief.roi is not None else None
+        if polygon is not None:
+            self.room_polygons[self.room_index] = polygon
+        for door in found:
+            known = next((d for d in self.doors if np.linalg.norm(d.centre[:2] - door.centre[:2]) < 0.6), None)
+            if known is not None:
+                continue  # a door seen from both sides is one door
+            self.doors.append(KnownDoor(door.centre, door.outward, door.width, self.room_index))
+        # A door into a room already scanned needs no crossing: its far side is known.
+        for known in self.doors:
+            if known.visited:
+                continue
+            beyond = Point(*(known.centre[:2] + 0.6 * known.outward))
+            for room, poly in self.room_polygons.items():
+                if room != known.found_in_room and poly.contains(beyond):
+                    known.visited, known.entered_room = True, room
+        self.rooms_done.append(self.room_index)
+        return list(self.doors)
+
+    def next_door(self) -> int | None:
+        """The nearest unvisited door the robot can reach, by its estimated travel, or None."""
+        best, best_length = None, np.inf
+        for k, door in enumerate(self.doors):
+            if door.visited or door.failed:
+                continue
+            length = self._route_length(door)
+            if length is not None and length < best_length:
+                best, best_length = k, length
+        return best
+
+    def _room_route(self, target_room: int) -> list[KnownDoor] | None:
+        """Doors already crossed that lead from the current room to ``target_room`` (breadth first)."""
+        links = [d for d in self.doors if d.visited and d.entered_room is not None]
+        queue: list[tuple[int, list[KnownDoor]]] = [(self.room_index, [])]
+        seen = {self.room_index}
+        while queue:
+            room, route = queue.pop(0)
+            if room == target_room:
+                return route
+            for d in links:
+                for a, b in ((d.found_in_room, d.entered_room), (d.entered_room, d.found_in_room)):
+                    if a == room and b not in seen:
+                        seen.add(b)
+                        queue.append((b, [*route, d]))
+        return None
+
+    def _route_length(self, door: KnownDoor) -> float | None:
+        """Travel to stand under ``door``: the geodesic in this room, else through rooms already
+        scanned (straight legs between the doors on the way, an estimate)."""
+        if door.found_in_room == self.room_index:
+            return self._approach_length(door)
+        route = self._room_route(door.found_in_room)
+        if route is None:
+            return None
+        legs = [self.pose[:2, 3], *[d.centre[:2] for d in route], door.centre[:2]]
+        return float(sum(np.linalg.norm(b - a) for a, b in itertools.pairwise(legs)))
+
+    def _approach(self, door: KnownDoor) -> np.ndarray:
+        """The point 0.5 m in front of a door, on this side of it."""
+        side = 1.0 if np.dot(self.pose[:2, 3] - door.centre[:2], door.outward) > 0 else -1.0
+        return door.centre[:2] + side * 0.5 * door.outward
+
+    def _approach_length(self, door: KnownDoor) -> float | None:
+        grid = self.belief.grid
+        if grid is None or self.belief.roi is None:
+            return None
+        cfg = self.config
+        walkable = assume_blind_zone_free(
+            grid.labels, grid.origin, grid.voxel_size, self.stops, cfg.scanner.elevation_min, cfg.scanner.min_range
+        )
+        # Standing at a door needs only the robot's radius: its clearance would close a 0.8 m door.
+        narrow = NavigationConfig(**{**cfg.navigation.to_dict(), "safety_distance": 0.0})
+        tmap = traversability(walkable, grid.origin, grid.voxel_size, self.belief.roi.floor_z, narrow, self.visited)
+        target = self._approach(door)
+        if not tmap.contains(np.asarray(target).reshape(1, 2))[0]:
+            return None
+        route = geodesic(tmap, self.pose[:2, 3])
+        i, j = tmap.cell_of(target, "door approach")[0]
+        length = float(route.distances[i, j])
+        if not np.isfinite(length):
+            return None
+        self._door_route = (tmap, route)
+        return length + 0.5
+
+    def cross_door(self, k: int) -> StepReport:
+        """Drive to door ``k``, stand under its frame, and take the first scan of the next room."""
+        door = self.doors[k]
+        length = self._route_length(door)
+        if length is None:
+            door.failed = True
+            raise ValueError(f"door {k} at {door.centre[:2].round(2)} cannot be reached")
+        # The door leads out of the room it was found in: the robot enters the room beyond.
+        into = door.outward
+        self._drive(door.centre[:2], float(np.arctan2(into[1], into[0])), length)
+        door.visited = True
+        self.room_index = max([*self.rooms_done, self.room_index]) + 1
+        door.entered_room = self.room_index
+        self.belief = RoomBelief(self.config.scanner, self.belief.classifier, voxel_size=self.config.voxel_size)
+        self.scans_in_room = 0
+        self.visited = [self.pose[:2, 3].copy()]
+        self.stops = []
+        return self.scan(length, 0, keep_direction=into)
 
     # ------------------------------------------------------------------ room completion (METHOD §7)
     def room_structural_voxels(self) -> int:

@@ -76,3 +76,33 @@ def test_invalid_candidate_index():
     robot.scan()
     with pytest.raises(IndexError, match="not valid"):
         robot.move_to(999)
+
+
+@pytest.mark.expensive
+def test_the_robot_finds_the_door_and_scans_the_next_room(tmp_path, plan_dict):
+    import json
+
+    from scenes import load_scene as load
+
+    plan_dict["clutter"] = [{"kind": "cabinet", "position": [1.0, 3.55], "size": [1.2, 0.5, 1.9], "yaw": 0}]
+    path = tmp_path / "two.json"
+    path.write_text(json.dumps(plan_dict))
+    scene = load(str(path))
+    robot = Robot(scene, RobotConfig(), np.random.default_rng(1))
+    meter = CoverageMeter(scene)
+    robot.scan()
+    rooms_entered = 1
+    while True:
+        while not robot.room_complete():
+            cands, gains = robot.candidates()
+            robot.move_to(int(greedy_order(gains[: cands.count], cands.path_length[: cands.count])[0]))
+        doors = robot.finish_room()
+        k = robot.next_door()
+        if k is None:
+            break
+        robot.cross_door(k)
+        rooms_entered += 1
+    meter.add(robot.cloud.storey_points())
+    assert rooms_entered == 2 and len(doors) == 1
+    assert np.linalg.norm(doors[0].centre[:2] - [5.0, 2.0]) < 0.3  # the door between the rooms
+    assert meter.percent(room=0) > 85.0 and meter.percent(room=1) > 85.0

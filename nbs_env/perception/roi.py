@@ -130,15 +130,19 @@ class RoIScan:
         the robot stands next to, which it cannot measure but must not look through.
     min_range : float
         The scanner's minimum range in metres.
+    keep_direction : (2,) float, optional
+        For a scan taken standing in a door frame: the horizontal direction into the room being
+        entered. Only the half of the scan's free space on that side belongs to this room.
     """
 
     points: np.ndarray
     origin: np.ndarray
     near_directions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     min_range: float = 1.5
+    keep_direction: np.ndarray | None = None
 
     @classmethod
-    def from_scan(cls, scan, pose: np.ndarray) -> RoIScan:
+    def from_scan(cls, scan, pose: np.ndarray, keep_direction: np.ndarray | None = None) -> RoIScan:
         """Build from a :class:`~nbs_env.sensing.scanner.Scan` and the robot's estimate of its pose."""
         from nbs_env.sensing.scanner import ray_pattern
 
@@ -152,6 +156,7 @@ class RoIScan:
             origin=pose[:3, 3].copy(),
             near_directions=directions[up].astype(np.float64) @ pose[:3, :3].T,
             min_range=scan.config.min_range,
+            keep_direction=None if keep_direction is None else np.asarray(keep_direction, dtype=float),
         )
 
 
@@ -280,6 +285,11 @@ def compute_roi(scans: Sequence[RoIScan], config: RoIConfig | None = None) -> Ro
         wall = (reach >= lo) & (reach < ceiling_z - cfg.histogram_bin)
         blocks = origin[:2] + scan.min_range * d[wall][:, :2]
         radii = _free_space_radii(band, origin, cfg.azimuth_bins, cfg.max_range, blocks)
+        if radii is not None and scan.keep_direction is not None:
+            # Standing in a door frame: the half behind the robot is the room it came from.
+            theta = (np.arange(cfg.azimuth_bins) + 0.5) / cfg.azimuth_bins * 2 * np.pi - np.pi
+            facing = np.cos(theta) * scan.keep_direction[0] + np.sin(theta) * scan.keep_direction[1]
+            radii = np.where(facing > 0.05, radii, np.minimum(radii, 0.1))
         if radii is not None:
             stars.append((origin, radii))
     if not stars:
@@ -295,7 +305,9 @@ def compute_roi(scans: Sequence[RoIScan], config: RoIConfig | None = None) -> Ro
         ok = (rows >= 0) & (rows < image.shape[0]) & (cols >= 0) & (cols < image.shape[1])
         walls[rows[ok], cols[ok]] = True
         walls = ndimage.binary_dilation(walls)
-    last = np.asarray(scans[-1].origin, dtype=float)
+    last = np.asarray(scans[-1].origin, dtype=float).copy()
+    if scans[-1].keep_direction is not None:
+        last[:2] += 0.3 * np.asarray(scans[-1].keep_direction)  # a seed inside the room, off the door line
     seed = ((last[1] - origin_xy[1]) / cfg.pixel, (last[0] - origin_xy[0]) / cfg.pixel)
     image = _clean(image, seed, max(1, round(0.10 / cfg.pixel)))
     room = _component(image & ~walls, seed)
