@@ -158,8 +158,11 @@ class RegistrationConfig:
     max_rmse : float
         Largest inlier RMSE at the finest stage, metres.
     max_correction_m, max_correction_deg : float
-        Largest move away from the odometry pose that is accepted; odometry drift never explains
-        more, so a larger correction means ICP locked onto the wrong structure.
+        Largest move away from the odometry pose that is accepted after a short leg; odometry drift
+        never explains more, so a larger correction means ICP locked onto the wrong structure.
+    correction_per_metre_m, correction_per_metre_deg : float
+        The gates grow with the distance driven since the last scan (4 σ of the default odometry
+        drift per metre), so that the correct pose after a long transit is not refused.
     target_radius : float
         Only the part of S(t) within this distance of the odometry pose is matched.
     deterministic : bool
@@ -176,6 +179,8 @@ class RegistrationConfig:
     max_rmse: float = 0.04
     max_correction_m: float = 0.75
     max_correction_deg: float = 10.0
+    correction_per_metre_m: float = 0.08
+    correction_per_metre_deg: float = 2.0
     target_radius: float = 30.0
     deterministic: bool = True
 

@@ -146,7 +146,7 @@ class Robot:
         if self.config.perfect_localisation:
             self.pose = self.true_pose.copy()
         else:
-            result = register(scan.points, self.pose, self.cloud, self.config.registration)
+            result = register(scan.points, self.pose, self.cloud, self.config.registration, travelled=path_length)
             self.pose = result.pose
         times["registration"] = time.perf_counter() - t
         self.cloud.add(scan.to_world(self.pose), self.pose[:3, 3])
