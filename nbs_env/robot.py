@@ -48,7 +48,12 @@ class RobotConfig:
     ----------
     completion_fraction : float
         The room is complete when the best predicted gain falls below this share of the room's
-        structural voxels (Structure + Occluded-structure), METHOD §7.
+        structural voxels (Structure + Occluded-structure), METHOD §7. METHOD's 1% was changed to 3%
+        after measuring greedy runs (default config, seed 0): on ``five_rooms`` 1% took 30 scans for
+        95.0% of the structural surface, 3% 21 scans for 93.6%, 5% 17 scans for 93.6%; on six
+        generated 2-3-room storeys (seeds 500000-500005) 1% took 88 scans for a mean 80.9%, 3% 73
+        scans for 88.1%, 5% 49 scans for 78.0% (the coverage there depends mostly on which doors are
+        found, which changes with the scans taken).
     max_scans_per_room : int
         The scan cap per room.
     perfect_localisation : bool
@@ -61,7 +66,7 @@ class RobotConfig:
     navigation: NavigationConfig = field(default_factory=NavigationConfig)
     gain: GainConfig = field(default_factory=GainConfig)
     voxel_size: float = 0.05
-    completion_fraction: float = 0.01
+    completion_fraction: float = 0.03
     max_scans_per_room: int = 12
     perfect_localisation: bool = False
 
