@@ -132,6 +132,7 @@ class Robot:
         self.pose = planar(start[0], start[1], 0.0, self._floor_z + self.config.scanner.height)
         self._candidates: Candidates | None = None
         self._gains: np.ndarray | None = None
+        self._door_map = None
         self.doors: list[KnownDoor] = []
         self.room_index = 0
         self.rooms_done: list[int] = []
@@ -162,6 +163,7 @@ class Robot:
         self.scans_in_room += 1
         self._candidates = None
         self._gains = None
+        self._door_map = None
         return StepReport(
             scan_index=len(self.stops) - 1,
             path_length=path_length,
@@ -181,12 +183,7 @@ class Robot:
             grid = self.belief.grid
             assert grid is not None and self.belief.roi is not None, "scan first"
             cfg = self.config
-            walkable = assume_blind_zone_free(
-                grid.labels, grid.origin, grid.voxel_size, self.stops, cfg.scanner.elevation_min, cfg.scanner.min_range
-            )
-            tmap = traversability(
-                walkable, grid.origin, grid.voxel_size, self.belief.roi.floor_z, cfg.navigation, self.visited
-            )
+            tmap = self._traversability(cfg.navigation)
             self._candidates = candidates(tmap, self.pose[:2, 3], cfg.navigation)
             sensors = np.column_stack(
                 [self._candidates.points, np.full(self._candidates.count, self.belief.roi.floor_z + cfg.scanner.height)]
@@ -288,27 +285,35 @@ class Robot:
         side = 1.0 if np.dot(self.pose[:2, 3] - door.centre[:2], door.outward) > 0 else -1.0
         return door.centre[:2] + side * 0.5 * door.outward
 
-    def _approach_length(self, door: KnownDoor) -> float | None:
+    def _traversability(self, navigation: NavigationConfig):
+        """The traversable floor of the current room from the robot's own grid."""
         grid = self.belief.grid
-        if grid is None or self.belief.roi is None:
-            return None
-        cfg = self.config
+        assert grid is not None and self.belief.roi is not None, "scan first"
+        scanner = self.config.scanner
         walkable = assume_blind_zone_free(
-            grid.labels, grid.origin, grid.voxel_size, self.stops, cfg.scanner.elevation_min, cfg.scanner.min_range
+            grid.labels, grid.origin, grid.voxel_size, self.stops, scanner.elevation_min, scanner.min_range
         )
-        # Standing at a door needs only the robot's radius: its clearance would close a 0.8 m door.
-        narrow = NavigationConfig(**{**cfg.navigation.to_dict(), "safety_distance": 0.0})
-        tmap = traversability(walkable, grid.origin, grid.voxel_size, self.belief.roi.floor_z, narrow, self.visited)
+        return traversability(walkable, grid.origin, grid.voxel_size, self.belief.roi.floor_z, navigation, self.visited)
+
+    def _door_routes(self):
+        """Routes from here in the current room, kept until the next scan (one per room, not per door)."""
+        if self._door_map is None:
+            # Standing at a door needs only the robot's radius: its clearance would close a 0.8 m door.
+            narrow = NavigationConfig(**{**self.config.navigation.to_dict(), "safety_distance": 0.0})
+            tmap = self._traversability(narrow)
+            self._door_map = (tmap, geodesic(tmap, self.pose[:2, 3]))
+        return self._door_map
+
+    def _approach_length(self, door: KnownDoor) -> float | None:
+        if self.belief.grid is None or self.belief.roi is None:
+            return None
+        tmap, route = self._door_routes()
         target = self._approach(door)
         if not tmap.contains(np.asarray(target).reshape(1, 2))[0]:
             return None
-        route = geodesic(tmap, self.pose[:2, 3])
         i, j = tmap.cell_of(target, "door approach")[0]
         length = float(route.distances[i, j])
-        if not np.isfinite(length):
-            return None
-        self._door_route = (tmap, route)
-        return length + 0.5
+        return length + 0.5 if np.isfinite(length) else None
 
     def cross_door(self, k: int) -> StepReport:
         """Drive to door ``k``, stand under its frame, and take the first scan of the next room."""

@@ -62,16 +62,14 @@ def test_size_limits():
 
 @pytest.mark.expensive
 def test_the_living_room_of_five_rooms_has_its_two_doors():
-    from nbs_env.planning.visibility import greedy_order
     from nbs_env.robot import Robot, RobotConfig
+    from policies.greedy import scan_room
     from scenes import load_scene
 
     scene = load_scene("five_rooms")
     robot = Robot(scene, RobotConfig(), np.random.default_rng(0))
     robot.scan()
-    while not robot.room_complete():
-        cands, gains = robot.candidates()
-        robot.move_to(int(greedy_order(gains[: cands.count], cands.path_length[: cands.count])[0]))
+    scan_room(robot)
     belief = robot.belief
     found = detect_doors(belief.se_faces, [(s.points, s.origin) for s in belief.scans])
     truth = [d for d in scene.doors if 0 in d.rooms]  # evaluation: the living room's true doors

@@ -7,8 +7,8 @@ import pytest
 
 from nbs_env.config import ScannerConfig
 from nbs_env.metrics import CoverageMeter
-from nbs_env.planning.visibility import greedy_order
 from nbs_env.robot import Robot, RobotConfig
+from policies.greedy import greedy_index, scan_room
 from scenes import SurfaceClass, load_scene
 
 
@@ -39,7 +39,7 @@ def greedy_run(scene_name: str, seed: int, config: RobotConfig | None = None, ma
     meter.add(robot.cloud.storey_points())
     while not robot.room_complete() and len(robot.stops) < max_scans:
         cands, gains = robot.candidates()
-        best = int(greedy_order(gains[: cands.count], cands.path_length[: cands.count])[0])
+        best = greedy_index(cands, gains)
         report = robot.move_to(best)
         assert report.predicted_gain == gains[best]
         meter.add(robot.cloud.storey_points()[-report.points :])
@@ -93,9 +93,7 @@ def test_the_robot_finds_the_door_and_scans_the_next_room(tmp_path, plan_dict):
     robot.scan()
     rooms_entered = 1
     while True:
-        while not robot.room_complete():
-            cands, gains = robot.candidates()
-            robot.move_to(int(greedy_order(gains[: cands.count], cands.path_length[: cands.count])[0]))
+        scan_room(robot)
         doors = robot.finish_room()
         k = robot.next_door()
         if k is None:

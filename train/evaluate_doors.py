@@ -19,8 +19,8 @@ import time
 import numpy as np
 
 from nbs_env.perception.doors import detect_doors
-from nbs_env.planning.visibility import greedy_order
 from nbs_env.robot import Robot, RobotConfig
+from policies.greedy import scan_room
 from scenes import load_scene
 from train.perception_data import spread_positions
 
@@ -48,9 +48,7 @@ def main(argv: list[str] | None = None) -> int:
             scene = load_scene(f"generated:{storey - 1}", rooms=(2, 4), start=tuple(start[0]))
             robot = Robot(scene, RobotConfig(), rng)
             robot.scan()
-            while not robot.room_complete():
-                cands, gains = robot.candidates()
-                robot.move_to(int(greedy_order(gains[: cands.count], cands.path_length[: cands.count])[0]))
+            scan_room(robot)
             belief = robot.belief
             found = detect_doors(belief.se_faces, [(s.points, s.origin) for s in belief.scans])
             truth = [d for d in scene.doors if room.id in d.rooms]

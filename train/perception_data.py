@@ -22,7 +22,7 @@ from scenes import Room, Scene, SurfaceClass
 from scenes._open3d import open3d
 from scenes.geometry import free_region
 
-__all__ = ["RoomCase", "face_is_structural", "room_cases", "spread_positions", "true_point_labels"]
+__all__ = ["RoomCase", "face_is_structural", "room_cases", "spread_positions"]
 
 
 def spread_positions(scene: Scene, room: Room, rng: np.random.Generator, k: int = 3) -> list[np.ndarray]:
@@ -117,8 +117,3 @@ def face_is_structural(face: WallFace, distance: WallDistance, spacing: float = 
     xy = np.asarray(face.p0, dtype=float) + uu.reshape(-1, 1) * face.direction
     points = np.column_stack([xy, face.z0 + vv.reshape(-1)])
     return bool(np.mean(distance(points) <= within) > 0.5)
-
-
-def true_point_labels(case: RoomCase) -> np.ndarray:
-    """(n,) bool: which points of the case's scans hit a true structural face."""
-    return case.truth_labels

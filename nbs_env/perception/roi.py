@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 from scipy import ndimage
-from shapely.geometry import Point, Polygon
+from shapely.geometry import Polygon
 from shapely.geometry.polygon import orient
 
 from nbs_env.errors import NBSError
@@ -518,7 +518,3 @@ def leaked_area(polygon: np.ndarray, others: Sequence[np.ndarray]) -> float:
     """Area in m² of ``polygon`` that lies inside any of the ``others`` (an evaluation helper)."""
     a = Polygon(polygon).buffer(0)
     return float(sum(a.intersection(Polygon(o).buffer(0)).area for o in others))
-
-
-def point_in(polygon: np.ndarray, xy: np.ndarray) -> bool:
-    return bool(Polygon(polygon).contains(Point(float(xy[0]), float(xy[1]))))
