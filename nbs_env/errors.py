@@ -17,3 +17,11 @@ class InvalidPoseError(NBSError, ValueError):
 
 class ModelFileError(NBSError, ValueError):
     """A stored model file that is missing, not JSON, malformed, or modified after it was written."""
+
+
+class InvalidActionError(NBSError, ValueError):
+    """An action outside the action space (not an integer, or out of range)."""
+
+
+class UnreachableDoorError(NBSError, RuntimeError):
+    """A detected door the robot cannot drive to from where it is."""

@@ -13,15 +13,18 @@ from __future__ import annotations
 
 import itertools
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 from shapely.geometry import Point, Polygon
 
 from nbs_env.belief import BeliefUpdate, RoomBelief
-from nbs_env.config import OdometryConfig, RegistrationConfig, ScannerConfig
+from nbs_env.config import OdometryConfig, RegistrationConfig, ScannerConfig, _finite, _require
+from nbs_env.errors import UnreachableDoorError
 from nbs_env.labels import VoxelLabel
 from nbs_env.perception.doors import detect_doors
+from nbs_env.perception.faces import WallFace
+from nbs_env.perception.structure import label_points
 from nbs_env.planning.navigation import (
     Candidates,
     NavigationConfig,
@@ -37,7 +40,7 @@ from nbs_env.sensing.registration import AccumulatedCloud, RegistrationResult, r
 from nbs_env.sensing.scanner import Scan, Scanner
 from scenes import Scene
 
-__all__ = ["KnownDoor", "Robot", "RobotConfig", "StepReport"]
+__all__ = ["KnownDoor", "Robot", "RobotConfig", "RoomModel", "StepReport"]
 
 
 @dataclass(frozen=True)
@@ -70,6 +73,21 @@ class RobotConfig:
     max_scans_per_room: int = 12
     perfect_localisation: bool = False
 
+    def __post_init__(self) -> None:
+        _finite(voxel_size=self.voxel_size, completion_fraction=self.completion_fraction)
+        _require(0.01 <= self.voxel_size <= 1.0, f"voxel_size must be within [0.01, 1] metres, got {self.voxel_size}")
+        _require(
+            0.0 <= self.completion_fraction < 1.0,
+            f"completion_fraction is a share in [0, 1), got {self.completion_fraction}",
+        )
+        _require(
+            isinstance(self.max_scans_per_room, int) and self.max_scans_per_room >= 1,
+            f"max_scans_per_room must be an integer >= 1, got {self.max_scans_per_room!r}",
+        )
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
 
 @dataclass
 class KnownDoor:
@@ -82,6 +100,35 @@ class KnownDoor:
     visited: bool = False
     failed: bool = False
     entered_room: int | None = None
+
+
+@dataclass(frozen=True)
+class RoomModel:
+    """The structural model the robot recovered for one room, from its own measurements.
+
+    Attributes
+    ----------
+    index : int
+        The robot's number for the room (the order it entered them in).
+    polygon : (n, 2) float
+        The RoI outline, counter-clockwise.
+    floor_z, ceiling_z : float
+    se_faces : list of WallFace
+        The RoI wall faces classified SE.
+    points : (m, 3) float
+        The room's registered points, downsampled to 5 cm (the perception working copy, whatever
+        the voxel size of V(t)).
+    structure : (m,) bool
+        Which of ``points`` are labelled Structure.
+    """
+
+    index: int
+    polygon: np.ndarray
+    floor_z: float
+    ceiling_z: float
+    se_faces: list[WallFace]
+    points: np.ndarray = field(repr=False)
+    structure: np.ndarray = field(repr=False)
 
 
 @dataclass(frozen=True)
@@ -98,6 +145,7 @@ class StepReport:
     points: int
     acquisition_time: float
     times: dict[str, float]
+    world_points: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 3)))
 
 
 class Robot:
@@ -120,7 +168,10 @@ class Robot:
             OdometryConfig(0.0, 0.0, 0.0) if self.config.perfect_localisation else self.config.odometry, rng
         )
         self._floor_z = float(scene.start[2])
-        self.cloud = AccumulatedCloud(self.config.voxel_size)
+        # S(t) of the storey, ICP's target; without ICP it needs no normals.
+        self.cloud = AccumulatedCloud(
+            self.config.registration.voxel_size, normals=not self.config.perfect_localisation, rooms=False
+        )
         self.belief = RoomBelief(self.config.scanner, voxel_size=self.config.voxel_size)
         self.visited: list[np.ndarray] = []
         self.stops: list[np.ndarray] = []
@@ -137,6 +188,8 @@ class Robot:
         self.room_index = 0
         self.rooms_done: list[int] = []
         self.room_polygons: dict[int, Polygon] = {}
+        self.room_models: list[RoomModel] = []
+        self.planning_time = 0.0
 
     # ------------------------------------------------------------------ the cycle
     def scan(
@@ -155,7 +208,8 @@ class Robot:
             result = register(scan.points, self.pose, self.cloud, self.config.registration, travelled=path_length)
             self.pose = result.pose
         times["registration"] = time.perf_counter() - t
-        self.cloud.add(scan.to_world(self.pose), self.pose[:3, 3])
+        world = scan.to_world(self.pose)
+        self.cloud.add(world, self.pose[:3, 3], room=self.room_index)
         update = self.belief.add_scan(scan, self.pose, keep_direction)
         times.update(update.times)
         self.visited.append(self.pose[:2, 3].copy())
@@ -175,14 +229,22 @@ class Robot:
             points=len(scan),
             acquisition_time=scan.acquisition_time,
             times=times,
+            world_points=world,
         )
 
     def candidates(self) -> tuple[Candidates, np.ndarray]:
         """The next valid positions and their predicted gains, from the robot's own grid."""
         if self._candidates is None:
+            t = time.perf_counter()
             grid = self.belief.grid
             assert grid is not None and self.belief.roi is not None, "scan first"
             cfg = self.config
+            # A poor registration can put the pose estimate outside the room's grid; the robot
+            # still stands somewhere, so the grid grows (with Unknown) to hold it.
+            xy = self.pose[:2, 3]
+            if np.any(xy < grid.origin[:2]) or np.any(xy >= grid.upper[:2]):
+                reach = cfg.navigation.robot_radius + cfg.navigation.safety_distance + 2 * grid.voxel_size
+                grid.ensure_covers(np.array([*(xy - reach), grid.origin[2]]), np.array([*(xy + reach), grid.upper[2]]))
             tmap = self._traversability(cfg.navigation)
             self._candidates = candidates(tmap, self.pose[:2, 3], cfg.navigation)
             sensors = np.column_stack(
@@ -192,6 +254,7 @@ class Robot:
             gains = np.zeros(cfg.navigation.max_candidates, dtype=np.int64)
             gains[: self._candidates.count] = model.gains(sensors, cfg.scanner)
             self._gains = gains
+            self.planning_time = time.perf_counter() - t
         return self._candidates, self._gains
 
     def move_to(self, index: int) -> StepReport:
@@ -239,8 +302,22 @@ class Robot:
             for room, poly in self.room_polygons.items():
                 if room != known.found_in_room and poly.contains(beyond):
                     known.visited, known.entered_room = True, room
+        model = self.room_model()
+        if model is not None:
+            self.room_models.append(model)
         self.rooms_done.append(self.room_index)
         return list(self.doors)
+
+    def room_model(self) -> RoomModel | None:
+        """The current room's recovered model (None before its first scan)."""
+        belief = self.belief
+        roi = belief.roi
+        if roi is None:
+            return None
+        points = belief.cloud.working_points()
+        se_faces = belief.se_faces
+        structure = label_points(points, se_faces, roi.floor_z, roi.ceiling_z, roi.polygon)
+        return RoomModel(self.room_index, roi.polygon.copy(), roi.floor_z, roi.ceiling_z, se_faces, points, structure)
 
     def next_door(self) -> int | None:
         """The nearest unvisited door the robot can reach, by its estimated travel, or None."""
@@ -321,14 +398,19 @@ class Robot:
         length = self._route_length(door)
         if length is None:
             door.failed = True
-            raise ValueError(f"door {k} at {door.centre[:2].round(2)} cannot be reached")
+            raise UnreachableDoorError(f"door {k} at {door.centre[:2].round(2).tolist()} cannot be reached")
         # The door leads out of the room it was found in: the robot enters the room beyond.
         into = door.outward
         self._drive(door.centre[:2], float(np.arctan2(into[1], into[0])), length)
         door.visited = True
         self.room_index = max([*self.rooms_done, self.room_index]) + 1
         door.entered_room = self.room_index
-        self.belief = RoomBelief(self.config.scanner, self.belief.classifier, voxel_size=self.config.voxel_size)
+        self.belief = RoomBelief(
+            self.config.scanner,
+            self.belief.classifier,
+            voxel_size=self.config.voxel_size,
+            exclude=[m.polygon for m in self.room_models],
+        )
         self.scans_in_room = 0
         self.visited = [self.pose[:2, 3].copy()]
         self.stops = []

@@ -54,8 +54,10 @@ def test_an_opening_nobody_saw_through_is_not_a_door():
 
 
 def test_size_limits():
+    # A 2 m passage counts (open-plan rooms under a lintel), unless max_width says otherwise.
     wide = detect_doors([FACE], wall_scan((1.0, 3.0), None, through=True))
-    assert wide == []  # 2 m is wider than any door
+    assert len(wide) == 1 and wide[0].width == pytest.approx(2.0, abs=0.051)
+    assert detect_doors([FACE], wall_scan((1.0, 3.0), None, through=True), DoorConfig(max_width=1.5)) == []
     narrow = detect_doors([FACE], wall_scan((1.0, 1.9), None, through=True), DoorConfig(min_width=1.2))
     assert narrow == []
 

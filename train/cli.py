@@ -1,13 +1,16 @@
 """The ``nbs`` command line.
 
-Exit codes: 0 success; 1 a scene could not be loaded or built (the message says what and where);
-2 a bad command line (unknown flag, bad value).
+Exit codes: 0 success; 1 a scene could not be loaded or built (the message says what and where),
+or ``nbs scan`` could not run it (a start inside a wall or outside the building); 2 a bad command
+line (unknown flag, bad value, unknown policy, a configuration value out of range).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
+import re
 import sys
 import time
 from collections.abc import Sequence
@@ -46,6 +49,36 @@ def _storey(text: str) -> str | int:
     return int(text) if text.lstrip("-").isdigit() else text
 
 
+def _start(text: str) -> tuple[float, float]:
+    parts = text.split(",")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        x, y = (float(v) for v in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y in metres (e.g. 3.0,4.5), got {text!r}") from None
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise argparse.ArgumentTypeError(f"expected finite X,Y, got {text!r}")
+    return x, y
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
+    return value
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="nbs", description="nbs-env: next-best-scan planning of building interiors.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -73,6 +106,32 @@ def build_parser() -> argparse.ArgumentParser:
     gen.add_argument("--clutter-density", type=_non_negative, default=None, help="objects per 6 m² (default 1)")
     gen.add_argument("--out", type=Path, required=True, help="floor-plan JSON to write")
     gen.add_argument("--show", type=Path, default=None, help="also draw the storey to this PNG")
+
+    scan = sub.add_parser(
+        "scan",
+        help="scan a storey autonomously and write a report",
+        description="Scan a storey with a policy (the paper's greedy NBS by default) and write metrics.json, "
+        "structure.ply, cloud.ply, model.obj, topdown.png and steps/step_NNN.png into --out.",
+    )
+    scan.add_argument(
+        "--scene", required=True, help="bundled name, .json/.obj/.glb/.gltf/.ply/.ifc path, or generated:SEED"
+    )
+    scan.add_argument("--policy", default="greedy", help="who chooses the next scan (default: greedy)")
+    scan.add_argument("--seed", type=int, default=0, help="seed of the episode (default 0)")
+    scan.add_argument("--out", type=Path, default=None, help="report folder (default: ./scan-<scene>)")
+    scan.add_argument("--max-scans", type=_positive_int, default=80, help="scan budget (default 80)")
+    scan.add_argument("--resolution", type=_number, default=None, help="scanner angular step in degrees (default 0.5)")
+    scan.add_argument("--voxel", type=_number, default=None, help="voxel size of V(t) in metres (default 0.05)")
+    scan.add_argument("--storey", type=_storey, default=None, help="IFC storey name or index (IFC files only)")
+    scan.add_argument(
+        "--start",
+        type=_start,
+        default=None,
+        metavar="X,Y",
+        help="start position in metres (--start=-1,2 for a negative X)",
+    )
+    scan.add_argument("--no-steps", action="store_true", help="do not save a picture per step")
+    scan.add_argument("--quiet", action="store_true", help="no progress bar")
     return parser
 
 
@@ -150,12 +209,190 @@ def run(args: argparse.Namespace) -> int:
     raise AssertionError(args.action)  # argparse only lets known actions through
 
 
+# ---------------------------------------------------------------------- nbs scan
+def _scan_error(message: object, code: int) -> int:
+    print(f"nbs scan: error: {message}", file=sys.stderr)
+    return code
+
+
+def _default_out(scene: str) -> Path:
+    stem = Path(scene).stem if Path(scene).suffix else scene
+    return Path(f"scan-{re.sub(r'[^A-Za-z0-9_.-]+', '-', stem)}")
+
+
+def _scan_config(args: argparse.Namespace):
+    """The EnvConfig of ``nbs scan``'s options (raises ConfigError for bad values)."""
+    from dataclasses import replace
+
+    from nbs_env.env import make_config
+    from nbs_env.errors import ConfigError
+
+    overrides: dict = {"scene": args.scene, "max_scans": args.max_scans}
+    if args.storey is not None:
+        overrides["scene_options"] = {"storey": args.storey}
+    cfg = make_config("default", **overrides)
+    robot = cfg.robot
+    if args.resolution is not None:
+        robot = replace(robot, scanner=replace(robot.scanner, angular_step=args.resolution))
+    if args.voxel is not None:
+        if not (math.isfinite(args.voxel) and 0.01 <= args.voxel <= 1.0):
+            raise ConfigError(f"--voxel must be a voxel size in metres within 0.01..1, got {args.voxel}")
+        robot = replace(robot, voxel_size=args.voxel)
+    return replace(cfg, robot=robot)
+
+
+def _table(rows: list[list[str]], right: set[int]) -> str:
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = []
+    for k, row in enumerate(rows):
+        cells = [c.rjust(w) if i in right else c.ljust(w) for i, (c, w) in enumerate(zip(row, widths, strict=True))]
+        lines.append("  ".join(cells).rstrip())
+        if k == 0:
+            lines.append("  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+def scan_summary(metrics: dict, out: Path, files: Sequence[str]) -> str:
+    """The printed result of ``nbs scan``: a table per true room and the total, in the paper's terms."""
+    header = ["room", "scans", "SE sensed %", "path m", "processed points", "processing s", "time s"]
+    rows = [header]
+    for room in metrics["rooms"]:
+        rows.append(
+            [
+                room["name"],
+                str(room["scans"]),
+                f"{room['structure_sensed_pct']:.1f}",
+                f"{room['path_length_m']:.1f}",
+                f"{room['processed_points']:,}",
+                f"{room['processing_time_s']:.1f}",
+                "",
+            ]
+        )
+    outside = [s for s in metrics["steps"] if s["room"] is None]
+    if outside:
+        rows.append(["(in no room)", str(len(outside)), "", "", "", "", ""])
+    total_time = metrics["processing_time_s"] + metrics["acquisition_time_s"] + metrics["travel_time_s"]
+    rows.append(
+        [
+            "total",
+            str(metrics["scans"]),
+            f"{metrics['structure_sensed_pct']:.1f}",
+            f"{metrics['path_length_m']:.1f}",
+            f"{metrics['processed_points']:,}",
+            f"{metrics['processing_time_s']:.1f}",
+            f"{total_time:.1f}",
+        ]
+    )
+    budget = metrics["config"]["max_scans"]
+    if metrics["complete"]:
+        state = "yes"
+    elif metrics["scans"] >= budget:
+        state = f"no (the budget of {budget} scans ran out)"
+    else:
+        state = "no"
+    reg = metrics["registration_error"]
+    lines = [
+        f"{metrics['scene']}: policy {metrics['policy']}, seed {metrics['seed']}",
+        "",
+        _table(rows, right={1, 2, 3, 4, 5, 6}),
+        "",
+        f"time {total_time:.1f} s = processing {metrics['processing_time_s']:.1f} s"
+        f" + acquisition {metrics['acquisition_time_s']:.1f} s + travel {metrics['travel_time_s']:.1f} s"
+        f" ({metrics['path_length_m']:.1f} m at {metrics['config']['travel_speed']} m/s)",
+        f"registration error: mean {reg['mean_m'] * 100:.1f} cm / {reg['mean_deg']:.2f}°,"
+        f" max {reg['max_m'] * 100:.1f} cm / {reg['max_deg']:.2f}°",
+        f"storey complete: {state}",
+        f"wrote {out}/: {', '.join(files)}",
+    ]
+    return "\n".join(lines)
+
+
+def run_scan(args: argparse.Namespace) -> int:
+    """``nbs scan``: run one episode with a policy and write its report."""
+    from scenes.errors import SceneError
+
+    if args.storey is not None and Path(args.scene).suffix.lower() != ".ifc":
+        return _scan_error(f"--storey applies to .ifc files only, not to scene {args.scene!r}", EXIT_USAGE)
+    from nbs_env.errors import ConfigError, NBSError
+    from policies import POLICIES, UnknownPolicyError, make_policy
+
+    try:
+        policy = make_policy(args.policy, args.seed)
+    except UnknownPolicyError:
+        return _scan_error(f"unknown policy {args.policy!r}; policies: {', '.join(POLICIES)}", EXIT_USAGE)
+    out = args.out if args.out is not None else _default_out(args.scene)
+    try:
+        return _scan(args, policy, out)
+    except ConfigError as exc:
+        return _scan_error(exc, EXIT_USAGE)
+    except (SceneError, NBSError) as exc:  # InvalidPoseError: a start inside a wall or outside
+        return _scan_error(exc, EXIT_SCENE_ERROR)
+    except OSError as exc:  # e.g. an --out folder we may not write
+        return _scan_error(exc, EXIT_SCENE_ERROR)
+    except KeyboardInterrupt:
+        print("nbs scan: interrupted", file=sys.stderr)
+        return 130
+
+
+def _scan(args: argparse.Namespace, policy, out: Path) -> int:
+    import matplotlib.pyplot as plt
+    from tqdm import tqdm
+
+    from nbs_env.env import NBSEnv
+    from nbs_env.export import REPORT_FILES, write_report
+
+    cfg = _scan_config(args)
+    env = NBSEnv(cfg, render_mode="rgb_array")
+    options = {} if args.start is None else {"start": args.start}
+    obs, info = env.reset(seed=args.seed, options=options)
+    policy.reset()
+    out.mkdir(parents=True, exist_ok=True)
+    steps_dir = out / "steps"
+    if not args.no_steps:
+        steps_dir.mkdir(exist_ok=True)
+        for old in steps_dir.glob("step_*.png"):
+            old.unlink()
+
+    def save_step(k: int) -> None:
+        if not args.no_steps:
+            plt.imsave(steps_dir / f"step_{k:03d}.png", env.render())
+
+    save_step(0)
+    done = env.complete or info["scans"] >= cfg.max_scans
+    invalid = 0
+    bar = tqdm(
+        total=cfg.max_scans, initial=info["scans"], unit="scan", disable=args.quiet, file=sys.stderr, dynamic_ncols=True
+    )
+    with bar:
+        # The robot's room number (1, 2, ... in the order it entered them) and the true SE sensed.
+        bar.set_postfix(room=info["room"] + 1, se=f"{info['structure_sensed_pct']:.1f}%")
+        k = 0
+        while not done:
+            before = info["scans"]
+            obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
+            done = terminated or truncated
+            invalid = invalid + 1 if info["invalid_action"] else 0
+            if invalid >= 10:
+                bar.close()
+                return _scan_error(f"policy {policy.name!r} chose a masked action 10 times in a row", EXIT_SCENE_ERROR)
+            k += 1
+            bar.set_postfix(room=info["room"] + 1, se=f"{info['structure_sensed_pct']:.1f}%", refresh=False)
+            bar.update(info["scans"] - before)
+            save_step(k)
+    metrics = write_report(env, out, args.scene, policy.name, args.seed)
+    files = [*REPORT_FILES, *([] if args.no_steps else [f"steps/ ({k + 1} pictures)"])]
+    print(scan_summary(metrics, out, files))
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``nbs`` console script; returns the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
     from scenes.errors import SceneError
 
+    if args.command == "scan":
+        return run_scan(args)
     try:
         return run(args)
     except SceneError as exc:

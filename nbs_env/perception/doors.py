@@ -1,7 +1,7 @@
 """Door detection in the SE wall faces of the RoI (METHOD §8), from measured points only.
 
 An opening is an empty rectangle of a wall face's image (points within ±10 cm of the face, 5 cm
-pixels) that stands on the floor, is 0.6-1.5 m wide and 1.8-2.3 m high (a lintel was seen above it),
+pixels) that stands on the floor, is 0.6-4.0 m wide and 1.8-2.3 m high (a lintel was seen above it),
 and through which the scanner saw: registered points lie behind the face plane within the opening.
 That last test tells a door from the shadow a cabinet casts on the wall behind it.
 """
@@ -26,7 +26,9 @@ class DoorConfig:
     Attributes
     ----------
     min_width, max_width : float
-        Clear width, metres.
+        Clear width, metres. Up to 4 m, so that a wide passage under a lintel between open-plan
+        rooms counts (FZK-Haus: 3.5 m from the living room to the hall; with 1.5 m the robot never
+        left the living room).
     min_height, max_height : float
         Clear height, metres; the lintel must have been seen within this range.
     floor_gap : float
@@ -40,7 +42,7 @@ class DoorConfig:
     """
 
     min_width: float = 0.6
-    max_width: float = 1.5
+    max_width: float = 4.0
     min_height: float = 1.8
     max_height: float = 2.3
     floor_gap: float = 0.15

@@ -48,7 +48,8 @@ class WallFace:
         return np.array([-d[1], d[0]])
 
     def corners(self) -> np.ndarray:
-        """(4, 3) float: the parallelogram's corners, counter-clockwise seen from inside the room."""
+        """(4, 3) float: the parallelogram's corners, counter-clockwise seen from outside the room
+        (their right-hand normal points out of it)."""
         p0, p1 = np.asarray(self.p0, dtype=float), np.asarray(self.p1, dtype=float)
         return np.array([[*p0, self.z0], [*p1, self.z0], [*p1, self.z1], [*p0, self.z1]])
 

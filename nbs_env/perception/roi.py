@@ -248,7 +248,7 @@ def _rasterise_stars(stars: list[tuple[np.ndarray, np.ndarray]], pixel: float) -
     return image, corner
 
 
-def compute_roi(scans: Sequence[RoIScan], config: RoIConfig | None = None) -> RoI:
+def compute_roi(scans: Sequence[RoIScan], config: RoIConfig | None = None, exclude: Sequence[np.ndarray] = ()) -> RoI:
     """The RoI of the current room from its registered scans.
 
     Parameters
@@ -256,6 +256,10 @@ def compute_roi(scans: Sequence[RoIScan], config: RoIConfig | None = None) -> Ro
     scans : sequence of RoIScan
         Every registered scan of the current room (points placed with the robot's estimates).
     config : RoIConfig
+    exclude : sequence of (k, 2) float
+        Outlines of rooms the robot has already scanned (its own RoIs). Their inside, less 10 cm,
+        is not part of this room: through a wide opening under a low lintel the band under the
+        ceiling continues into the room next door, which would otherwise join this RoI.
 
     Raises
     ------
@@ -295,6 +299,8 @@ def compute_roi(scans: Sequence[RoIScan], config: RoIConfig | None = None) -> Ro
     if not stars:
         raise RoIError("no scan saw enough of the band under the ceiling to outline the room")
     image, origin_xy = _rasterise_stars(stars, cfg.pixel)
+    for outline in exclude:
+        image &= ~_rasterise_polygon(outline, origin_xy, cfg.pixel, image.shape, shrink=0.10)
     # What one scan claims as free beyond a wall it could not measure (too close), another scan may
     # have seen as wall: the band's points cut such claims off from the room.
     band_xy = np.concatenate([b for b in band_points if len(b)]) if any(len(b) for b in band_points) else None
@@ -315,6 +321,24 @@ def compute_roi(scans: Sequence[RoIScan], config: RoIConfig | None = None) -> Ro
     image = ndimage.binary_fill_holes(ndimage.binary_dilation(room, iterations=2) & image)
     polygon = polygon_from_image(image, origin_xy, cfg.pixel, cfg.corner_distance, cfg.collinear_deg)
     return RoI(polygon=polygon, floor_z=floor_z, ceiling_z=ceiling_z, image=image, origin=origin_xy, pixel=cfg.pixel)
+
+
+def _rasterise_polygon(
+    outline: np.ndarray, origin_xy: np.ndarray, pixel: float, shape: tuple[int, int], shrink: float
+) -> np.ndarray:
+    """(h, w) bool: pixels whose centres lie inside ``outline`` shrunk by ``shrink`` metres."""
+    from shapely.geometry import Polygon as _Polygon
+    from skimage.draw import polygon as fill
+
+    out = np.zeros(shape, dtype=bool)
+    inner = _Polygon(np.asarray(outline, dtype=float)).buffer(-shrink)
+    for part in getattr(inner, "geoms", [inner]):
+        if part.is_empty:
+            continue
+        xy = np.asarray(part.exterior.coords)
+        rows, cols = fill((xy[:, 1] - origin_xy[1]) / pixel - 0.5, (xy[:, 0] - origin_xy[0]) / pixel - 0.5, shape)
+        out[rows, cols] = True
+    return out
 
 
 def _clean(image: np.ndarray, seed: tuple[float, float], radius: int) -> np.ndarray:

@@ -85,6 +85,15 @@ def _pixel_count(extent: float, pixel: float) -> int:
     return max(1, math.ceil(ratio))
 
 
+def _near(face: WallFace, points: np.ndarray, margin: float) -> np.ndarray:
+    """Indices of the (n, 3) points whose xy lies in the face's bounding box grown by ``margin``: a
+    cheap first cut, so that only those go through the face-frame transform."""
+    p0, p1 = np.asarray(face.p0, dtype=float), np.asarray(face.p1, dtype=float)
+    lo, hi = np.minimum(p0, p1) - margin, np.maximum(p0, p1) + margin
+    x, y = points[:, 0], points[:, 1]
+    return np.flatnonzero((x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1]))
+
+
 def face_image(face: WallFace, points: np.ndarray, *, pixel: float = 0.05, band: float = 0.10) -> np.ndarray:
     """Binary image of the measured points near a wall face.
 
@@ -119,7 +128,7 @@ def face_image(face: WallFace, points: np.ndarray, *, pixel: float = 0.05, band:
     image = np.zeros((d2, d1), dtype=bool)
     if len(points) == 0:
         return image
-    u, v, w = face.local(points).T
+    u, v, w = face.local(points[_near(face, points, band)]).T
     keep = (np.abs(w) <= band) & (u >= 0) & (u <= length) & (v >= 0) & (v <= height)
     cols = np.minimum((u[keep] / pixel).astype(np.intp), d1 - 1)  # u, v >= 0 here, so truncation is floor
     rows = np.minimum((v[keep] / pixel).astype(np.intp), d2 - 1)
@@ -646,8 +655,11 @@ def label_points(
     # One vectorised pass over the points per face: O(n) memory, and 10-20 faces cost 10-20 passes,
     # where an (n, faces) broadcast would allocate several (n, faces) arrays for nothing.
     for face in se_faces:
-        u, v, w = face.local(points).T
-        structure |= (
+        # The rectangle kept reaches `distance` past the face's ends and sides: its corners lie
+        # within distance·√2 of the face's bounding box.
+        idx = _near(face, points, 1.5 * distance)
+        u, v, w = face.local(points[idx]).T
+        structure[idx] |= (
             (np.abs(w) <= distance)
             & (u >= -distance)
             & (u <= face.length + distance)

@@ -28,9 +28,11 @@ def _cloud(points: np.ndarray, normals: np.ndarray | None = None):
     return pc
 
 
-def _downsample_with_normals(points: np.ndarray, origin: np.ndarray, voxel: float, radius: float):
+def _downsample_with_normals(points: np.ndarray, origin: np.ndarray, voxel: float, radius: float | None):
     o3d = open3d()
     pc = _cloud(points).voxel_down_sample(voxel)
+    if radius is None:
+        return pc
     pc.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=30))
     # Normals face the scanner, so that averaging over scans does not cancel them.
     pc.orient_normals_towards_camera_location(np.asarray(origin, dtype=np.float64))
@@ -61,16 +63,25 @@ class AccumulatedCloud:
         Voxel size of the working copies in metres.
     normal_radius : float
         Neighbourhood radius for the normals of the working copies.
+    normals : bool
+        Estimate normals (ICP's target needs them); without, adding a scan costs about a third.
+    rooms : bool
+        Keep a working copy per room as well as the storey's.
     """
 
-    def __init__(self, voxel_size: float = 0.05, normal_radius: float = 0.15) -> None:
+    def __init__(
+        self, voxel_size: float = 0.05, normal_radius: float = 0.15, *, normals: bool = True, rooms: bool = True
+    ) -> None:
         self.voxel_size = voxel_size
         self.normal_radius = normal_radius
+        self.normals = normals
+        self.rooms = rooms
         self._full: list[np.ndarray] = []
         self._rooms_of_scans: list[int] = []
         self._origins: list[np.ndarray] = []
         self._storey = None
         self._room_copies: dict[int, object] = {}
+        self._pending: list[int] = []
 
     def __len__(self) -> int:
         return len(self._full)
@@ -98,9 +109,19 @@ class AccumulatedCloud:
         self._full.append(points_world)
         self._rooms_of_scans.append(int(room))
         self._origins.append(np.asarray(origin, dtype=float))
-        new = _downsample_with_normals(points_world, origin, self.voxel_size, self.normal_radius)
-        self._storey = self._merge(self._storey, new)
-        self._room_copies[int(room)] = self._merge(self._room_copies.get(int(room)), new)
+        # The working copies are merged when first asked for: a robot without ICP never asks.
+        self._pending.append(len(self._full) - 1)
+
+    def _update(self) -> None:
+        for k in self._pending:
+            points, origin, room = self._full[k], self._origins[k], self._rooms_of_scans[k]
+            new = _downsample_with_normals(
+                points, origin, self.voxel_size, self.normal_radius if self.normals else None
+            )
+            self._storey = self._merge(self._storey, new)
+            if self.rooms:
+                self._room_copies[room] = self._merge(self._room_copies.get(room), new)
+        self._pending = []
 
     def _merge(self, old, new):
         if old is None:
@@ -120,11 +141,13 @@ class AccumulatedCloud:
 
     def working_points(self, room: int | None = None) -> np.ndarray:
         """(n, 3) float: the downsampled working copy of the storey, or of one room."""
+        self._update()
         pc = self._storey if room is None else self._room_copies.get(room)
         return np.zeros((0, 3)) if pc is None else np.asarray(pc.points)
 
     def working_cloud(self, room: int | None = None):
         """The downsampled working copy (an open3d PointCloud with normals), or None when empty."""
+        self._update()
         return self._storey if room is None else self._room_copies.get(room)
 
 

@@ -1,0 +1,131 @@
+"""Benchmark: NBSEnv steps per second, and the time of each stage of a step against the raw cast.
+
+Two parts:
+
+1. ``nbs_env/NBS-Fast-v0`` steps per second on one core (the process is pinned to CPU 0 and every
+   thread pool is set to one thread before numpy and open3d load): greedy episodes on generated 1-3
+   room storeys. Reset time is reported apart. Goal: at least 20 steps/s.
+2. The default config (``nbs_env/NBS-FiveRooms-v0``, 0.5° scanner, 5 cm voxels, odometry drift and
+   ICP): the median time of each stage of a step over a greedy episode, each as a ratio to the bare
+   Embree ``RaycastingScene.cast_rays`` of the same scan's rays, cast in the same process.
+
+Usage:
+    python benchmarks/env.py --part fast --cores 1 [--episodes 10]
+    python benchmarks/env.py --part default --cores 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+
+def _pin(cores: int) -> None:
+    # Thread pools read these when they load, so they are set before numpy and open3d are imported.
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[var] = str(cores)
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, set(range(cores)))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=10, help="NBS-Fast-v0 episodes (seeds 0..N-1)")
+    parser.add_argument("--cores", type=int, default=1, help="CPU cores the process may use")
+    parser.add_argument("--part", choices=("fast", "default", "both"), default="both")
+    args = parser.parse_args()
+    _pin(args.cores)
+
+    import nbs_env  # noqa: F401  (registers the ids)
+    from policies import GreedyPolicy
+
+    policy = GreedyPolicy()
+    if args.part != "default":
+        fast(args, policy)
+    if args.part != "fast":
+        default(args, policy)
+
+
+def fast(args, policy) -> None:
+    import statistics
+    import time
+
+    import gymnasium as gym
+
+    from nbs_env.env import STAGES
+
+    print(f"part 1: nbs_env/NBS-Fast-v0 on {args.cores} core(s), {args.episodes} greedy episodes")
+    env = gym.make("nbs_env/NBS-Fast-v0")
+    step_times, reset_times, stages = [], [], {s: [] for s in (*STAGES, "evaluation")}
+    casts = []
+    for seed in range(args.episodes):
+        t = time.perf_counter()
+        obs, info = env.reset(seed=seed)
+        reset_times.append(time.perf_counter() - t)
+        robot = env.unwrapped.robot
+        while True:
+            action = policy.act(obs, info)
+            t = time.perf_counter()
+            obs, _, terminated, truncated, info = env.step(action)
+            step_times.append(time.perf_counter() - t)
+            for s in stages:
+                stages[s].append(info["times"][s])
+            scanner = env.unwrapped.robot._scanner
+            rays = scanner.rays(robot.true_pose)
+            t = time.perf_counter()
+            scanner.raw_cast(rays)
+            casts.append(time.perf_counter() - t)
+            if terminated or truncated:
+                break
+    total = sum(step_times)
+    cast = statistics.median(casts)
+    mean = total / len(step_times)
+    print(f"  steps: {len(step_times)}, {1 / mean:.1f} steps/s (mean {1e3 * mean:.0f} ms)")
+    print(f"  reset: median {1e3 * statistics.median(reset_times):.0f} ms (storey generation + first scan)")
+    rays = env.unwrapped.config.robot.scanner.n_rays
+    print(f"  raw cast of one scan ({rays:,} rays): {1e3 * cast:.2f} ms; a mean step is {mean / cast:.0f}x it")
+    for s, values in stages.items():
+        print(f"    {s:15s} {1e3 * statistics.median(values):7.1f} ms median")
+
+
+def default(args, policy) -> None:
+    import statistics
+    import time
+
+    import gymnasium as gym
+
+    from nbs_env.env import STAGES
+
+    print(f"part 2: nbs_env/NBS-FiveRooms-v0 (default config), one greedy episode, {args.cores} core(s)")
+    env = gym.make("nbs_env/NBS-FiveRooms-v0")
+    obs, info = env.reset(seed=0)
+    per_stage = {s: [] for s in (*STAGES, "evaluation")}
+    steps, casts = [], []
+    while True:
+        action = policy.act(obs, info)
+        t = time.perf_counter()
+        obs, _, terminated, truncated, info = env.step(action)
+        steps.append(time.perf_counter() - t)
+        for s in per_stage:
+            per_stage[s].append(info["times"][s])
+        scanner = env.unwrapped.robot._scanner
+        rays = scanner.rays(env.unwrapped.robot.true_pose)
+        t = time.perf_counter()
+        scanner.raw_cast(rays)
+        casts.append(time.perf_counter() - t)
+        if terminated or truncated:
+            break
+    cast = statistics.median(casts)
+    print(f"  {len(steps)} steps; raw cast of one scan ({scanner.config.n_rays:,} rays): {1e3 * cast:.1f} ms median")
+    print(f"  {'stage':15s} {'median ms':>10s} {'x raw cast':>11s}")
+    for s, values in per_stage.items():
+        m = statistics.median(values)
+        print(f"  {s:15s} {1e3 * m:10.1f} {m / cast:11.1f}")
+    m = statistics.median(steps)
+    print(f"  {'whole step':15s} {1e3 * m:10.1f} {m / cast:11.1f}")
+    print("  (a step that completes a room also detects doors, drives and takes the door-frame scan)")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,36 @@
+"""The floor of every comparison: a uniformly random valid candidate."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from policies.base import mask_of
+
+__all__ = ["RandomPolicy"]
+
+
+class RandomPolicy:
+    """Picks uniformly among the candidates the mask allows.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator or int, optional
+        Its only source of randomness (a seed is turned into a Generator).
+    """
+
+    name = "random"
+
+    def __init__(self, rng: np.random.Generator | int | None = None) -> None:
+        self._seed = rng
+        self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+
+    def reset(self) -> None:
+        """Random keeps no episode state (its generator runs on across episodes)."""
+
+    def act(self, obs: dict[str, np.ndarray], info: dict[str, Any]) -> int:
+        valid = np.flatnonzero(mask_of(obs, info))
+        if not len(valid):
+            raise ValueError("no valid action: the mask is all False")
+        return int(self.rng.choice(valid))

@@ -1,0 +1,400 @@
+"""``nbs scan`` and its report files (nbs_env.export): the metrics schema, the clouds, the model."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import itertools
+import json
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import trimesh
+
+from nbs_env.export import FACE_KINDS, SCHEMA, metrics_dict, structural_model, write_model_obj, write_points_ply
+from nbs_env.perception.faces import WallFace
+from nbs_env.robot import RoomModel
+from scenes import Room, load_scene
+from train.cli import EXIT_SCENE_ERROR, EXIT_USAGE, main
+
+# A coarse, fast episode of the small bundled scene.
+FAST = ["scan", "--scene", "l_room", "--resolution", "1", "--voxel", "0.1", "--max-scans", "3"]
+
+
+def nbs(*args: str) -> int:
+    """Run the CLI in-process; argparse's usage errors arrive as SystemExit."""
+    try:
+        return main(list(args))
+    except SystemExit as exc:
+        return int(exc.code)
+
+
+def read_ply(path: Path) -> np.ndarray:
+    """A binary little-endian PLY vertex element as a structured array (our writer's subset)."""
+    data = path.read_bytes()
+    end = data.index(b"end_header\n") + len(b"end_header\n")
+    header = data[:end].decode("ascii").splitlines()
+    assert header[:2] == ["ply", "format binary_little_endian 1.0"]
+    n = next(int(line.split()[2]) for line in header if line.startswith("element vertex"))
+    types = {"float": "<f4", "uchar": "u1"}
+    dtype = [(line.split()[2], types[line.split()[1]]) for line in header if line.startswith("property")]
+    array = np.frombuffer(data[end:], dtype=np.dtype(dtype))
+    assert len(array) == n
+    return array
+
+
+def strip_times(value):
+    """``value`` without the wall-clock fields (they differ between runs)."""
+    if isinstance(value, dict):
+        return {k: strip_times(v) for k, v in value.items() if k not in ("processing_time_s", "times")}
+    if isinstance(value, list):
+        return [strip_times(v) for v in value]
+    return value
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory) -> SimpleNamespace:
+    out = tmp_path_factory.mktemp("scan") / "report"
+    stdout = io.StringIO()
+    with contextlib.redirect_stdout(stdout):
+        code = nbs(*FAST, "--seed", "3", "--out", str(out), "--quiet")
+    assert code == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    return SimpleNamespace(out=out, metrics=metrics, stdout=stdout.getvalue())
+
+
+# ---------------------------------------------------------------------- the report
+TOP_LEVEL = {
+    "schema": str,
+    "scene": str,
+    "policy": str,
+    "seed": int,
+    "complete": bool,
+    "scans": int,
+    "structure_sensed_pct": float,
+    "path_length_m": float,
+    "processed_points": int,
+    "processing_time_s": float,
+    "acquisition_time_s": float,
+    "travel_time_s": float,
+    "registration_error": dict,
+    "rooms": list,
+    "steps": list,
+    "door_events": list,
+    "config": dict,
+}
+ROOM_KEYS = {
+    "id": int,
+    "name": str,
+    "scans": int,
+    "structure_sensed_pct": float,
+    "path_length_m": float,
+    "processed_points": int,
+    "processing_time_s": float,
+}
+STEP_KEYS = {
+    "scan": int,
+    "room": (int, type(None)),
+    "position": list,
+    "estimated_position": list,
+    "predicted_gain": int,
+    "structure_sensed_pct": float,
+    "path_length_m": float,
+    "processing_time_s": float,
+    "door": bool,
+    "times": dict,
+}
+
+
+def check_types(record: dict, spec: dict) -> None:
+    assert set(record) == set(spec), set(record) ^ set(spec)
+    for key, kind in spec.items():
+        assert isinstance(record[key], kind), (key, record[key])
+        if kind is int:
+            assert not isinstance(record[key], bool), key
+
+
+def test_metrics_json_has_the_schema(report):
+    m = report.metrics
+    check_types(m, TOP_LEVEL)
+    assert m["schema"] == SCHEMA == "nbs-metrics/1"
+    assert (m["scene"], m["policy"], m["seed"]) == ("l_room", "greedy", 3)
+    assert m["scans"] == 3 and not m["complete"]  # the budget of 3 scans ends it
+    assert 0 < m["structure_sensed_pct"] <= 100
+    assert m["processed_points"] > 0 and m["acquisition_time_s"] > 0
+    assert m["travel_time_s"] == pytest.approx(m["path_length_m"] / m["config"]["travel_speed"])
+    assert set(m["registration_error"]) == {"mean_m", "max_m", "mean_deg", "max_deg"}
+    assert all(isinstance(v, float) and v >= 0 for v in m["registration_error"].values())
+    assert m["registration_error"]["mean_m"] <= m["registration_error"]["max_m"]
+    # The config is the env's, JSON-safe (tuples became lists).
+    assert m["config"]["max_scans"] == 3 and m["config"]["scene"] == "l_room"
+    assert m["config"]["robot"]["scanner"]["angular_step"] == 1.0 and m["config"]["robot"]["voxel_size"] == 0.1
+    assert isinstance(m["config"]["observation"]["shape"], list)
+
+
+def test_rooms_are_the_true_rooms(report):
+    m = report.metrics
+    scene = load_scene("l_room")
+    assert [r["id"] for r in m["rooms"]] == [r.id for r in scene.rooms]
+    for room in m["rooms"]:
+        check_types(room, ROOM_KEYS)
+    (room,) = m["rooms"]
+    assert room["name"] == "l_room" and room["scans"] == 3
+    assert room["structure_sensed_pct"] == pytest.approx(m["structure_sensed_pct"])
+    assert room["path_length_m"] == pytest.approx(m["path_length_m"])
+    assert room["processed_points"] == m["processed_points"]
+
+
+def test_steps_one_per_scan_with_cumulative_fields(report):
+    steps = report.metrics["steps"]
+    assert len(steps) == report.metrics["scans"]
+    for k, step in enumerate(steps):
+        check_types(step, STEP_KEYS)
+        assert step["scan"] == k and step["room"] == 0
+        assert len(step["position"]) == 3 and len(step["estimated_position"]) == 3
+        assert set(step["times"]) >= {"scan", "registration", "roi", "classification", "voxels", "planning"}
+    for key in ("structure_sensed_pct", "path_length_m"):
+        values = [s[key] for s in steps]
+        assert all(b >= a for a, b in itertools.pairwise(values)), (key, values)
+    assert steps[-1]["structure_sensed_pct"] == pytest.approx(report.metrics["structure_sensed_pct"])
+    assert steps[-1]["path_length_m"] == pytest.approx(report.metrics["path_length_m"])
+    assert steps[0]["position"][:2] == [3.0, 4.5]  # l_room's start
+    assert steps[1]["position"] != steps[0]["position"]  # the robot moved
+
+
+def test_point_clouds_load_and_structure_is_part_of_the_cloud(report):
+    from scenes._open3d import open3d
+
+    o3d = open3d()
+    structure = np.asarray(o3d.io.read_point_cloud(str(report.out / "structure.ply")).points)
+    cloud = np.asarray(o3d.io.read_point_cloud(str(report.out / "cloud.ply")).points)
+    assert 0 < len(structure) < len(cloud)
+    labels = read_ply(report.out / "cloud.ply")["label"]
+    assert set(np.unique(labels)) == {0, 1}
+    assert int((labels == 1).sum()) == len(structure)
+    np.testing.assert_array_equal(cloud[labels == 1], structure)
+    # The points lie in the building (with a margin for noise and drift).
+    lo, hi = load_scene("l_room").mesh.bounds
+    assert np.all(cloud >= lo - 0.3) and np.all(cloud <= hi + 0.3)
+
+
+def test_model_obj_loads_inside_the_scene(report):
+    text = (report.out / "model.obj").read_text()
+    assert "o room0_wall" in text and "o room0_floor" in text and "o room0_ceiling" in text
+    mesh = trimesh.load(report.out / "model.obj", force="mesh")
+    assert len(mesh.faces) >= 2 + 2 + 2  # some walls, a floor and a ceiling
+    lo, hi = load_scene("l_room").mesh.bounds
+    assert np.all(mesh.bounds[0] >= lo - 0.3) and np.all(mesh.bounds[1] <= hi + 0.3)
+    # The recovered floor (faces facing up) lies within the L's 45.6 m² of clear floor, and covers most of it.
+    floor = mesh.area_faces[mesh.face_normals[:, 2] > 0.99].sum()
+    assert 30.0 < floor < 45.6 * 1.1
+
+
+def test_pictures_and_table(report):
+    from PIL import Image
+
+    image = np.asarray(Image.open(report.out / "topdown.png"))
+    assert image.ndim == 3 and image.shape[0] > 100 and image.std() > 0
+    steps = sorted((report.out / "steps").glob("step_*.png"))
+    assert [p.name for p in steps][:2] == ["step_000.png", "step_001.png"] and len(steps) >= 2
+    out = report.stdout
+    assert "l_room" in out and "SE sensed %" in out and "processed points" in out
+    total = next(line for line in out.splitlines() if line.startswith("total"))
+    assert f"{report.metrics['processed_points']:,}" in total
+    assert "storey complete: no" in out and "metrics.json" in out
+
+
+def test_same_seed_same_report(report, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert nbs(*FAST, "--seed", "3", "--no-steps", "--quiet") == 0
+    out = tmp_path / "scan-l_room"  # the default --out
+    assert not (out / "steps").exists()
+    again = json.loads((out / "metrics.json").read_text())
+    first = report.metrics
+    assert [s["position"] for s in again["steps"]] == [s["position"] for s in first["steps"]]
+    assert [s["structure_sensed_pct"] for s in again["steps"]] == [s["structure_sensed_pct"] for s in first["steps"]]
+    assert strip_times(again) == strip_times(first)
+    assert "total" in capsys.readouterr().out
+
+
+# ---------------------------------------------------------------------- errors
+def test_unknown_policy_is_a_usage_error(tmp_path, capsys):
+    assert nbs(*FAST, "--policy", "clairvoyant", "--out", str(tmp_path / "r"), "--quiet") == EXIT_USAGE
+    err = capsys.readouterr().err
+    assert "nbs scan: error:" in err and "'clairvoyant'" in err and "greedy" in err
+    assert not (tmp_path / "r").exists()
+
+
+def test_unknown_scene_is_a_scene_error(tmp_path, capsys):
+    assert nbs("scan", "--scene", "atlantis", "--out", str(tmp_path / "r"), "--quiet") == EXIT_SCENE_ERROR
+    err = capsys.readouterr().err
+    assert "nbs scan: error: atlantis: no bundled scene" in err
+
+
+@pytest.mark.parametrize(
+    ("start", "message"),
+    [("100,100", "is not free floor"), ("0.0,4.0", "is not free floor"), ("5.0,2.5", "is not free floor")],
+    ids=["outside", "in-a-wall", "in-the-column"],
+)
+def test_bad_start_is_refused(tmp_path, capsys, start, message):
+    assert nbs(*FAST, "--start", start, "--out", str(tmp_path / "r"), "--quiet") == EXIT_SCENE_ERROR
+    err = capsys.readouterr().err
+    assert err.startswith("nbs scan: error: l_room: start") and message in err
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--start", "abc"], "expected X,Y"),
+        (["--start", "1,2,3"], "expected X,Y"),
+        (["--resolution", "0"], "angular_step must be > 0"),
+        (["--resolution", "-1"], "angular_step must be > 0"),
+        (["--voxel", "0"], "--voxel must be"),
+        (["--storey", "Erdgeschoss"], "--storey applies to .ifc files only"),
+        (["--max-scans", "0"], "expected an integer >= 1"),
+    ],
+)
+def test_bad_options_are_usage_errors(tmp_path, capsys, args, message):
+    assert nbs(*FAST, *args, "--out", str(tmp_path / "r"), "--quiet") == EXIT_USAGE
+    err = capsys.readouterr().err
+    assert "nbs scan: error:" in err and message in err
+
+
+def test_python_m_train_scan_reports_without_traceback(tmp_path):
+    proc = subprocess.run(
+        [sys.executable, "-m", "train", *FAST, "--start", "100,100", "--quiet"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
+    )
+    assert proc.returncode == EXIT_SCENE_ERROR
+    assert "nbs scan: error: l_room: start [100.0, 100.0] is not free floor" in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+# ---------------------------------------------------------------------- nbs_env.export units
+def test_write_points_ply_round_trip(tmp_path):
+    rng = np.random.default_rng(0)
+    points = rng.uniform(-5, 5, size=(1000, 3))
+    labels = rng.integers(0, 2, size=1000).astype(np.uint8)
+    labels[:3] = [7, 255, 0]
+    path = write_points_ply(tmp_path / "p.ply", points, labels)
+    array = read_ply(path)
+    assert array.dtype.names == ("x", "y", "z", "label")
+    np.testing.assert_array_equal(array["label"], labels)
+    np.testing.assert_allclose(np.column_stack([array["x"], array["y"], array["z"]]), points, atol=1e-5)
+    loaded = trimesh.load(path)
+    np.testing.assert_allclose(loaded.vertices, points, atol=1e-5)
+    # Without labels: just x, y, z; an empty cloud is a valid file.
+    assert read_ply(write_points_ply(tmp_path / "q.ply", points)).dtype.names == ("x", "y", "z")
+    assert len(read_ply(write_points_ply(tmp_path / "e.ply", np.zeros((0, 3)), np.zeros(0, np.uint8)))) == 0
+
+
+@pytest.mark.parametrize(
+    ("points", "labels"),
+    [
+        (np.zeros((4, 2)), None),
+        (np.full((2, 3), np.nan), None),
+        (np.zeros((3, 3)), [0, 1]),
+        (np.zeros((2, 3)), [0, 256]),
+    ],
+    ids=["not-n-by-3", "nan", "label-count", "label-range"],
+)
+def test_write_points_ply_refuses_bad_input(tmp_path, points, labels):
+    with pytest.raises(ValueError):
+        write_points_ply(tmp_path / "bad.ply", points, labels)
+
+
+def room_model(polygon, index=0, floor_z=0.0, ceiling_z=2.5) -> RoomModel:
+    polygon = np.asarray(polygon, dtype=float)
+    faces = [WallFace(polygon[k], polygon[(k + 1) % len(polygon)], floor_z, ceiling_z) for k in range(len(polygon))]
+    return RoomModel(index, polygon, floor_z, ceiling_z, faces, np.zeros((0, 3)), np.zeros(0, dtype=bool))
+
+
+def test_structural_model_of_a_rectangle():
+    room = room_model([[0, 0], [4, 0], [4, 3], [0, 3]])
+    mesh = structural_model([room])
+    kinds = np.asarray(mesh.face_attributes["kind"])
+    assert np.count_nonzero(kinds == FACE_KINDS.index("wall")) == 8
+    assert np.count_nonzero(kinds == FACE_KINDS.index("floor")) >= 2
+    assert np.count_nonzero(kinds == FACE_KINDS.index("ceiling")) >= 2
+    np.testing.assert_array_equal(mesh.face_attributes["room"], 0)
+    area = mesh.area_faces
+    assert area[kinds == 0].sum() == pytest.approx(2 * (4 + 3) * 2.5)
+    assert area[kinds == 1].sum() == pytest.approx(12.0)
+    assert area[kinds == 2].sum() == pytest.approx(12.0)
+    # Normals point into the room: walls inwards, floor up, ceiling down.
+    normals, centres = mesh.face_normals, mesh.triangles_center
+    assert np.all(normals[kinds == 1][:, 2] > 0.99) and np.all(normals[kinds == 2][:, 2] < -0.99)
+    inward = np.array([2.0, 1.5]) - centres[kinds == 0][:, :2]
+    assert np.all(np.einsum("ij,ij->i", normals[kinds == 0][:, :2], inward) > 0)
+    assert np.all(mesh.vertices[:, 2] >= 0) and np.all(mesh.vertices[:, 2] <= 2.5)
+
+
+def test_structural_model_of_two_rooms_one_concave(tmp_path):
+    l_shape = room_model([[0, 0], [8, 0], [8, 4], [4, 4], [4, 8], [0, 8]], index=0)
+    box = room_model([[10, 0], [12, 0], [12, 2], [10, 2]], index=1, floor_z=0.1, ceiling_z=2.6)
+    box = RoomModel(1, box.polygon, 0.1, 2.6, box.se_faces[:2], box.points, box.structure)  # two SE walls only
+    mesh = structural_model([l_shape, box])
+    kinds, rooms = np.asarray(mesh.face_attributes["kind"]), np.asarray(mesh.face_attributes["room"])
+    area = mesh.area_faces
+    assert area[(rooms == 0) & (kinds == 1)].sum() == pytest.approx(48.0)  # 64 - 16: earcut kept the notch
+    assert area[(rooms == 1) & (kinds == 2)].sum() == pytest.approx(4.0)
+    assert np.count_nonzero((rooms == 1) & (kinds == 0)) == 4
+    path = write_model_obj(tmp_path / "m.obj", [l_shape, box])
+    text = path.read_text()
+    for name in ("room0_wall", "room0_floor", "room0_ceiling", "room1_wall", "room1_floor", "room1_ceiling"):
+        assert f"o {name}\n" in text
+    loaded = trimesh.load(path, force="mesh")
+    assert loaded.area == pytest.approx(mesh.area)
+    assert len(structural_model([]).faces) == 0
+    assert "no faces" in write_model_obj(tmp_path / "e.obj", []).read_text()
+
+
+def test_door_frame_scans_belong_to_the_room_entered():
+    """A door-frame scan goes to the room entered, though it stands on the wall face of the room
+    left; the path legs and points are counted per room."""
+    rooms = [
+        Room(0, "a", np.array([[0, 0], [5, 0], [5, 4], [0, 4]], dtype=float)),
+        Room(1, "b", np.array([[5.2, 0], [9, 0], [9, 4], [5.2, 4]], dtype=float)),
+        Room(2, "c", np.array([[0, 5], [4, 5], [4, 9], [0, 9]], dtype=float)),
+    ]
+
+    def step(k, robot_room, xy, path, door=False):
+        return SimpleNamespace(
+            scan=k, room=robot_room, door=door, true_position=np.array([*xy, 1.5]),
+            estimated_position=np.array([*xy, 1.5]), predicted_gain=np.int64(3), path_length=path,
+            structure_sensed_pct=10.0 * (k + 1), processing_time=0.5, acquisition_time=0.2,
+            points=1000 + k, registration_error=(0.01 * k, 0.1 * k), times={"scan": 0.1},
+        )  # fmt: skip
+
+    steps = [
+        step(0, 0, (2, 2), 0.0),
+        step(1, 0, (4, 1), 2.0),
+        step(2, 1, (4.95, 2), 3.5, door=True),  # in the door of a and b, on a's wall face
+        step(3, 1, (7, 2), 5.5),
+        step(4, 1, (5.1, 2), 7.5),  # in the wall (drift), not a door scan: b, by the robot's room
+        step(5, 2, (2, 4.9), 12.0, door=True),  # entering c, the budget ran out: the room no scan was in
+    ]
+    config = SimpleNamespace(travel_speed=0.5, to_dict=lambda: {"max_scans": 10, "shape": (1, 2)})
+    meter = SimpleNamespace(percent=lambda room=None: {None: 40.0, 0: 60.0, 1: 30.0, 2: 0.0}[room])
+    env = SimpleNamespace(
+        steps=steps, scene=SimpleNamespace(rooms=rooms), meter=meter, config=config, complete=True, door_events=[]
+    )
+    m = metrics_dict(env, "fake", "greedy", 0)
+    json.dumps(m)  # plain JSON types only
+    assert [s["room"] for s in m["steps"]] == [0, 0, 1, 1, 1, 2]
+    a, b, c = m["rooms"]
+    assert (a["scans"], b["scans"], c["scans"]) == (2, 3, 1)
+    assert a["path_length_m"] == pytest.approx(2.0) and b["path_length_m"] == pytest.approx(5.5)
+    assert c["path_length_m"] == pytest.approx(4.5)
+    assert b["processed_points"] == 1002 + 1003 + 1004 and c["processed_points"] == 1005
+    assert (a["structure_sensed_pct"], c["structure_sensed_pct"]) == (60.0, 0.0)
+    assert m["travel_time_s"] == pytest.approx(24.0) and m["config"]["shape"] == [1, 2]
+    assert m["registration_error"]["max_m"] == pytest.approx(0.05)
+    assert type(m["steps"][0]["predicted_gain"]) is int
