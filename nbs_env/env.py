@@ -30,7 +30,16 @@ from scenes import FloorPlan, Scene, load_scene
 from scenes.generator import GeneratorConfig, generate_plan
 from scenes.geometry import point_is_free
 
-__all__ = ["PRESETS", "EnvConfig", "NBSEnv", "RewardConfig", "StageTimes", "candidate_table_of", "make_config"]
+__all__ = [
+    "PRESETS",
+    "BeliefView",
+    "EnvConfig",
+    "NBSEnv",
+    "RewardConfig",
+    "StageTimes",
+    "candidate_table_of",
+    "make_config",
+]
 
 #: Stage names of ``info["times"]``, in the order a step runs them.
 STAGES = ("scan", "registration", "roi", "classification", "voxels", "planning")
@@ -89,6 +98,16 @@ class EnvConfig:
     observation : ObservationConfig
     max_scans : int
         The scan budget of an episode; reaching it truncates.
+    completion : {"gain", "policy"}
+        Who decides that a room is complete. ``"gain"`` (the paper's method, METHOD §7): the robot,
+        when the best predicted Occluded-structure→Structure gain falls below
+        ``robot.completion_fraction`` of the room's structural voxels. ``"policy"``: the agent, through
+        one more action, index K ("this room is done"), always valid; the compared methods use it
+        for their own stopping rules. In both, the room's scan cap and running out of NVPs end it.
+    expose_belief : bool
+        Put a :class:`BeliefView` of the robot's belief (its grid, RoI, candidates, this step's
+        registered scans) in ``info["belief"]``, for policies that keep their own maps. References,
+        not copies: use it in-process only (it does not pickle).
     coverage_spacing, coverage_radius : float
         Ground-truth sample spacing and sensing radius of the evaluation, metres.
     travel_speed : float
@@ -102,6 +121,8 @@ class EnvConfig:
     reward: RewardConfig = field(default_factory=RewardConfig)
     observation: ObservationConfig = field(default_factory=ObservationConfig)
     max_scans: int = 80
+    completion: str = "gain"
+    expose_belief: bool = False
     coverage_spacing: float = 0.05
     coverage_radius: float = 0.05
     travel_speed: float = 0.5
@@ -119,6 +140,13 @@ class EnvConfig:
         )
         _require(self.coverage_spacing > 0 and self.coverage_radius > 0, "coverage spacing and radius must be > 0")
         _require(self.travel_speed > 0, f"travel_speed must be > 0, got {self.travel_speed}")
+        _require(
+            self.completion in ("gain", "policy"), f"completion must be 'gain' or 'policy', got {self.completion!r}"
+        )
+        _require(
+            self.robot.predict_gains or self.completion == "policy",
+            "completion='gain' needs robot.predict_gains (the room ends when the predicted gain is small)",
+        )
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -187,6 +215,50 @@ class StageTimes:
         return dict(self.values)
 
 
+@dataclass(frozen=True)
+class BeliefView:
+    """What the robot believes, for policies that keep their own state (``info["belief"]``).
+
+    Everything here is the robot's: measured points placed with its pose estimates, its own grid
+    and RoI. Nothing is ground truth. Arrays are references into the live belief: read, never write.
+
+    Attributes
+    ----------
+    pose : (4, 4) float
+        The pose estimate.
+    room : int
+        The robot's number of the room it is in.
+    new_room : bool
+        This step (or reset) started the room: maps of the previous room no longer apply.
+    scans : list of ((n, 3) float, (3,) float)
+        The scans registered during this step (a door crossing adds one): world points and the
+        scanner position.
+    grid : VoxelGrid or None
+        The room's labelled voxel space V(t).
+    roi : RoI or None
+        The room's region of interest.
+    candidates_xy : (K, 2) float
+        World positions of the NVPs (zeros for padding).
+    path_length : (K,) float
+        Geodesic path lengths to them.
+    mask : (K,) bool
+        Which entries are real.
+    scanner : ScannerConfig
+        The scanner's pattern and limits.
+    """
+
+    pose: np.ndarray
+    room: int
+    new_room: bool
+    scans: list[tuple[np.ndarray, np.ndarray]]
+    grid: Any
+    roi: Any
+    candidates_xy: np.ndarray
+    path_length: np.ndarray
+    mask: np.ndarray
+    scanner: ScannerConfig
+
+
 @dataclass
 class _Step:
     """One scan of the episode, as the report records it (``true_*`` for evaluation only)."""
@@ -202,6 +274,7 @@ class _Step:
     processing_time: float
     acquisition_time: float
     points: int
+    structure_points: int
     registration_error: tuple[float, float]
     times: dict[str, float]
 
@@ -224,7 +297,9 @@ class NBSEnv(gym.Env):
 
     `Discrete(K)` with K = `robot.navigation.max_candidates` (64): an index into the candidate
     list. Only the first `count` entries are real; `action_masks()` (and `info["action_mask"]`)
-    says which. A masked action takes no scan, costs `reward.invalid_action_penalty` and sets
+    says which. With `completion="policy"` the space is `Discrete(K + 1)` and action K, always
+    allowed, declares the room complete (the robot then looks for the next door). A masked action
+    takes no scan, costs `reward.invalid_action_penalty` and sets
     `info["invalid_action"] = True`. An action outside `Discrete(K)` raises `InvalidActionError`.
 
     ## Observation Space
@@ -298,7 +373,10 @@ class NBSEnv(gym.Env):
         self.render_mode = render_mode
         k = config.robot.navigation.max_candidates
         self.max_candidates = k
-        self.action_space = spaces.Discrete(k)
+        #: The "room done" action of completion="policy" (None otherwise).
+        self.stop_action: int | None = k if config.completion == "policy" else None
+        self.n_actions = k + (self.stop_action is not None)
+        self.action_space = spaces.Discrete(self.n_actions)
         self.observation_space = spaces.Dict(
             {
                 # uint8 in 0..255 is what stable-baselines3 expects of image-like arrays; only 0..5 occur.
@@ -367,6 +445,8 @@ class NBSEnv(gym.Env):
         self.paths: list[np.ndarray] = []
         self.complete = False
         self._last_conversions = 0
+        self._step_scans: list[tuple[np.ndarray, np.ndarray]] = []
+        self._new_room = True
         self._record(self.robot.scan(), door=False)
         self._advance()
 
@@ -374,11 +454,14 @@ class NBSEnv(gym.Env):
         if self.robot is None:
             raise gym.error.ResetNeeded("call reset() before step()")
         a = self._check_action(action)
+        self._step_scans = []
+        self._new_room = False
         if self.complete or len(self.steps) >= self.config.max_scans:
             # Stepping past the end of an episode: nothing to do, nothing changes.
             return self._observation(), 0.0, self.complete, not self.complete, self._info()
         mask = self.action_masks()
-        if not mask[a] or self.robot.candidates()[0].count == 0:
+        stop = a == self.stop_action
+        if not mask[a] or (not stop and self.robot.candidates()[0].count == 0):
             info = self._info(invalid_action=True)
             return self._observation(), -self.config.reward.invalid_action_penalty, False, False, info
         self._actions.append(a)
@@ -386,16 +469,19 @@ class NBSEnv(gym.Env):
         before_pct = self.meter.percent()
         before_len = self.robot.path_length
         scans_before = len(self.steps)
-        watched = self.robot.belief.occluded_structure_centres() if reward_cfg.kind == "conversions" else None
-        structural = max(1, self.robot.room_structural_voxels())
-        cands, _ = self.robot.candidates()
-        self.paths.append(cands.path(a))
-        self._record(self.robot.move_to(a), door=False)
         conversions = 0
-        if watched is not None and len(watched):
-            conversions = int(np.count_nonzero(self.robot.belief.labels_at(watched) == VoxelLabel.STRUCTURE))
+        structural = max(1, self.robot.room_structural_voxels())
+        if stop:
+            self._advance(done=True)
+        else:
+            watched = self.robot.belief.occluded_structure_centres() if reward_cfg.kind == "conversions" else None
+            cands, _ = self.robot.candidates()
+            self.paths.append(cands.path(a))
+            self._record(self.robot.move_to(a), door=False)
+            if watched is not None and len(watched):
+                conversions = int(np.count_nonzero(self.robot.belief.labels_at(watched) == VoxelLabel.STRUCTURE))
+            self._advance()
         self._last_conversions = conversions
-        self._advance()
         scans = len(self.steps) - scans_before
         metres = self.robot.path_length - before_len
         gain = self.meter.percent() - before_pct if reward_cfg.kind == "coverage" else 100.0 * conversions / structural
@@ -410,17 +496,20 @@ class NBSEnv(gym.Env):
             ok = float(np.asarray(action).reshape(())) == a
         except (TypeError, ValueError):
             ok = False
-        if not ok or not (0 <= a < self.max_candidates):
-            raise InvalidActionError(f"action must be an integer in [0, {self.max_candidates}), got {action!r}")
+        if not ok or not (0 <= a < self.n_actions):
+            raise InvalidActionError(f"action must be an integer in [0, {self.n_actions}), got {action!r}")
         return a
 
     def action_masks(self) -> np.ndarray:
-        """(K,) bool: which actions are real candidates (sb3-contrib's MaskablePPO reads this)."""
-        mask = np.zeros(self.max_candidates, dtype=bool)
+        """(n_actions,) bool: which actions are real candidates (sb3-contrib's MaskablePPO reads
+        this); with completion="policy" the last, "room done", is always allowed."""
+        mask = np.zeros(self.n_actions, dtype=bool)
         if self.robot is None:
             return mask
         if not self.complete and len(self.steps) < self.config.max_scans:
-            mask = self.robot.candidates()[0].mask.copy()
+            mask[: self.max_candidates] = self.robot.candidates()[0].mask
+            if self.stop_action is not None:
+                mask[self.stop_action] = True
         if not mask.any():
             # A finished episode keeps one action so that a masked sampler always has a choice;
             # stepping it changes nothing.
@@ -435,11 +524,21 @@ class NBSEnv(gym.Env):
         return self.robot.candidates()[1].copy()
 
     # ------------------------------------------------------------------ the storey
-    def _advance(self) -> None:
-        """Room completion (METHOD §7) and the door hand-over (METHOD §8), until a room is open."""
+    def _room_complete(self, done: bool) -> bool:
         robot = self.robot
         assert robot is not None
-        while len(self.steps) < self.config.max_scans and robot.room_complete():
+        if self.config.completion == "gain":
+            return robot.room_complete()
+        return done or robot.room_exhausted()
+
+    def _advance(self, done: bool = False) -> None:
+        """Room completion (METHOD §7) and the door hand-over (METHOD §8), until a room is open.
+
+        ``done``: the agent declared the room complete (completion="policy")."""
+        robot = self.robot
+        assert robot is not None
+        while len(self.steps) < self.config.max_scans and self._room_complete(done):
+            done = False  # the declaration was for the room the robot was in
             before = len(robot.doors)
             robot.finish_room()
             for door in robot.doors[before:]:
@@ -478,11 +577,13 @@ class NBSEnv(gym.Env):
                     }
                 )
                 self._record(report, door=True)
+                self._new_room = True
                 break
 
     def _record(self, report: StepReport, door: bool) -> None:
         robot = self.robot
         assert robot is not None
+        self._step_scans.append((report.world_points, report.estimated_pose[:3, 3].copy()))
         t = time.perf_counter()
         self.meter.add(report.world_points)
         evaluation = time.perf_counter() - t
@@ -503,6 +604,7 @@ class NBSEnv(gym.Env):
                 processing_time=processing,
                 acquisition_time=report.acquisition_time,
                 points=report.points,
+                structure_points=report.belief.structure_points,
                 registration_error=robot.registration_error(),
                 times=times,
             )
@@ -551,7 +653,30 @@ class NBSEnv(gym.Env):
             "invalid_action": invalid_action,
             "conversions": self._last_conversions,
             "complete": self.complete,
+            **({"belief": self.belief_view()} if self.config.expose_belief else {}),
         }
+
+    def belief_view(self) -> BeliefView:
+        """The robot's belief now (see :class:`BeliefView`)."""
+        robot = self.robot
+        assert robot is not None
+        k = self.max_candidates
+        xy, length, mask = np.zeros((k, 2)), np.zeros(k), np.zeros(k, dtype=bool)
+        if not self.complete and len(self.steps) < self.config.max_scans:
+            cands, _ = robot.candidates()
+            xy[: cands.count], length, mask = cands.points, cands.path_length.astype(float), cands.mask
+        return BeliefView(
+            pose=robot.pose,
+            room=robot.room_index,
+            new_room=self._new_room,
+            scans=list(self._step_scans),
+            grid=robot.belief.grid,
+            roi=robot.belief.roi,
+            candidates_xy=xy,
+            path_length=length,
+            mask=mask,
+            scanner=self.config.robot.scanner,
+        )
 
     # ------------------------------------------------------------------ results
     def room_models(self) -> list[RoomModel]:

@@ -32,8 +32,13 @@ scene's ground truth (true positions, true rooms), which the robot never sees.
     scans                   int     scans taken, door-frame scans included
     structure_sensed_pct    float   true structural surface sensed, % of the storey's
     path_length_m           float   distance driven
-    processed_points        int     points of all scans
-    processing_time_s       float   registration, RoI, classification, voxels, planning
+    processed_points        int     points the pipeline processed (the paper's measure): the SE
+                                    points for a structure-aware policy (ours), every point for
+                                    the structure-agnostic compared methods
+    measured_points         int     points of all scans
+    processing_time_s       float   registration, RoI, classification, voxels, planning, and the
+                                    policy's own decision time
+    policy_time_s           float   the policy's decision time alone
     acquisition_time_s      float   simulated scanner time
     travel_time_s           float   path_length_m / config.travel_speed
     registration_error      {mean_m, max_m, mean_deg, max_deg}: pose estimate vs true pose,
@@ -56,6 +61,8 @@ scene's ground truth (true positions, true rooms), which the robot never sees.
         structure_sensed_pct float  cumulative
         path_length_m       float   cumulative
         processing_time_s   float
+        points              int     points of the scan
+        structure_points    int     of which labelled Structure
         door                bool    a scan taken in a door frame on entering a room
         times               {stage: seconds}: scan, registration, roi, classification, voxels,
                             planning, evaluation
@@ -359,7 +366,14 @@ def _true_rooms(env: NBSEnv) -> list[int | None]:
     return out
 
 
-def metrics_dict(env: NBSEnv, scene_name: str, policy: str, seed: int | None) -> dict[str, Any]:
+def metrics_dict(
+    env: NBSEnv,
+    scene_name: str,
+    policy: str,
+    seed: int | None,
+    policy_times: dict[int, float] | None = None,
+    structure_aware: bool | None = None,
+) -> dict[str, Any]:
     """The ``metrics.json`` content of an episode (schema ``"nbs-metrics/1"``, module docstring).
 
     Parameters
@@ -372,15 +386,32 @@ def metrics_dict(env: NBSEnv, scene_name: str, policy: str, seed: int | None) ->
         The policy's name (an object with a ``name`` attribute is also taken).
     seed : int or None
         The seed given to ``reset``.
+    policy_times : dict of int to float, optional
+        Seconds the policy spent deciding, by the index of the scan its decision led to; added to
+        that scan's processing time (the greedy's gains are already in the env's planning stage).
+    structure_aware : bool, optional
+        Whether the policy's pipeline keeps only the SE points (the paper's method) or processes
+        every point (the structure-agnostic methods), for ``processed_points``; by default the
+        policy object's ``structure_aware`` attribute, else True.
 
     Returns
     -------
     dict
         Plain JSON types only.
     """
+    if structure_aware is None:
+        structure_aware = bool(getattr(policy, "structure_aware", True))
+    policy_times = policy_times or {}
     steps = env.steps
     if not steps:
         raise ValueError("the env has no scans: call reset() first")
+
+    def processed(s) -> int:
+        return int(s.structure_points if structure_aware else s.points)
+
+    def processing(i: int) -> float:
+        return float(steps[i].processing_time + policy_times.get(i, 0.0))
+
     policy_name = str(getattr(policy, "name", policy))
     meter = env.meter
     true_rooms = _true_rooms(env)
@@ -399,8 +430,8 @@ def metrics_dict(env: NBSEnv, scene_name: str, policy: str, seed: int | None) ->
                 "scans": len(mine),
                 "structure_sensed_pct": float(meter.percent(room=room.id)),
                 "path_length_m": float(sum(legs[i] for i in mine)),
-                "processed_points": int(sum(steps[i].points for i in mine)),
-                "processing_time_s": float(sum(steps[i].processing_time for i in mine)),
+                "processed_points": int(sum(processed(steps[i]) for i in mine)),
+                "processing_time_s": float(sum(processing(i) for i in mine)),
             }
         )
 
@@ -413,11 +444,13 @@ def metrics_dict(env: NBSEnv, scene_name: str, policy: str, seed: int | None) ->
             "predicted_gain": int(s.predicted_gain),
             "structure_sensed_pct": float(s.structure_sensed_pct),
             "path_length_m": float(s.path_length),
-            "processing_time_s": float(s.processing_time),
+            "processing_time_s": processing(k),
+            "points": int(s.points),
+            "structure_points": int(s.structure_points),
             "door": bool(s.door),
             "times": {str(k): float(v) for k, v in s.times.items()},
         }
-        for s, room in zip(steps, true_rooms, strict=True)
+        for k, (s, room) in enumerate(zip(steps, true_rooms, strict=True))
     ]
 
     metrics = {
@@ -429,8 +462,10 @@ def metrics_dict(env: NBSEnv, scene_name: str, policy: str, seed: int | None) ->
         "scans": len(steps),
         "structure_sensed_pct": float(meter.percent()),
         "path_length_m": path_length,
-        "processed_points": int(sum(s.points for s in steps)),
-        "processing_time_s": float(sum(s.processing_time for s in steps)),
+        "processed_points": int(sum(processed(s) for s in steps)),
+        "measured_points": int(sum(s.points for s in steps)),
+        "processing_time_s": float(sum(processing(i) for i in range(len(steps)))),
+        "policy_time_s": float(sum(policy_times.values())),
         "acquisition_time_s": float(sum(s.acquisition_time for s in steps)),
         "travel_time_s": path_length / float(env.config.travel_speed),
         "registration_error": {
@@ -448,7 +483,14 @@ def metrics_dict(env: NBSEnv, scene_name: str, policy: str, seed: int | None) ->
 
 
 # ---------------------------------------------------------------------- the report
-def write_report(env: NBSEnv, out_dir: str | Path, scene_name: str, policy: str, seed: int | None) -> dict[str, Any]:
+def write_report(
+    env: NBSEnv,
+    out_dir: str | Path,
+    scene_name: str,
+    policy: str,
+    seed: int | None,
+    policy_times: dict[int, float] | None = None,
+) -> dict[str, Any]:
     """Write the episode's report files (:data:`REPORT_FILES`) into ``out_dir``.
 
     Parameters
@@ -458,7 +500,7 @@ def write_report(env: NBSEnv, out_dir: str | Path, scene_name: str, policy: str,
         whatever the env's render mode.
     out_dir : str or Path
         Created if missing; existing report files are overwritten.
-    scene_name, policy, seed
+    scene_name, policy, seed, policy_times
         As for :func:`metrics_dict`.
 
     Returns
@@ -476,7 +518,7 @@ def write_report(env: NBSEnv, out_dir: str | Path, scene_name: str, policy: str,
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    metrics = metrics_dict(env, scene_name, policy, seed)
+    metrics = metrics_dict(env, scene_name, policy, seed, policy_times)
     (out / "metrics.json").write_text(json.dumps(metrics, indent=1) + "\n")
 
     models = env.room_models()

@@ -61,6 +61,10 @@ class RobotConfig:
         The scan cap per room.
     perfect_localisation : bool
         Skip odometry drift and registration (the belief is the true pose): for fast RL.
+    predict_gains : bool
+        Compute the greedy's predicted gain of every NVP. Policies with their own utility turn it
+        off, so that their processing time does not carry the greedy's; room completion by gain
+        (METHOD §7) then cannot run.
     """
 
     scanner: ScannerConfig = field(default_factory=ScannerConfig)
@@ -72,6 +76,7 @@ class RobotConfig:
     completion_fraction: float = 0.03
     max_scans_per_room: int = 12
     perfect_localisation: bool = False
+    predict_gains: bool = True
 
     def __post_init__(self) -> None:
         _finite(voxel_size=self.voxel_size, completion_fraction=self.completion_fraction)
@@ -250,9 +255,10 @@ class Robot:
             sensors = np.column_stack(
                 [self._candidates.points, np.full(self._candidates.count, self.belief.roi.floor_z + cfg.scanner.height)]
             )
-            model = VisibilityModel(grid.labels, grid.origin, grid.voxel_size, cfg.gain)
             gains = np.zeros(cfg.navigation.max_candidates, dtype=np.int64)
-            gains[: self._candidates.count] = model.gains(sensors, cfg.scanner)
+            if cfg.predict_gains:
+                model = VisibilityModel(grid.labels, grid.origin, grid.voxel_size, cfg.gain)
+                gains[: self._candidates.count] = model.gains(sensors, cfg.scanner)
             self._gains = gains
             self.planning_time = time.perf_counter() - t
         return self._candidates, self._gains
@@ -425,8 +431,14 @@ class Robot:
             np.count_nonzero((grid.labels == VoxelLabel.STRUCTURE) | (grid.labels == VoxelLabel.OCCLUDED_STRUCTURE))
         )
 
+    def room_exhausted(self) -> bool:
+        """The room's scan cap is reached, or no NVP is left."""
+        return self.scans_in_room >= self.config.max_scans_per_room or self.candidates()[0].count == 0
+
     def room_complete(self) -> bool:
         """Best predicted gain below the completion share, no NVP, or the scan cap reached."""
+        if not self.config.predict_gains:
+            raise RuntimeError("room completion by gain needs RobotConfig.predict_gains")
         if self.scans_in_room >= self.config.max_scans_per_room:
             return True
         cands, gains = self.candidates()

@@ -9,16 +9,45 @@ Every policy follows :class:`policies.base.Policy`: ``reset()``, ``act(obs, info
 
 from __future__ import annotations
 
+from typing import Any
+
 from policies.base import Policy
 from policies.greedy import GreedyPolicy
 from policies.random import RandomPolicy
 
-__all__ = ["POLICIES", "GreedyPolicy", "Policy", "RandomPolicy", "UnknownPolicyError", "make_policy"]
+__all__ = ["POLICIES", "GreedyPolicy", "Policy", "RandomPolicy", "UnknownPolicyError", "env_settings", "make_policy"]
 
-#: Policy names → factories taking a seed.
+
+def _baseline(name: str):
+    def factory(seed: int | None, option: str | None = None):
+        from policies import baselines
+
+        cls = {
+            "stachniss_burgard": baselines.StachnissBurgardPolicy,
+            "blaer_allen": baselines.BlaerAllenPolicy,
+            "potthast_sukhatme": baselines.PotthastSukhatmePolicy,
+            "nearest_frontier": baselines.NearestFrontierPolicy,
+        }[name]
+        return cls()
+
+    return factory
+
+
+def _information_gain(seed: int | None, option: str | None = None):
+    from policies.baselines import InformationGainPolicy
+
+    return InformationGainPolicy(option or "occlusion_aware")
+
+
+#: Policy names → factories taking a seed (and, after a colon, an option: ``information_gain:rear_side_voxel``).
 POLICIES = {
-    "greedy": lambda seed: GreedyPolicy(),
-    "random": lambda seed: RandomPolicy(seed),
+    "greedy": lambda seed, option=None: GreedyPolicy(),
+    "stachniss_burgard": _baseline("stachniss_burgard"),
+    "blaer_allen": _baseline("blaer_allen"),
+    "potthast_sukhatme": _baseline("potthast_sukhatme"),
+    "information_gain": _information_gain,
+    "nearest_frontier": _baseline("nearest_frontier"),
+    "random": lambda seed, option=None: RandomPolicy(seed),
 }
 
 
@@ -27,7 +56,16 @@ class UnknownPolicyError(ValueError):
 
 
 def make_policy(name: str, seed: int | None = None) -> Policy:
-    """A policy by name (see :data:`POLICIES`)."""
-    if name not in POLICIES:
+    """A policy by name (see :data:`POLICIES`); ``name:option`` passes an option (a formulation)."""
+    base, _, option = str(name).partition(":")
+    if base not in POLICIES:
         raise UnknownPolicyError(f"unknown policy {name!r}; policies: {', '.join(POLICIES)}")
-    return POLICIES[name](seed)
+    try:
+        return POLICIES[base](seed, option or None)
+    except ValueError as exc:
+        raise UnknownPolicyError(f"policy {name!r}: {exc}") from None
+
+
+def env_settings(policy: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(EnvConfig overrides, RobotConfig overrides) a policy needs, e.g. completion="policy"."""
+    return dict(getattr(policy, "env_overrides", {})), dict(getattr(policy, "robot_overrides", {}))

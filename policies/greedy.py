@@ -26,6 +26,8 @@ class GreedyPolicy:
     env computes from the robot's own voxel grid) over the mask, ties to the shorter path."""
 
     name = "greedy"
+    #: Keeps only the SE points (the paper's processed-point measure).
+    structure_aware = True
 
     def reset(self) -> None:
         """The greedy keeps no state."""

@@ -21,6 +21,8 @@ class RandomPolicy:
     """
 
     name = "random"
+    #: Runs our pipeline (RoI, SE classification); only the choice is random.
+    structure_aware = True
 
     def __init__(self, rng: np.random.Generator | int | None = None) -> None:
         self._seed = rng

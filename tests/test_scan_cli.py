@@ -50,7 +50,7 @@ def read_ply(path: Path) -> np.ndarray:
 def strip_times(value):
     """``value`` without the wall-clock fields (they differ between runs)."""
     if isinstance(value, dict):
-        return {k: strip_times(v) for k, v in value.items() if k not in ("processing_time_s", "times")}
+        return {k: strip_times(v) for k, v in value.items() if k not in ("processing_time_s", "policy_time_s", "times")}
     if isinstance(value, list):
         return [strip_times(v) for v in value]
     return value
@@ -78,7 +78,9 @@ TOP_LEVEL = {
     "structure_sensed_pct": float,
     "path_length_m": float,
     "processed_points": int,
+    "measured_points": int,
     "processing_time_s": float,
+    "policy_time_s": float,
     "acquisition_time_s": float,
     "travel_time_s": float,
     "registration_error": dict,
@@ -105,6 +107,8 @@ STEP_KEYS = {
     "structure_sensed_pct": float,
     "path_length_m": float,
     "processing_time_s": float,
+    "points": int,
+    "structure_points": int,
     "door": bool,
     "times": dict,
 }
@@ -370,7 +374,7 @@ def test_door_frame_scans_belong_to_the_room_entered():
             scan=k, room=robot_room, door=door, true_position=np.array([*xy, 1.5]),
             estimated_position=np.array([*xy, 1.5]), predicted_gain=np.int64(3), path_length=path,
             structure_sensed_pct=10.0 * (k + 1), processing_time=0.5, acquisition_time=0.2,
-            points=1000 + k, registration_error=(0.01 * k, 0.1 * k), times={"scan": 0.1},
+            points=1000 + k, structure_points=500 + k, registration_error=(0.01 * k, 0.1 * k), times={"scan": 0.1},
         )  # fmt: skip
 
     steps = [
@@ -386,14 +390,20 @@ def test_door_frame_scans_belong_to_the_room_entered():
     env = SimpleNamespace(
         steps=steps, scene=SimpleNamespace(rooms=rooms), meter=meter, config=config, complete=True, door_events=[]
     )
-    m = metrics_dict(env, "fake", "greedy", 0)
+    m = metrics_dict(env, "fake", "stachniss_burgard", 0, structure_aware=False)
     json.dumps(m)  # plain JSON types only
     assert [s["room"] for s in m["steps"]] == [0, 0, 1, 1, 1, 2]
     a, b, c = m["rooms"]
     assert (a["scans"], b["scans"], c["scans"]) == (2, 3, 1)
     assert a["path_length_m"] == pytest.approx(2.0) and b["path_length_m"] == pytest.approx(5.5)
     assert c["path_length_m"] == pytest.approx(4.5)
+    # A structure-agnostic method processes every point; ours keeps the SE points (the paper's measure).
     assert b["processed_points"] == 1002 + 1003 + 1004 and c["processed_points"] == 1005
+    ours = metrics_dict(env, "fake", "greedy", 0, policy_times={1: 0.25})
+    assert (
+        ours["processed_points"] == sum(500 + k for k in range(6)) and ours["measured_points"] == m["measured_points"]
+    )
+    assert ours["processing_time_s"] == pytest.approx(6 * 0.5 + 0.25) and ours["policy_time_s"] == 0.25
     assert (a["structure_sensed_pct"], c["structure_sensed_pct"]) == (60.0, 0.0)
     assert m["travel_time_s"] == pytest.approx(24.0) and m["config"]["shape"] == [1, 2]
     assert m["registration_error"]["max_m"] == pytest.approx(0.05)

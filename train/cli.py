@@ -132,7 +132,44 @@ def build_parser() -> argparse.ArgumentParser:
     )
     scan.add_argument("--no-steps", action="store_true", help="do not save a picture per step")
     scan.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    compare = sub.add_parser(
+        "compare",
+        help="run policies on scenes over seeds and write the comparison table",
+        description="Run every (scene, policy, seed) and write table.csv, table.md, coverage_vs_scans.png, "
+        "path_time.png and each run's metrics.json into --out.",
+    )
+    compare.add_argument("--scenes", required=True, help="comma-separated scenes; generated:A-B is a range of seeds")
+    compare.add_argument("--policies", required=True, help="comma-separated policies (see `nbs compare --help`)")
+    compare.add_argument("--seeds", default="0", help="comma-separated seeds (default 0)")
+    compare.add_argument("--out", type=Path, required=True, help="output folder")
+    compare.add_argument("--jobs", type=_positive_int, default=1, help="worker processes (default 1)")
+    compare.add_argument("--backend", choices=("local", "ray"), default="local", help="local processes or Ray")
+    compare.add_argument("--address", default=None, help="Ray cluster address (default: start a local instance)")
+    compare.add_argument("--preset", choices=("default", "fast"), default="default", help="env preset (default)")
+    compare.add_argument("--max-scans", type=_positive_int, default=80, help="scan budget per run (default 80)")
+    compare.add_argument("--quiet", action="store_true", help="no progress bar")
     return parser
+
+
+def run_compare(args: argparse.Namespace) -> int:
+    """``nbs compare``: the grid, its table and plots."""
+    from train.compare import CompareError, grid, run_grid, write_outputs
+
+    try:
+        specs = grid(args.scenes, args.policies, args.seeds, args.preset, args.max_scans)
+        results, oracles = run_grid(specs, args.jobs, args.backend, args.address, progress=not args.quiet)
+    except CompareError as exc:
+        print(f"nbs compare: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    write_outputs(results, oracles, args.out)
+    failed = [r for r in results if not r["ok"]]
+    print((args.out / "table.md").read_text())
+    print(f"{len(results) - len(failed)} of {len(results)} runs ok; wrote {args.out}/")
+    for r in failed:
+        spec = r["spec"]
+        print(f"failed: {spec['scene']} {spec['policy']} seed {spec['seed']}: {r['error']}", file=sys.stderr)
+    return 0 if not failed else 1
 
 
 def _load(args: argparse.Namespace):
@@ -340,46 +377,36 @@ def _scan(args: argparse.Namespace, policy, out: Path) -> int:
 
     from nbs_env.env import NBSEnv
     from nbs_env.export import REPORT_FILES, write_report
+    from train.episode import config_for, run_episode
 
-    cfg = _scan_config(args)
+    cfg = config_for(_scan_config(args), policy)
     env = NBSEnv(cfg, render_mode="rgb_array")
     options = {} if args.start is None else {"start": args.start}
-    obs, info = env.reset(seed=args.seed, options=options)
-    policy.reset()
     out.mkdir(parents=True, exist_ok=True)
     steps_dir = out / "steps"
     if not args.no_steps:
         steps_dir.mkdir(exist_ok=True)
         for old in steps_dir.glob("step_*.png"):
             old.unlink()
+    bar = tqdm(total=cfg.max_scans, unit="scan", disable=args.quiet, file=sys.stderr, dynamic_ncols=True)
+    k = -1
 
-    def save_step(k: int) -> None:
+    def on_step(info: dict) -> None:
+        nonlocal k
+        k += 1
         if not args.no_steps:
             plt.imsave(steps_dir / f"step_{k:03d}.png", env.render())
-
-    save_step(0)
-    done = env.complete or info["scans"] >= cfg.max_scans
-    invalid = 0
-    bar = tqdm(
-        total=cfg.max_scans, initial=info["scans"], unit="scan", disable=args.quiet, file=sys.stderr, dynamic_ncols=True
-    )
-    with bar:
         # The robot's room number (1, 2, ... in the order it entered them) and the true SE sensed.
-        bar.set_postfix(room=info["room"] + 1, se=f"{info['structure_sensed_pct']:.1f}%")
-        k = 0
-        while not done:
-            before = info["scans"]
-            obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
-            done = terminated or truncated
-            invalid = invalid + 1 if info["invalid_action"] else 0
-            if invalid >= 10:
-                bar.close()
-                return _scan_error(f"policy {policy.name!r} chose a masked action 10 times in a row", EXIT_SCENE_ERROR)
-            k += 1
-            bar.set_postfix(room=info["room"] + 1, se=f"{info['structure_sensed_pct']:.1f}%", refresh=False)
-            bar.update(info["scans"] - before)
-            save_step(k)
-    metrics = write_report(env, out, args.scene, policy.name, args.seed)
+        bar.set_postfix(room=info["room"] + 1, se=f"{info['structure_sensed_pct']:.1f}%", refresh=False)
+        bar.update(info["scans"] - bar.n)
+
+    with bar:
+        try:
+            policy_times = run_episode(env, policy, args.seed, options, on_step)
+        except RuntimeError as exc:
+            bar.close()
+            return _scan_error(exc, EXIT_SCENE_ERROR)
+    metrics = write_report(env, out, args.scene, policy, args.seed, policy_times)
     files = [*REPORT_FILES, *([] if args.no_steps else [f"steps/ ({k + 1} pictures)"])]
     print(scan_summary(metrics, out, files))
     return 0
@@ -393,6 +420,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     if args.command == "scan":
         return run_scan(args)
+    if args.command == "compare":
+        return run_compare(args)
     try:
         return run(args)
     except SceneError as exc:

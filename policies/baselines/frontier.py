@@ -1,0 +1,61 @@
+"""Nearest frontier (Yamauchi 1997), a floor for the comparison.
+
+**Source.** Drive to the nearest frontier, the boundary between known free space and unknown space.
+
+**Adapted here:** frontier voxels are unknown voxels 6-adjacent to Empty ones, inside the room's
+RoI prism (the dynamic workspace the compared methods were given), projected to the floor. The next
+scan is the candidate that minimises its path length plus its distance to the nearest frontier
+column, among candidates within 3 m of one; the room ends when fewer than 1% of the RoI's columns
+are frontier. Structure-agnostic.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import shapely
+from scipy import ndimage
+from scipy.spatial import cKDTree
+from shapely.geometry import Polygon
+
+from nbs_env.env import BeliefView
+from policies.baselines._maps import MappingPolicy, collapse
+
+__all__ = ["NearestFrontierPolicy"]
+
+
+class NearestFrontierPolicy(MappingPolicy):
+    """Go to the nearest frontier (see the module docstring)."""
+
+    name = "nearest_frontier"
+
+    def __init__(self, reach: float = 3.0, stop_share: float = 0.01) -> None:
+        self.reach = reach
+        self.stop_share = stop_share
+        super().__init__()
+
+    def act(self, obs, info) -> int:
+        belief = self._belief(info)
+        stop = len(belief.mask)
+        valid = np.flatnonzero(belief.mask)
+        frontier, columns = self._frontier(belief)
+        if not len(valid) or len(frontier) < max(1, self.stop_share * columns):
+            return stop
+        d, _ = cKDTree(frontier).query(belief.candidates_xy[valid])
+        ok = d <= self.reach
+        if not ok.any():
+            return stop
+        cost = np.where(ok, belief.path_length[valid] + d, np.inf)
+        return int(valid[int(np.argmin(cost))])
+
+    def _frontier(self, belief: BeliefView) -> tuple[np.ndarray, int]:
+        """(f, 2) world xy of the frontier columns inside the RoI, and the RoI's column count."""
+        grid, roi = belief.grid, belief.roi
+        free, _, unknown = collapse(grid.labels)
+        k0 = max(0, int(np.floor((roi.floor_z + 0.1 - grid.origin[2]) / grid.voxel_size)))
+        k1 = min(grid.shape[2], int(np.ceil((roi.ceiling_z - 0.1 - grid.origin[2]) / grid.voxel_size)))
+        near_free = ndimage.binary_dilation(free, structure=ndimage.generate_binary_structure(3, 1))
+        column = (unknown & near_free)[:, :, k0:k1].any(axis=2)
+        i, j = np.indices(column.shape)
+        xy = grid.origin[:2] + (np.stack([i, j], -1).reshape(-1, 2) + 0.5) * grid.voxel_size
+        inside = shapely.contains_xy(Polygon(roi.polygon).buffer(-0.1), xy[:, 0], xy[:, 1])
+        return xy[inside & column.reshape(-1)], int(inside.sum())

@@ -1,0 +1,155 @@
+"""The oracle: the yardstick of the comparison, and the ONE policy that reads ground truth.
+
+It is not a competitor. With the true building it lists the scan positions a robot could stand at
+(a lattice keeping the 0.45 m clearance from walls and furniture in every room), takes a noise-free
+scan of the true building from each with the same scanner as the robot, finds which samples of the
+true structural surface each scan senses by the evaluation's own rule (a point within the
+meter's radius, :class:`nbs_env.metrics.CoverageMeter`), and picks positions by greedy set cover.
+That gives, per scene and scanner:
+
+- the largest share of the structural surface any plan of scans from those positions senses
+  (``max_coverage_pct``), and
+- the fewest scans found to reach a given share (``scans_to_reach``; greedy set cover is within a
+  factor ln(n) of the optimum, and is what is reported).
+
+The oracle's scans are perfectly registered and noise-free, so a robot can fall short of its
+coverage through registration error and noise, and exceed it slightly only by noise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from shapely.geometry import Polygon
+from shapely.prepared import prep
+
+from nbs_env.config import ScannerConfig
+from scenes import Scene
+from scenes.geometry import CLEARANCE, free_region
+
+__all__ = ["OraclePlan", "oracle_plan"]
+
+
+@dataclass(frozen=True)
+class OraclePlan:
+    """The oracle's greedy set cover of one scene.
+
+    Attributes
+    ----------
+    positions : (m, 3) float
+        The chosen scanner positions, in the order chosen.
+    coverage_pct : (m,) float
+        Share of the structural samples seen after each chosen scan, in %.
+    max_coverage_pct : float
+        Share seen from all candidate positions together.
+    candidates : int
+        How many candidate positions there were.
+    samples : int
+        How many structural samples.
+    """
+
+    positions: np.ndarray
+    coverage_pct: np.ndarray
+    max_coverage_pct: float
+    candidates: int
+    samples: int
+
+    def scans_to_reach(self, pct: float) -> int | None:
+        """The fewest scans of the plan that see at least ``pct`` % (None if it never does)."""
+        hit = np.flatnonzero(self.coverage_pct >= pct - 1e-9)
+        return int(hit[0]) + 1 if len(hit) else None
+
+    def to_dict(self) -> dict:
+        return {
+            "positions": self.positions.round(3).tolist(),
+            "coverage_pct": [float(v) for v in self.coverage_pct],
+            "max_coverage_pct": float(self.max_coverage_pct),
+            "candidates": int(self.candidates),
+            "samples": int(self.samples),
+        }
+
+
+def _positions(scene: Scene, lattice: float, clearance: float) -> np.ndarray:
+    out = []
+    for room in scene.rooms:
+        free = free_region(scene, Polygon(room.polygon), room.floor_z, clearance)
+        if free.is_empty:
+            continue
+        lo, hi = np.floor(np.asarray(free.bounds[:2]) / lattice), np.ceil(np.asarray(free.bounds[2:]) / lattice)
+        gx, gy = np.meshgrid(np.arange(lo[0], hi[0] + 1) * lattice, np.arange(lo[1], hi[1] + 1) * lattice)
+        pts = np.column_stack([gx.ravel(), gy.ravel()])
+        inside = np.array([prep(free).contains_properly(_point(p)) for p in pts], dtype=bool)
+        for p in pts[inside]:
+            out.append([p[0], p[1], room.floor_z])
+    return np.asarray(out, dtype=float).reshape(-1, 3)
+
+
+def _point(p):
+    from shapely.geometry import Point
+
+    return Point(float(p[0]), float(p[1]))
+
+
+def oracle_plan(
+    scene: Scene,
+    scanner: ScannerConfig | None = None,
+    *,
+    lattice: float = 0.5,
+    clearance: float = CLEARANCE,
+    spacing: float = 0.05,
+    radius: float = 0.05,
+) -> OraclePlan:
+    """Greedy set cover of the scene's structural surface by scan positions (module docstring).
+
+    Parameters
+    ----------
+    scene : Scene
+        The true building (ground truth: this is the yardstick).
+    scanner : ScannerConfig
+        The robot's scanner; its range noise is left out.
+    lattice : float
+        Spacing of the candidate positions, metres (the robot's NVP lattice).
+    clearance : float
+        Distance to keep from walls and furniture, metres.
+    spacing, radius : float
+        The evaluation's sample spacing and sensing radius (as the env's ``coverage_spacing`` and
+        ``coverage_radius``).
+    """
+    from dataclasses import replace
+
+    from scipy.spatial import cKDTree
+
+    from nbs_env.sensing.pose import planar
+    from nbs_env.sensing.scanner import Scanner
+
+    scanner = replace(scanner or ScannerConfig(), range_noise=0.0)
+    samples = scene.structure_samples(spacing, interior_only=True).points
+    positions = _positions(scene, lattice, clearance)
+    caster = Scanner(scene, scanner)
+    sees = np.zeros((len(positions), len(samples)), dtype=bool)
+    for k, (x, y, z) in enumerate(positions):
+        pose = planar(x, y, 0.0, z + scanner.height)
+        points = caster.scan(pose).to_world(pose)
+        if not len(points):
+            continue
+        distance, _ = cKDTree(points).query(samples, distance_upper_bound=radius, workers=-1)
+        sees[k] = np.isfinite(distance)
+    reachable = sees.any(axis=0)
+    covered = np.zeros(len(samples), dtype=bool)
+    chosen, curve = [], []
+    while True:
+        gain = (sees & ~covered).sum(axis=1)
+        best = int(np.argmax(gain)) if len(gain) else 0
+        if not len(gain) or gain[best] == 0:
+            break
+        covered |= sees[best]
+        chosen.append(positions[best])
+        curve.append(100.0 * covered.sum() / max(1, len(samples)))
+    return OraclePlan(
+        positions=np.asarray(chosen, dtype=float).reshape(-1, 3),
+        coverage_pct=np.asarray(curve, dtype=float),
+        max_coverage_pct=100.0 * reachable.sum() / max(1, len(samples)),
+        candidates=len(positions),
+        samples=len(samples),
+    )

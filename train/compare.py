@@ -1,0 +1,439 @@
+"""``nbs compare``: every (scene, policy, seed) run, locally in worker processes or on a Ray cluster,
+and the paper's comparison table.
+
+Each run plays one policy on one scene with one seed (:func:`run_one`) and returns its
+``metrics.json`` content, or its error: a failed run does not stop the others. The oracle
+(:mod:`policies.oracle`, ground truth, the yardstick) is computed once per scene. The outputs:
+
+- ``runs/<scene>/<policy>/seed<k>/metrics.json`` for every run (``error.txt`` for a failed one);
+- ``table.csv`` and ``table.md``: per scene, policy and room, and in total, mean ± std over seeds of
+  the paper's five quantities (scans, time, % structural surface sensed, processed points, path
+  length), and two against the oracle: coverage as a share of the largest any plan reaches, and the
+  scans taken over the oracle's scans to the same coverage;
+- ``coverage_vs_scans.png`` (one curve per policy, a band over runs) and ``path_time.png``.
+
+Runs are deterministic: the same seeds give the same table, times aside.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import multiprocessing
+import time
+import traceback
+from collections.abc import Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["RunSpec", "expand_scenes", "run_grid", "run_one", "summarise", "write_outputs"]
+
+#: The table's quantities: (key, heading, format).
+QUANTITIES = (
+    ("scans", "scans", "{:.1f}"),
+    ("time_s", "time (s)", "{:.0f}"),
+    ("structure_sensed_pct", "SE sensed (%)", "{:.1f}"),
+    ("processed_points", "processed points", "{:,.0f}"),
+    ("path_length_m", "path (m)", "{:.1f}"),
+)
+
+
+class CompareError(ValueError):
+    """A bad grid specification (scenes, policies, seeds)."""
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run of the grid (JSON-safe)."""
+
+    scene: str
+    policy: str
+    seed: int
+    preset: str = "default"
+    max_scans: int = 80
+
+    @property
+    def key(self) -> str:
+        return f"{self.scene}|{self.policy}|{self.seed}"
+
+
+def expand_scenes(text: str) -> list[str]:
+    """``"five_rooms,generated:0-9"`` → the scene specs; ``generated:A-B`` is a range of seeds."""
+    out: list[str] = []
+    for part in (p.strip() for p in str(text).split(",")):
+        if not part:
+            continue
+        if part.startswith("generated:") and "-" in part[len("generated:") :]:
+            lo, _, hi = part[len("generated:") :].partition("-")
+            try:
+                a, b = int(lo), int(hi)
+            except ValueError:
+                raise CompareError(f"scene range {part!r}: use generated:A-B with integers A <= B") from None
+            if a > b:
+                raise CompareError(f"scene range {part!r}: {a} > {b}")
+            out.extend(f"generated:{k}" for k in range(a, b + 1))
+        else:
+            out.append(part)
+    if not out:
+        raise CompareError("no scenes given")
+    return out
+
+
+def run_one(spec: RunSpec) -> dict[str, Any]:
+    """Play one run; returns ``{"spec", "ok", "metrics" | "error"}`` and never raises."""
+    started = time.perf_counter()
+    try:
+        from nbs_env.env import NBSEnv, make_config
+        from nbs_env.export import metrics_dict
+        from policies import make_policy
+        from train.episode import config_for, run_episode
+
+        policy = make_policy(spec.policy, spec.seed)
+        config = config_for(make_config(spec.preset, scene=spec.scene, max_scans=spec.max_scans), policy)
+        env = NBSEnv(config)
+        times = run_episode(env, policy, spec.seed)
+        metrics = metrics_dict(env, spec.scene, policy, spec.seed, times)
+        metrics["policy"] = spec.policy
+        return {"spec": asdict(spec), "ok": True, "metrics": metrics, "wall_s": time.perf_counter() - started}
+    except Exception as exc:  # a failed run is recorded, the others go on
+        return {
+            "spec": asdict(spec),
+            "ok": False,
+            "error": f"{type(exc).__name__}: {exc}",
+            "traceback": traceback.format_exc(),
+            "wall_s": time.perf_counter() - started,
+        }
+
+
+def _oracle(scene: str, preset: str = "default") -> dict[str, Any]:
+    """The oracle's plan of ``scene`` with the preset's scanner and evaluation (never raises)."""
+    try:
+        from nbs_env.env import make_config
+        from policies.oracle import oracle_plan
+        from scenes import load_scene
+
+        cfg = make_config(preset, scene=scene)
+        plan = oracle_plan(
+            load_scene(scene, **cfg.scene_options),
+            cfg.robot.scanner,
+            spacing=cfg.coverage_spacing,
+            radius=cfg.coverage_radius,
+        )
+        return {"scene": scene, "ok": True, **plan.to_dict()}
+    except Exception as exc:
+        return {"scene": scene, "ok": False, "error": f"{type(exc).__name__}: {exc}"}
+
+
+def run_grid(
+    specs: Sequence[RunSpec],
+    jobs: int = 1,
+    backend: str = "local",
+    address: str | None = None,
+    progress: bool = True,
+) -> tuple[list[dict[str, Any]], dict[str, dict[str, Any]]]:
+    """Run every spec, and the oracle of every scene.
+
+    Parameters
+    ----------
+    specs : sequence of RunSpec
+    jobs : int
+        Worker processes (local), or CPUs of a local Ray instance.
+    backend : {"local", "ray"}
+        ``"ray"`` sends each run as a Ray task to ``address`` (a running cluster), or to a local
+        instance started here when ``address`` is None.
+
+    Returns
+    -------
+    results : list of dict
+        :func:`run_one`'s records, in the order of ``specs``.
+    oracles : dict
+        Scene → the oracle's plan (``OraclePlan.to_dict()``) or its error.
+    """
+    from tqdm import tqdm
+
+    scenes = sorted({s.scene for s in specs})
+    presets = {s.preset for s in specs}
+    if len(presets) > 1:
+        raise CompareError(f"one preset per grid, got {sorted(presets)}")
+    preset = presets.pop() if presets else "default"
+    tasks: list[tuple[str, Any]] = [("run", s) for s in specs] + [("oracle", s) for s in scenes]
+    done: dict[int, Any] = {}
+    bar = tqdm(total=len(tasks), unit="run", disable=not progress, dynamic_ncols=True)
+    if backend == "local":
+        if jobs <= 1:
+            for k, (kind, arg) in enumerate(tasks):
+                done[k] = run_one(arg) if kind == "run" else _oracle(arg, preset)
+                bar.update()
+        else:
+            # spawn: forked children would inherit open3d's and OpenBLAS's threads mid-state.
+            context = multiprocessing.get_context("spawn")
+            with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+                futures = {
+                    (pool.submit(run_one, arg) if kind == "run" else pool.submit(_oracle, arg, preset)): k
+                    for k, (kind, arg) in enumerate(tasks)
+                }
+                for future in as_completed(futures):
+                    done[futures[future]] = future.result()
+                    bar.update()
+    elif backend == "ray":
+        try:
+            import ray
+        except ImportError:
+            raise CompareError('the Ray backend needs ray: pip install "nbs-env[cluster]"') from None
+        started_here = not ray.is_initialized()
+        if started_here:
+            if address:
+                ray.init(address=address, log_to_driver=False)
+            else:
+                ray.init(num_cpus=max(1, jobs), include_dashboard=False, log_to_driver=False)
+        try:
+            run_remote = ray.remote(run_one)
+            oracle_remote = ray.remote(_oracle)
+            refs = [
+                run_remote.remote(arg) if kind == "run" else oracle_remote.remote(arg, preset) for kind, arg in tasks
+            ]
+            index = {ref: k for k, ref in enumerate(refs)}
+            pending = list(refs)
+            while pending:
+                ready, pending = ray.wait(pending, num_returns=1)
+                for ref in ready:
+                    done[index[ref]] = ray.get(ref)
+                    bar.update()
+        finally:
+            if started_here:
+                ray.shutdown()
+    else:
+        raise CompareError(f"unknown backend {backend!r}; backends: local, ray")
+    bar.close()
+    results = [done[k] for k in range(len(specs))]
+    oracles = {scenes[k]: done[len(specs) + k] for k in range(len(scenes))}
+    return results, oracles
+
+
+# ---------------------------------------------------------------------- the table
+def _mean_std(values: Iterable[float]) -> tuple[float, float]:
+    v = np.asarray(list(values), dtype=float)
+    if not len(v):
+        return math.nan, math.nan
+    return float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else 0.0
+
+
+def _total_time(m: dict[str, Any]) -> float:
+    return float(m["processing_time_s"] + m["acquisition_time_s"] + m["travel_time_s"])
+
+
+def summarise(results: Sequence[dict[str, Any]], oracles: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    """Rows of the table: per (scene, policy) one per true room and one ``total``, plus per policy an
+    ``all scenes`` row when there are several scenes. Each quantity is mean and std over seeds."""
+    rows: list[dict[str, Any]] = []
+    scenes = list(dict.fromkeys(r["spec"]["scene"] for r in results))
+    policies = list(dict.fromkeys(r["spec"]["policy"] for r in results))
+    for scene in scenes:
+        oracle = oracles.get(scene, {})
+        for policy in policies:
+            runs = [r for r in results if r["spec"]["scene"] == scene and r["spec"]["policy"] == policy]
+            ok = [r["metrics"] for r in runs if r["ok"]]
+            failed = [r for r in runs if not r["ok"]]
+            base = {"scene": scene, "policy": policy, "runs": len(runs), "failed": len(failed)}
+            if failed:
+                base["errors"] = sorted({r["error"] for r in failed})
+            if not ok:
+                rows.append({**base, "room": "total"})
+                continue
+            for k, room in enumerate(ok[0]["rooms"]):
+                per = [m["rooms"][k] for m in ok]
+                row = {**base, "room": room["name"]}
+                row["not_scanned"] = sum(1 for p in per if p["scans"] == 0)
+                for key, values in (
+                    ("scans", [p["scans"] for p in per]),
+                    ("structure_sensed_pct", [p["structure_sensed_pct"] for p in per]),
+                    ("processed_points", [p["processed_points"] for p in per]),
+                    ("path_length_m", [p["path_length_m"] for p in per]),
+                ):
+                    row[key] = _mean_std(values)
+                rows.append(row)
+            row = {**base, "room": "total"}
+            row["complete"] = sum(1 for m in ok if m["complete"])
+            row["not_scanned"] = sum(sum(1 for p in m["rooms"] if p["scans"] == 0) for m in ok)
+            row["scans"] = _mean_std(m["scans"] for m in ok)
+            row["time_s"] = _mean_std(_total_time(m) for m in ok)
+            row["structure_sensed_pct"] = _mean_std(m["structure_sensed_pct"] for m in ok)
+            row["processed_points"] = _mean_std(m["processed_points"] for m in ok)
+            row["path_length_m"] = _mean_std(m["path_length_m"] for m in ok)
+            if oracle.get("ok"):
+                best = oracle["max_coverage_pct"]
+                row["of_oracle_pct"] = _mean_std(100.0 * m["structure_sensed_pct"] / best for m in ok)
+                curve = np.asarray(oracle["coverage_pct"])
+                ratios = []
+                for m in ok:
+                    # Above the oracle's best (noise can do it), against the oracle's scans to its best.
+                    reach = np.flatnonzero(curve >= min(m["structure_sensed_pct"], curve[-1]) - 1e-9)
+                    if len(reach):
+                        ratios.append(m["scans"] / (int(reach[0]) + 1))
+                row["vs_oracle_scans"] = _mean_std(ratios) if ratios else (math.nan, math.nan)
+                row["oracle_max_pct"] = best
+            rows.append(row)
+    if len(scenes) > 1:
+        for policy in policies:
+            totals = [r for r in rows if r["policy"] == policy and r["room"] == "total" and "scans" in r]
+            row = {"scene": "all scenes", "policy": policy, "room": "total", "runs": sum(r["runs"] for r in totals)}
+            row["failed"] = sum(r["failed"] for r in rows if r["policy"] == policy and r["room"] == "total")
+            for key in ("scans", "time_s", "structure_sensed_pct", "processed_points", "path_length_m",
+                        "of_oracle_pct", "vs_oracle_scans"):  # fmt: skip
+                means = [r[key][0] for r in totals if key in r and not math.isnan(r[key][0])]
+                if means:
+                    row[key] = _mean_std(means)
+            row["complete"] = sum(r.get("complete", 0) for r in totals)
+            row["not_scanned"] = sum(r.get("not_scanned", 0) for r in totals)
+            rows.append(row)
+    return rows
+
+
+def _cell(value: Any, fmt: str) -> str:
+    if value is None or (isinstance(value, tuple) and math.isnan(value[0])):
+        return "–"
+    mean, std = value
+    return f"{fmt.format(mean)} ± {fmt.format(std)}"
+
+
+def _markdown(rows: list[dict[str, Any]]) -> str:
+    head = ["scene", "policy", "room", *[h for _, h, _ in QUANTITIES], "% of oracle max", "scans ÷ oracle's", "notes"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        notes = []
+        if r.get("failed"):
+            notes.append(f"{r['failed']} of {r['runs']} runs failed")
+        if r.get("not_scanned"):
+            notes.append("room not scanned in " if r["room"] != "total" else "rooms not scanned: ")
+            notes[-1] += f"{r['not_scanned']} run(s)" if r["room"] != "total" else str(r["not_scanned"])
+        if r["room"] == "total" and "complete" in r:
+            notes.append(f"complete {r['complete']}/{r['runs'] - r.get('failed', 0)}")
+        cells = [r["scene"], r["policy"], r["room"]]
+        cells += [_cell(r.get(key), fmt) for key, _, fmt in QUANTITIES]
+        cells += [_cell(r.get("of_oracle_pct"), "{:.1f}"), _cell(r.get("vs_oracle_scans"), "{:.2f}")]
+        cells.append("; ".join(notes))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _csv(rows: list[dict[str, Any]], path: Path) -> None:
+    keys = [k for k, _, _ in QUANTITIES] + ["of_oracle_pct", "vs_oracle_scans"]
+    fields = ["scene", "policy", "room", "runs", "failed", "complete", "not_scanned"]
+    fields += [f"{k}_{s}" for k in keys for s in ("mean", "std")]
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=fields)
+        writer.writeheader()
+        for r in rows:
+            out = {k: r.get(k, "") for k in fields[:7]}
+            for k in keys:
+                mean, std = r.get(k, ("", ""))
+                out[f"{k}_mean"], out[f"{k}_std"] = mean, std
+            writer.writerow(out)
+
+
+def _plots(results: list[dict[str, Any]], oracles: dict[str, dict[str, Any]], out: Path) -> None:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    ok = [r for r in results if r["ok"]]
+    policies = list(dict.fromkeys(r["spec"]["policy"] for r in results))
+    fig = Figure(figsize=(8, 5), dpi=110)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    for policy in policies:
+        curves = [
+            [s["structure_sensed_pct"] for s in r["metrics"]["steps"]] for r in ok if r["spec"]["policy"] == policy
+        ]
+        if not curves:
+            continue
+        n = max(len(c) for c in curves)
+        padded = np.array([c + [c[-1]] * (n - len(c)) for c in curves])  # a finished run keeps its coverage
+        x = np.arange(1, n + 1)
+        mean = padded.mean(axis=0)
+        (line,) = ax.plot(x, mean, label=f"{policy} ({len(curves)} runs)")
+        ax.fill_between(x, padded.min(axis=0), padded.max(axis=0), color=line.get_color(), alpha=0.15)
+    curves = [o["coverage_pct"] for o in oracles.values() if o.get("ok") and o["coverage_pct"]]
+    if curves:
+        n = max(len(c) for c in curves)
+        padded = np.array([c + [c[-1]] * (n - len(c)) for c in curves])
+        ax.plot(np.arange(1, n + 1), padded.mean(axis=0), "k--", label="oracle (ground truth, set cover)")
+    ax.set_xlabel("scan")
+    ax.set_ylabel("structural surface sensed (%)")
+    ax.set_ylim(0, 100)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower right")
+    ax.set_title("Coverage against scans (mean over runs; band: min to max)")
+    fig.savefig(out / "coverage_vs_scans.png")
+
+    fig = Figure(figsize=(9, 4), dpi=110)
+    FigureCanvasAgg(fig)
+    for k, (key, label) in enumerate((("path_length_m", "path length (m)"), ("time", "total time (s)"))):
+        ax = fig.add_subplot(1, 2, k + 1)
+        means, stds = [], []
+        for policy in policies:
+            ms = [r["metrics"] for r in ok if r["spec"]["policy"] == policy]
+            vals = [m["path_length_m"] if key == "path_length_m" else _total_time(m) for m in ms]
+            means.append(np.mean(vals) if vals else 0.0)
+            stds.append(np.std(vals) if vals else 0.0)
+        ax.bar(range(len(policies)), means, yerr=stds, color="#4c72b0", capsize=3)
+        ax.set_xticks(range(len(policies)), policies, rotation=35, ha="right", fontsize=8)
+        ax.set_ylabel(label)
+        ax.grid(axis="y", alpha=0.3)
+    fig.suptitle("Path length and time per run (mean ± std)")
+    fig.tight_layout()
+    fig.savefig(out / "path_time.png")
+
+
+def write_outputs(
+    results: list[dict[str, Any]], oracles: dict[str, dict[str, Any]], out: str | Path
+) -> list[dict[str, Any]]:
+    """Write the runs' metrics, ``table.csv``, ``table.md`` and the two plots; returns the rows."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    for r in results:
+        spec = r["spec"]
+        folder = out / "runs" / spec["scene"].replace("/", "_").replace(":", "_") / spec["policy"].replace(":", "_")
+        folder = folder / f"seed{spec['seed']}"
+        folder.mkdir(parents=True, exist_ok=True)
+        if r["ok"]:
+            (folder / "metrics.json").write_text(json.dumps(r["metrics"], indent=1))
+        else:
+            (folder / "error.txt").write_text(r["error"] + "\n\n" + r.get("traceback", ""))
+    (out / "oracle.json").write_text(json.dumps(oracles, indent=1))
+    rows = summarise(results, oracles)
+    _csv(rows, out / "table.csv")
+    (out / "table.md").write_text(_markdown(rows))
+    _plots(results, oracles, out)
+    return rows
+
+
+def grid(scenes: str, policies: str, seeds: str, preset: str = "default", max_scans: int = 80) -> list[RunSpec]:
+    """The RunSpecs of comma-separated scenes, policies and seeds (checked: bad names raise)."""
+    from policies import UnknownPolicyError, make_policy
+
+    scene_list = expand_scenes(scenes)
+    policy_list = [p.strip() for p in str(policies).split(",") if p.strip()]
+    if not policy_list:
+        raise CompareError("no policies given")
+    for p in policy_list:
+        try:
+            make_policy(p, 0)
+        except UnknownPolicyError as exc:
+            raise CompareError(str(exc)) from None
+    try:
+        seed_list = [int(s) for s in str(seeds).split(",") if s.strip()]
+    except ValueError:
+        raise CompareError(f"seeds must be comma-separated integers, got {seeds!r}") from None
+    if not seed_list:
+        raise CompareError("no seeds given")
+    return [
+        replace(RunSpec(scene, policy, seed), preset=preset, max_scans=max_scans)
+        for scene in scene_list
+        for policy in policy_list
+        for seed in seed_list
+    ]

@@ -1,0 +1,64 @@
+"""One episode of a policy in NBSEnv, as ``nbs scan`` and ``nbs compare`` run it."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
+
+from nbs_env.env import EnvConfig, NBSEnv
+from policies import Policy, env_settings
+
+__all__ = ["config_for", "run_episode"]
+
+
+def config_for(config: EnvConfig, policy: Policy) -> EnvConfig:
+    """``config`` with the settings the policy needs (its own room completion, the belief view)."""
+    env_overrides, robot_overrides = env_settings(policy)
+    robot = replace(config.robot, **robot_overrides) if robot_overrides else config.robot
+    return replace(config, robot=robot, **env_overrides)
+
+
+def run_episode(
+    env: NBSEnv,
+    policy: Policy,
+    seed: int | None,
+    options: dict[str, Any] | None = None,
+    on_step: Callable[[dict[str, Any]], None] | None = None,
+    max_invalid: int = 10,
+) -> dict[int, float]:
+    """Reset ``env``, play ``policy`` to the end of the episode.
+
+    Returns
+    -------
+    dict of int to float
+        The policy's decision time by the index of the scan the decision led to (for
+        :func:`nbs_env.export.metrics_dict`).
+
+    Raises
+    ------
+    RuntimeError
+        The policy chose a masked action ``max_invalid`` times in a row.
+    """
+    obs, info = env.reset(seed=seed, options=options or {})
+    policy.reset()
+    if on_step is not None:
+        on_step(info)
+    times: dict[int, float] = {}
+    invalid = 0
+    done = env.complete or info["scans"] >= env.config.max_scans
+    while not done:
+        before = info["scans"]
+        t = time.perf_counter()
+        action = policy.act(obs, info)
+        elapsed = time.perf_counter() - t
+        obs, _, terminated, truncated, info = env.step(action)
+        times[before] = times.get(before, 0.0) + elapsed
+        done = terminated or truncated
+        invalid = invalid + 1 if info["invalid_action"] else 0
+        if invalid >= max_invalid:
+            raise RuntimeError(f"policy {policy.name!r} chose a masked action {max_invalid} times in a row")
+        if on_step is not None:
+            on_step(info)
+    return times
