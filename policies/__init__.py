@@ -39,6 +39,14 @@ def _information_gain(seed: int | None, option: str | None = None):
     return InformationGainPolicy(option or "occlusion_aware")
 
 
+def _learned(seed: int | None, option: str | None = None):
+    if not option:
+        raise ValueError("ppo needs a checkpoint: ppo:PATH (a folder with policy.json and policy.pt)")
+    from policies.learned import LearnedPolicy
+
+    return LearnedPolicy(option)
+
+
 #: Policy names → factories taking a seed (and, after a colon, an option: ``information_gain:rear_side_voxel``).
 POLICIES = {
     "greedy": lambda seed, option=None: GreedyPolicy(),
@@ -48,6 +56,7 @@ POLICIES = {
     "information_gain": _information_gain,
     "nearest_frontier": _baseline("nearest_frontier"),
     "random": lambda seed, option=None: RandomPolicy(seed),
+    "ppo": _learned,
 }
 
 
@@ -56,12 +65,25 @@ class UnknownPolicyError(ValueError):
 
 
 def make_policy(name: str, seed: int | None = None) -> Policy:
-    """A policy by name (see :data:`POLICIES`); ``name:option`` passes an option (a formulation)."""
+    """A policy by name (see :data:`POLICIES`); ``name:option`` passes an option: a formulation
+    (``information_gain:rear_side_voxel``) or a checkpoint (``ppo:PATH``).
+
+    Raises
+    ------
+    UnknownPolicyError
+        An unknown name or option.
+    ModelFileError
+        ``ppo:PATH`` with a missing, corrupt or mismatched checkpoint.
+    """
     base, _, option = str(name).partition(":")
     if base not in POLICIES:
         raise UnknownPolicyError(f"unknown policy {name!r}; policies: {', '.join(POLICIES)}")
+    from nbs_env.errors import ModelFileError
+
     try:
         return POLICIES[base](seed, option or None)
+    except ModelFileError:
+        raise  # a checkpoint problem: its own message names the file
     except ValueError as exc:
         raise UnknownPolicyError(f"policy {name!r}: {exc}") from None
 

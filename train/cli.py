@@ -133,6 +133,8 @@ def build_parser() -> argparse.ArgumentParser:
     scan.add_argument("--no-steps", action="store_true", help="do not save a picture per step")
     scan.add_argument("--quiet", action="store_true", help="no progress bar")
 
+    sub.add_parser("train", help="train a masked PPO agent (see `nbs train --help`)", add_help=False)
+
     compare = sub.add_parser(
         "compare",
         help="run policies on scenes over seeds and write the comparison table",
@@ -150,6 +152,13 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--max-scans", type=_positive_int, default=80, help="scan budget per run (default 80)")
     compare.add_argument("--quiet", action="store_true", help="no progress bar")
     return parser
+
+
+def run_train(argv: Sequence[str]) -> int:
+    """``nbs train ...``: :mod:`train.ppo`'s command line."""
+    from train.ppo import main as train_main
+
+    return train_main(list(argv))
 
 
 def run_compare(args: argparse.Namespace) -> int:
@@ -350,13 +359,16 @@ def run_scan(args: argparse.Namespace) -> int:
 
     if args.storey is not None and Path(args.scene).suffix.lower() != ".ifc":
         return _scan_error(f"--storey applies to .ifc files only, not to scene {args.scene!r}", EXIT_USAGE)
-    from nbs_env.errors import ConfigError, NBSError
+    from nbs_env.errors import ConfigError, ModelFileError, NBSError
     from policies import POLICIES, UnknownPolicyError, make_policy
 
     try:
         policy = make_policy(args.policy, args.seed)
-    except UnknownPolicyError:
-        return _scan_error(f"unknown policy {args.policy!r}; policies: {', '.join(POLICIES)}", EXIT_USAGE)
+    except UnknownPolicyError as exc:
+        detail = str(exc) if ":" in args.policy else f"unknown policy {args.policy!r}; policies: {', '.join(POLICIES)}"
+        return _scan_error(detail, EXIT_USAGE)
+    except ModelFileError as exc:
+        return _scan_error(exc, EXIT_SCENE_ERROR)
     out = args.out if args.out is not None else _default_out(args.scene)
     try:
         return _scan(args, policy, out)
@@ -414,6 +426,9 @@ def _scan(args: argparse.Namespace, policy, out: Path) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``nbs`` console script; returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["train"]:
+        return run_train(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
     from scenes.errors import SceneError

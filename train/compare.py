@@ -420,10 +420,12 @@ def grid(scenes: str, policies: str, seeds: str, preset: str = "default", max_sc
     policy_list = [p.strip() for p in str(policies).split(",") if p.strip()]
     if not policy_list:
         raise CompareError("no policies given")
+    from nbs_env.errors import ModelFileError
+
     for p in policy_list:
         try:
             make_policy(p, 0)
-        except UnknownPolicyError as exc:
+        except (UnknownPolicyError, ModelFileError) as exc:
             raise CompareError(str(exc)) from None
     try:
         seed_list = [int(s) for s in str(seeds).split(",") if s.strip()]

@@ -1,0 +1,275 @@
+"""Learned policies: the network, and loading a trained one from a safe checkpoint.
+
+A checkpoint is a folder (or the path of its ``policy.json``) holding:
+
+- ``policy.json``: ``{"format": "nbs-policy", "version": 1, "network": {...NetworkConfig},
+  "input_layout": "xyz" | "zxy", "weights": "policy.pt", "sha256": "...", "training": {...}}``;
+- ``policy.pt``: the network's ``state_dict``, written by ``torch.save`` and read back with
+  ``torch.load(weights_only=True)``: tensors only, never a pickle that could run code.
+
+The network (:class:`ScanNet`) reads the observation of :class:`nbs_env.env.NBSEnv`: a small 3-D CNN
+over the one-hot voxel labels gives a grid vector g; each candidate's features c_k go with g through
+one shared MLP to the candidate's logit (with the candidate's gain and path relative to the step's
+largest), so an action's score depends on its own candidate and the grid, not on its slot. Masked
+actions are never chosen.
+
+torch is an optional dependency (``pip install "nbs-env[rl]"``), imported when a network is built.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nbs_env.env import candidate_table_of
+from nbs_env.errors import ModelFileError
+from policies.base import mask_of
+
+__all__ = ["CHECKPOINT_FORMAT", "LearnedPolicy", "NetworkConfig", "build_network", "load_checkpoint", "save_checkpoint"]
+
+CHECKPOINT_FORMAT = "nbs-policy"
+CHECKPOINT_VERSION = 1
+N_LABELS = 6
+
+
+def _torch():
+    try:
+        import torch
+    except ImportError:
+        raise ModelFileError('learned policies need torch: pip install torch==2.13.0 "nbs-env[rl]"') from None
+    return torch
+
+
+@dataclass(frozen=True)
+class NetworkConfig:
+    """The shape of a :class:`ScanNet` (JSON-safe).
+
+    Attributes
+    ----------
+    voxel_shape : (int, int, int)
+        The observation window (x, y, z cells).
+    candidates : int
+        K, the candidate slots.
+    features : int
+        F, the columns of the candidate table.
+    actions : int
+        K, or K + 1 with a "room done" action (completion="policy").
+    channels : (int, int, int)
+        Channels of the three stride-2 3-D convolutions.
+    grid_dim : int
+        Length of the grid vector g.
+    hidden : int
+        Width of the shared candidate MLP.
+    """
+
+    voxel_shape: tuple[int, int, int] = (64, 64, 16)
+    candidates: int = 64
+    features: int = 5
+    actions: int = 64
+    channels: tuple[int, int, int] = (8, 16, 32)
+    grid_dim: int = 64
+    hidden: int = 64
+
+    @property
+    def latent_dim(self) -> int:
+        """Length of the features the policy's heads read: g and the flat candidate table."""
+        return self.grid_dim + self.candidates * self.features
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def build_network(config: NetworkConfig):
+    """The encoder and the scorer as torch modules: ``(VoxelEncoder, CandidateScorer)``."""
+    torch = _torch()
+    nn = torch.nn
+
+    class VoxelEncoder(nn.Module):
+        """(B, X, Y, Z) labels (any float or int dtype) → (B, grid_dim)."""
+
+        def __init__(self) -> None:
+            super().__init__()
+            c1, c2, c3 = config.channels
+            self.net = nn.Sequential(
+                nn.Conv3d(N_LABELS, c1, 3, stride=2, padding=1),
+                nn.ReLU(),
+                nn.Conv3d(c1, c2, 3, stride=2, padding=1),
+                nn.ReLU(),
+                nn.Conv3d(c2, c3, 3, stride=2, padding=1),
+                nn.ReLU(),
+                nn.AdaptiveAvgPool3d((4, 4, 2)),
+                nn.Flatten(),
+                nn.Linear(c3 * 32, config.grid_dim),
+                nn.ReLU(),
+            )
+
+        def forward(self, labels):
+            one_hot = torch.nn.functional.one_hot(labels.round().long().clamp(0, N_LABELS - 1), N_LABELS)
+            return self.net(one_hot.permute(0, 4, 1, 2, 3).float())
+
+    class CandidateScorer(nn.Module):
+        """(B, grid_dim + K·F) → (B, actions) logits; one MLP shared by every candidate slot."""
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.mlp = nn.Sequential(
+                nn.Linear(config.grid_dim + config.features + 2, config.hidden),
+                nn.ReLU(),
+                nn.Linear(config.hidden, config.hidden),
+                nn.ReLU(),
+                nn.Linear(config.hidden, 1),
+            )
+            self.stop = nn.Linear(config.grid_dim, 1) if config.actions > config.candidates else None
+
+        def forward(self, latent):
+            g = latent[:, : config.grid_dim]
+            c = latent[:, config.grid_dim :].reshape(len(latent), config.candidates, config.features)
+            # Each candidate's gain and path relative to the best gain and the longest path of its
+            # step: the raw gain share is small (1e-3 to 1e-1) and its scale varies with the room.
+            rel = [c[..., col] / (c[..., col].amax(dim=1, keepdim=True) + 1e-6) for col in (3, 2)]  # gain, path
+            pair = torch.cat([g[:, None, :].expand(-1, config.candidates, -1), c, *[r[..., None] for r in rel]], dim=-1)
+            logits = self.mlp(pair).squeeze(-1)
+            if self.stop is not None:
+                logits = torch.cat([logits, self.stop(g)], dim=-1)
+            return logits
+
+    return VoxelEncoder(), CandidateScorer()
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def save_checkpoint(
+    folder: str | Path,
+    config: NetworkConfig,
+    state_dict: dict,
+    input_layout: str = "xyz",
+    training: dict[str, Any] | None = None,
+) -> Path:
+    """Write ``policy.pt`` (tensors only) and ``policy.json`` into ``folder``; returns the JSON path.
+
+    ``state_dict`` holds the keys ``encoder.*`` and ``scorer.*``.
+    """
+    torch = _torch()
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    weights = folder / "policy.pt"
+    torch.save({k: v.detach().cpu() for k, v in state_dict.items()}, weights)
+    document = {
+        "format": CHECKPOINT_FORMAT,
+        "version": CHECKPOINT_VERSION,
+        "network": config.to_dict(),
+        "input_layout": input_layout,
+        "weights": weights.name,
+        "sha256": _sha256(weights),
+        "training": training or {},
+    }
+    path = folder / "policy.json"
+    path.write_text(json.dumps(document, indent=1))
+    return path
+
+
+def load_checkpoint(path: str | Path):
+    """``(NetworkConfig, encoder, scorer, input_layout, document)`` from a checkpoint (see module docstring).
+
+    Raises
+    ------
+    ModelFileError
+        Missing files, not JSON, another format or version, a modified weights file (checksum),
+        weights that do not fit the network, or torch missing.
+    """
+    torch = _torch()
+    path = Path(path)
+    if path.is_dir():
+        path = path / "policy.json"
+    if not path.is_file():
+        raise ModelFileError(f"{path}: no such checkpoint (a folder with policy.json and policy.pt)")
+    try:
+        document = json.loads(path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ModelFileError(f"{path}: not a JSON checkpoint description ({exc})") from None
+    if not isinstance(document, dict) or document.get("format") != CHECKPOINT_FORMAT:
+        raise ModelFileError(f"{path}: not an {CHECKPOINT_FORMAT!r} file")
+    if document.get("version") != CHECKPOINT_VERSION:
+        raise ModelFileError(f"{path}: version {document.get('version')!r}, this nbs-env reads {CHECKPOINT_VERSION}")
+    try:
+        network = document["network"]
+        config = NetworkConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in network.items()})
+        weights = path.parent / str(document["weights"])
+        layout = str(document.get("input_layout", "xyz"))
+    except (KeyError, TypeError) as exc:
+        raise ModelFileError(f"{path}: malformed checkpoint description ({exc})") from None
+    if layout not in ("xyz", "zxy"):
+        raise ModelFileError(f"{path}: input_layout must be 'xyz' or 'zxy', got {layout!r}")
+    if not weights.is_file():
+        raise ModelFileError(f"{weights}: weights file missing")
+    if _sha256(weights) != document.get("sha256"):
+        raise ModelFileError(f"{weights}: checksum does not match {path.name} (modified or truncated)")
+    try:
+        state = torch.load(weights, map_location="cpu", weights_only=True)
+    except Exception as exc:
+        raise ModelFileError(f"{weights}: not a tensors-only weights file ({type(exc).__name__}: {exc})") from None
+    encoder, scorer = build_network(config)
+    try:
+        encoder.load_state_dict({k[len("encoder.") :]: v for k, v in state.items() if k.startswith("encoder.")})
+        scorer.load_state_dict({k[len("scorer.") :]: v for k, v in state.items() if k.startswith("scorer.")})
+    except RuntimeError as exc:
+        raise ModelFileError(f"{weights}: weights do not fit the network of {path.name}: {exc}") from None
+    encoder.eval()
+    scorer.eval()
+    return config, encoder, scorer, layout, document
+
+
+class LearnedPolicy:
+    """A trained :class:`ScanNet` as a policy: the masked argmax of its logits.
+
+    Parameters
+    ----------
+    path : str or Path
+        A checkpoint folder or its ``policy.json``.
+    """
+
+    #: Runs our pipeline (RoI, SE classification); only the choice is learned.
+    structure_aware = True
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.config, self.encoder, self.scorer, self.layout, self.document = load_checkpoint(path)
+        self.name = f"ppo:{self.path}"
+        if self.config.actions > self.config.candidates:
+            self.env_overrides = {"completion": "policy"}
+
+    def reset(self) -> None:
+        """A learned policy keeps no episode state."""
+
+    def logits(self, obs: dict[str, np.ndarray]) -> np.ndarray:
+        """(actions,) float: the network's logits for one observation."""
+        torch = _torch()
+        voxels = np.asarray(obs["voxels"])
+        if voxels.shape != tuple(self.config.voxel_shape):
+            raise ValueError(
+                f"observation voxels have shape {voxels.shape}, the network reads {self.config.voxel_shape}"
+            )
+        if self.layout == "zxy":
+            voxels = np.transpose(voxels, (2, 0, 1))
+        table = candidate_table_of(obs)
+        if table.shape != (self.config.candidates, self.config.features):
+            raise ValueError(f"observation has {table.shape} candidates, the network reads "
+                             f"({self.config.candidates}, {self.config.features})")  # fmt: skip
+        with torch.no_grad():
+            g = self.encoder(torch.as_tensor(voxels[None].astype(np.float32)))
+            latent = torch.cat([g, torch.as_tensor(table.reshape(1, -1), dtype=torch.float32)], dim=1)
+            return self.scorer(latent)[0].numpy()
+
+    def act(self, obs: dict[str, np.ndarray], info: dict[str, Any]) -> int:
+        mask = mask_of(obs, info)
+        logits = self.logits(obs)
+        if len(mask) != len(logits):
+            raise ValueError(f"the env has {len(mask)} actions, the network {len(logits)}")
+        return int(np.argmax(np.where(mask, logits, -np.inf)))

@@ -1,0 +1,129 @@
+"""The RL pipeline: a training smoke run, the safe checkpoint round trip, masks, bad checkpoints."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("sb3_contrib")
+torch = pytest.importorskip("torch")
+
+from nbs_env.env import NBSEnv  # noqa: E402
+from nbs_env.errors import ModelFileError  # noqa: E402
+from policies import make_policy  # noqa: E402
+from policies.learned import LearnedPolicy, NetworkConfig, build_network, save_checkpoint  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    from train.ppo import TrainConfig, train
+
+    out = tmp_path_factory.mktemp("ppo")
+    config = TrainConfig(timesteps=128, envs=2, seed=0, rooms=(1, 1), n_steps=32, batch_size=32)
+    path, model = train(config, out, progress=False)
+    return path, model
+
+
+def observations(n: int = 4):
+    env = NBSEnv("fast", scene="l_room")
+    obs, info = env.reset(seed=0)
+    out = [(obs, info)]
+    for k in range(n - 1):
+        obs, _, terminated, truncated, info = env.step(int(np.flatnonzero(info["action_mask"])[k % 3]))
+        out.append((obs, info))
+        if terminated or truncated:
+            break
+    return out
+
+
+def test_training_smoke_run_writes_a_safe_checkpoint(trained):
+    path, model = trained
+    document = json.loads(path.read_text())
+    assert document["format"] == "nbs-policy" and document["training"]["algo"] == "maskable_ppo"
+    assert model.num_timesteps >= 128
+    # Tensors only: loadable with weights_only=True (no pickle to trust).
+    state = torch.load(path.parent / document["weights"], weights_only=True)
+    assert any(k.startswith("encoder.") for k in state) and any(k.startswith("scorer.") for k in state)
+
+
+def test_loaded_policy_acts_as_the_trained_model(trained):
+    path, model = trained
+    policy = make_policy(f"ppo:{path.parent}")
+    for obs, info in observations():
+        expected, _ = model.predict(
+            {k: v[None] for k, v in obs.items()}, deterministic=True, action_masks=info["action_mask"][None]
+        )
+        assert policy.act(obs, info) == int(expected[0])
+
+
+def test_scores_do_not_depend_on_the_slot():
+    """Shared weights: swapping two candidates swaps their logits."""
+    config = NetworkConfig()
+    _, scorer = build_network(config)
+    latent = torch.randn(1, config.latent_dim)
+    swapped = latent.clone()
+    c = swapped[0, config.grid_dim :].reshape(config.candidates, config.features)
+    c[[3, 7]] = c[[7, 3]]
+    a, b = scorer(latent)[0], scorer(swapped)[0]
+    assert torch.allclose(a[3], b[7]) and torch.allclose(a[7], b[3]) and torch.allclose(a[0], b[0])
+
+
+def test_the_learned_policy_never_picks_a_masked_action(tmp_path):
+    config = NetworkConfig()
+    encoder, scorer = build_network(config)
+    state = {f"encoder.{k}": v for k, v in encoder.state_dict().items()}
+    state.update({f"scorer.{k}": v for k, v in scorer.state_dict().items()})
+    policy = LearnedPolicy(save_checkpoint(tmp_path, config, state))
+    rng = np.random.default_rng(0)
+    for obs, info in observations():
+        for _ in range(5):
+            mask = info["action_mask"] & (rng.random(len(info["action_mask"])) < 0.3)
+            mask[int(np.flatnonzero(info["action_mask"])[-1])] = True
+            assert mask[policy.act(obs, {**info, "action_mask": mask})]
+
+
+@pytest.mark.filterwarnings("ignore:Detected pickle protocol")
+def test_bad_checkpoints_raise_clear_errors(tmp_path):
+    config = NetworkConfig()
+    encoder, scorer = build_network(config)
+    state = {f"encoder.{k}": v for k, v in encoder.state_dict().items()}
+    state.update({f"scorer.{k}": v for k, v in scorer.state_dict().items()})
+    path = save_checkpoint(tmp_path / "ok", config, state)
+    LearnedPolicy(path)
+    with pytest.raises(ModelFileError, match="no such checkpoint"):
+        LearnedPolicy(tmp_path / "missing")
+    # A modified weights file.
+    weights = path.parent / "policy.pt"
+    data = bytearray(weights.read_bytes())
+    data[-10] ^= 0xFF
+    weights.write_bytes(bytes(data))
+    with pytest.raises(ModelFileError, match="checksum"):
+        LearnedPolicy(path)
+    # A description that does not match the weights.
+    other = save_checkpoint(tmp_path / "other", config, state)
+    document = json.loads(other.read_text())
+    document["network"]["hidden"] = 32
+    other.write_text(json.dumps(document))
+    with pytest.raises(ModelFileError, match="do not fit"):
+        LearnedPolicy(other)
+    other.write_text("{not json")
+    with pytest.raises(ModelFileError, match="not a JSON"):
+        LearnedPolicy(other)
+    other.write_text(json.dumps({"format": "something else"}))
+    with pytest.raises(ModelFileError, match="not an 'nbs-policy'"):
+        LearnedPolicy(other)
+    # A pickle that is not tensors-only is refused by weights_only loading.
+    import pickle
+
+    evil = tmp_path / "evil"
+    evil.mkdir()
+    (evil / "policy.pt").write_bytes(pickle.dumps({"x": object()}))
+    good = json.loads(path.read_text())
+    import hashlib
+
+    good["sha256"] = hashlib.sha256((evil / "policy.pt").read_bytes()).hexdigest()
+    (evil / "policy.json").write_text(json.dumps(good))
+    with pytest.raises(ModelFileError, match="tensors-only"):
+        LearnedPolicy(evil)

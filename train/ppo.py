@@ -1,0 +1,354 @@
+"""Train a masked PPO agent on generated storeys: ``nbs train`` / ``python -m train.ppo``.
+
+sb3-contrib's MaskablePPO reads the env's own ``action_masks()`` through ``SubprocVecEnv`` workers;
+every episode scans a fresh generated storey. The policy is :mod:`policies.learned`'s network: a
+3-D CNN over the one-hot voxel labels, and one MLP shared by all candidate slots. Checkpoints are
+written in the safe format of :func:`policies.learned.save_checkpoint` (tensors + JSON), never as
+SB3's pickled zip; a masked evaluation on held-out storeys against the greedy runs periodically.
+
+Needs the ``rl`` extra (torch, stable-baselines3, sb3-contrib; install ``torch==2.13.0`` first for
+the CPU build). Uses a GPU when torch sees one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from policies.learned import NetworkConfig, build_network, save_checkpoint
+
+__all__ = ["TrainConfig", "main", "train"]
+
+#: Seeds of the held-out evaluation storeys; training storeys are drawn by the env's own generator,
+#: whose seeds come from the training seed (and never equal these, by the generator's own range).
+HELD_OUT_BASE = 10_000_000
+
+
+def _require_rl():
+    try:
+        import sb3_contrib  # noqa: F401
+        import stable_baselines3  # noqa: F401
+        import torch  # noqa: F401
+    except ImportError:
+        raise SystemExit('nbs train needs the rl extra: pip install torch==2.13.0 "nbs-env[rl]"') from None
+
+
+class TrainConfig:
+    """What a training run is (JSON-safe); see ``nbs train --help``."""
+
+    def __init__(
+        self,
+        timesteps: int = 2048,
+        envs: int = 2,
+        seed: int = 0,
+        rooms: tuple[int, int] = (1, 5),
+        n_steps: int = 64,
+        batch_size: int = 64,
+        learning_rate: float = 3e-4,
+        eval_every: int = 0,
+        eval_storeys: int = 4,
+        checkpoint_every: int = 0,
+        max_episode_steps: int = 40,
+        bc_steps: int = 0,
+    ) -> None:
+        self.timesteps, self.envs, self.seed, self.rooms = timesteps, envs, seed, tuple(rooms)
+        self.n_steps, self.batch_size, self.learning_rate = n_steps, batch_size, learning_rate
+        self.eval_every, self.eval_storeys, self.checkpoint_every = eval_every, eval_storeys, checkpoint_every
+        self.max_episode_steps = max_episode_steps
+        self.bc_steps = bc_steps
+
+    def to_dict(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+def _env_factory(rooms: tuple[int, int], max_episode_steps: int):
+    def make():
+        import gymnasium as gym
+
+        from nbs_env.env import make_config
+        from scenes.generator import GeneratorConfig
+
+        config = make_config("fast")
+        config = replace(config, generator=GeneratorConfig(rooms=rooms))
+        return gym.make("nbs_env:nbs_env/NBS-Fast-v0", config=config, max_episode_steps=max_episode_steps)
+
+    return make
+
+
+def _policy_class():
+    from sb3_contrib.common.maskable.policies import MaskableMultiInputActorCriticPolicy
+    from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+
+    class Features(BaseFeaturesExtractor):
+        """g from the voxels, then the flat candidate table: the scorer splits them again."""
+
+        def __init__(self, observation_space, network: NetworkConfig) -> None:
+            super().__init__(observation_space, features_dim=network.latent_dim)
+            self.encoder, _ = build_network(network)
+
+        def forward(self, obs):
+            import torch
+
+            return torch.cat([self.encoder(obs["voxels"]), obs["candidates"].float()], dim=1)
+
+    class ScanNetPolicy(MaskableMultiInputActorCriticPolicy):
+        """MaskablePPO's policy with :mod:`policies.learned`'s slot-independent candidate scorer."""
+
+        def __init__(self, *args, network: NetworkConfig, **kwargs) -> None:
+            self.network = network
+            kwargs["features_extractor_class"] = Features
+            kwargs["features_extractor_kwargs"] = {"network": network}
+            kwargs["net_arch"] = {"pi": [], "vf": [128, 64]}
+            kwargs["normalize_images"] = False
+            super().__init__(*args, **kwargs)
+
+        def _build(self, lr_schedule) -> None:
+            super()._build(lr_schedule)
+            _, self.action_net = build_network(self.network)
+            self.action_net.to(self.device)
+            self.optimizer = self.optimizer_class(self.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)
+
+    return ScanNetPolicy
+
+
+def _state_dict(model) -> dict:
+    policy = model.policy
+    out = {f"encoder.{k}": v for k, v in policy.features_extractor.encoder.state_dict().items()}
+    out.update({f"scorer.{k}": v for k, v in policy.action_net.state_dict().items()})
+    return out
+
+
+def _layout(model) -> str:
+    shape = tuple(model.observation_space["voxels"].shape)
+    return "xyz" if shape == (64, 64, 16) else "zxy"
+
+
+def evaluate(policy_fn, storeys: list[int], max_episode_steps: int) -> dict[str, float]:
+    """Mean scans, SE % and path of a policy over held-out generated storeys (the fast preset)."""
+    from nbs_env.env import NBSEnv, make_config
+
+    scans, pct, path = [], [], []
+    for seed in storeys:
+        env = NBSEnv(make_config("fast", scene=f"generated:{seed}", max_scans=max_episode_steps))
+        obs, info = env.reset(seed=seed)
+        while True:
+            obs, _, terminated, truncated, info = env.step(policy_fn(obs, info))
+            if terminated or truncated:
+                break
+        scans.append(info["scans"])
+        pct.append(info["structure_sensed_pct"])
+        path.append(info["path_length_m"])
+    return {
+        "scans": float(np.mean(scans)),
+        "structure_sensed_pct": float(np.mean(pct)),
+        "path_length_m": float(np.mean(path)),
+    }
+
+
+def train(config: TrainConfig, out: str | Path, progress: bool = True):
+    """Train, write checkpoints and the final policy into ``out``.
+
+    Returns
+    -------
+    (Path, MaskablePPO)
+        The final checkpoint's ``policy.json`` and the trained model.
+    """
+    _require_rl()
+    import torch
+    from sb3_contrib import MaskablePPO
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+    from tqdm import tqdm
+
+    from policies import GreedyPolicy
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    factory = _env_factory(config.rooms, config.max_episode_steps)
+    workers = [factory] * config.envs
+    venv = SubprocVecEnv(workers, start_method="spawn") if config.envs > 1 else DummyVecEnv(workers)
+    venv.seed(config.seed)
+    network = NetworkConfig()
+    device = "cuda" if torch.cuda.is_available() else "cpu"
+    model = MaskablePPO(
+        _policy_class(),
+        venv,
+        n_steps=config.n_steps,
+        batch_size=config.batch_size,
+        learning_rate=config.learning_rate,
+        seed=config.seed,
+        device=device,
+        tensorboard_log=str(out / "tb") if _has_tensorboard() else None,
+        policy_kwargs={"network": network},
+        verbose=0,
+    )
+    held_out = [HELD_OUT_BASE + k for k in range(config.eval_storeys)]
+    log = out / "learning_curve.jsonl"
+    log.write_text("")
+    greedy = GreedyPolicy()
+    baseline = evaluate(greedy.act, held_out, config.max_episode_steps) if config.eval_every else None
+
+    class Progress(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.bar = tqdm(total=config.timesteps, unit="step", disable=not progress, dynamic_ncols=True)
+            self.last_eval = 0
+            self.last_checkpoint = 0
+            self.episodes: list[float] = []
+
+        def _on_step(self) -> bool:
+            self.bar.update(self.training_env.num_envs)
+            for info in self.locals.get("infos", []):
+                if "episode" in info:
+                    self.episodes.append(float(info["episode"]["r"]))
+            n = self.num_timesteps
+            if config.checkpoint_every and n - self.last_checkpoint >= config.checkpoint_every:
+                self.last_checkpoint = n
+                save_checkpoint(out / f"checkpoint_{n}", network, _state_dict(self.model), _layout(self.model))
+            if config.eval_every and n - self.last_eval >= config.eval_every:
+                self.last_eval = n
+                self._evaluate(n)
+            return True
+
+        def _evaluate(self, n: int) -> None:
+            def act(obs, info):
+                action, _ = self.model.predict(
+                    {k: v[None] for k, v in obs.items()}, deterministic=True, action_masks=info["action_mask"][None]
+                )
+                return int(action[0])
+
+            record = {"timesteps": n, "learned": evaluate(act, held_out, config.max_episode_steps), "greedy": baseline}
+            record["train_return"] = float(np.mean(self.episodes[-20:])) if self.episodes else None
+            with log.open("a") as f:
+                f.write(json.dumps(record) + "\n")
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
+
+    started = time.time()
+    warm = behaviour_clone(model, config.bc_steps, progress=progress) if config.bc_steps else None
+    if warm is not None:
+        (out / "behaviour_cloning.json").write_text(json.dumps(warm, indent=1))
+    model.learn(total_timesteps=config.timesteps, callback=Progress())
+    venv.close()
+    final = save_checkpoint(
+        out,
+        network,
+        _state_dict(model),
+        _layout(model),
+        training={
+            **config.to_dict(),
+            "seconds": time.time() - started,
+            "device": device,
+            "algo": "maskable_ppo",
+            "behaviour_cloning": warm,
+        },
+    )
+    return final, model
+
+
+def behaviour_clone(model, steps: int, epochs: int = 30, batch_size: int = 64, progress: bool = False) -> dict:
+    """Warm-start the policy on the greedy's decisions: play the greedy in the training envs for
+    ``steps`` vector steps, then fit the masked logits to its choices by cross-entropy.
+
+    Returns ``{"samples", "loss_first", "loss_last", "agreement"}``: agreement is the share of the
+    samples where the policy's masked argmax equals the greedy's choice after fitting.
+    """
+    import torch
+    from sb3_contrib.common.maskable.utils import get_action_masks
+
+    from nbs_env.planning.visibility import greedy_order
+
+    venv = model.env
+    obs = venv.reset()
+    samples: list[tuple[dict, np.ndarray, np.ndarray]] = []
+    for _ in range(steps):
+        masks = get_action_masks(venv)
+        gains = np.stack(venv.env_method("candidate_gains"))
+        table = obs["candidates"].reshape(len(masks), -1, 5)
+        actions = np.array([int(greedy_order(gains[i], table[i, :, 2], masks[i][: gains.shape[1]])[0])
+                            for i in range(len(masks))])  # fmt: skip
+        samples.append(({k: v.copy() for k, v in obs.items()}, masks.copy(), actions))
+        obs, _, _, _ = venv.step(actions)
+    policy = model.policy
+    keys = samples[0][0].keys()
+    all_obs = {k: np.concatenate([s[0][k] for s in samples]) for k in keys}
+    all_masks = np.concatenate([s[1] for s in samples])
+    all_actions = np.concatenate([s[2] for s in samples])
+    n = len(all_actions)
+    optimiser = torch.optim.Adam(policy.parameters(), lr=3e-3)
+    rng = np.random.default_rng(0)
+    losses = []
+    policy.set_training_mode(True)
+    for _ in range(epochs):
+        order = rng.permutation(n)
+        for start in range(0, n, batch_size):
+            idx = order[start : start + batch_size]
+            tensors, _ = policy.obs_to_tensor({k: v[idx] for k, v in all_obs.items()})
+            dist = policy.get_distribution(tensors, action_masks=all_masks[idx])
+            loss = -dist.log_prob(torch.as_tensor(all_actions[idx], device=policy.device)).mean()
+            optimiser.zero_grad()
+            loss.backward()
+            optimiser.step()
+            losses.append(loss.item())
+    policy.set_training_mode(False)
+    with torch.no_grad():
+        tensors, _ = policy.obs_to_tensor(all_obs)
+        chosen = policy.get_distribution(tensors, action_masks=all_masks).get_actions(deterministic=True)
+    agreement = float((chosen.cpu().numpy() == all_actions).mean())
+    return {"samples": n, "loss_first": losses[0], "loss_last": losses[-1], "agreement": agreement}
+
+
+def _has_tensorboard() -> bool:
+    try:
+        import tensorboard  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="nbs train", description="Train a masked PPO agent on generated storeys.")
+    p.add_argument("--algo", choices=("maskable_ppo",), default="maskable_ppo")
+    p.add_argument("--timesteps", type=int, default=2048)
+    p.add_argument("--envs", type=int, default=2)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--rooms", default="1-5", help="room range of the training storeys, e.g. 1-5")
+    p.add_argument("--eval-every", type=int, default=0, help="timesteps between evaluations (0: none)")
+    p.add_argument("--checkpoint-every", type=int, default=0, help="timesteps between checkpoints (0: none)")
+    p.add_argument("--bc-steps", type=int, default=0, help="vector steps of greedy play to warm-start from (0: none)")
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--quiet", action="store_true")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    lo, _, hi = args.rooms.partition("-")
+    try:
+        rooms = (int(lo), int(hi or lo))
+    except ValueError:
+        print(f"nbs train: error: --rooms must be A-B, got {args.rooms!r}", file=sys.stderr)
+        return 2
+    config = TrainConfig(
+        timesteps=args.timesteps,
+        envs=args.envs,
+        seed=args.seed,
+        rooms=rooms,
+        eval_every=args.eval_every,
+        checkpoint_every=args.checkpoint_every,
+        bc_steps=args.bc_steps,
+    )
+    path, _ = train(config, args.out, progress=not args.quiet)
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
