@@ -201,6 +201,8 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
             self.last_eval = 0
             self.last_checkpoint = 0
             self.episodes: list[float] = []
+            if config.eval_every and warm is not None:
+                self._evaluate(0)  # the behaviour-cloned start
 
         def _on_step(self) -> bool:
             self.bar.update(self.training_env.num_envs)
@@ -303,6 +305,33 @@ def behaviour_clone(model, steps: int, epochs: int = 30, batch_size: int = 64, p
         chosen = policy.get_distribution(tensors, action_masks=all_masks).get_actions(deterministic=True)
     agreement = float((chosen.cpu().numpy() == all_actions).mean())
     return {"samples": n, "loss_first": losses[0], "loss_last": losses[-1], "agreement": agreement}
+
+
+def plot_learning_curve(log: str | Path, out: str | Path) -> Path | None:
+    """``learning_curve.png`` from ``learning_curve.jsonl``: the learned policy's held-out SE % and
+    scans against timesteps, with the greedy's as lines. None when nothing was evaluated."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    records = [json.loads(line) for line in Path(log).read_text().splitlines() if line.strip()]
+    if not records:
+        return None
+    steps = [r["timesteps"] for r in records]
+    fig = Figure(figsize=(9, 3.6), dpi=110)
+    FigureCanvasAgg(fig)
+    for k, (key, label) in enumerate((("structure_sensed_pct", "SE sensed (%)"), ("scans", "scans"))):
+        ax = fig.add_subplot(1, 2, k + 1)
+        ax.plot(steps, [r["learned"][key] for r in records], "o-", label="learned (held-out storeys)")
+        if records[0].get("greedy"):
+            ax.axhline(records[0]["greedy"][key], color="k", ls="--", label="greedy")
+        ax.set_xlabel("timesteps")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    path = Path(out)
+    fig.savefig(path)
+    return path
 
 
 def _has_tensorboard() -> bool:
