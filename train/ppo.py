@@ -71,13 +71,15 @@ class TrainConfig:
 def _env_factory(rooms: tuple[int, int], max_episode_steps: int):
     def make():
         import gymnasium as gym
+        from stable_baselines3.common.monitor import Monitor
 
         from nbs_env.env import make_config
         from scenes.generator import GeneratorConfig
 
         config = make_config("fast")
         config = replace(config, generator=GeneratorConfig(rooms=rooms))
-        return gym.make("nbs_env:nbs_env/NBS-Fast-v0", config=config, max_episode_steps=max_episode_steps)
+        # Monitor puts each episode's return in info["episode"], for the learning-curve log.
+        return Monitor(gym.make("nbs_env:nbs_env/NBS-Fast-v0", config=config, max_episode_steps=max_episode_steps))
 
     return make
 
