@@ -47,9 +47,33 @@ def main() -> None:
         default(args, policy)
 
 
+def _play(env, policy, seed: int, stages: dict, casts: list) -> tuple[float, list[float]]:
+    """One episode: (reset seconds, step seconds); appends each step's stage times to ``stages`` and
+    the bare Embree cast of the same step's scan, timed in this process, to ``casts``."""
+    import time
+
+    t = time.perf_counter()
+    obs, info = env.reset(seed=seed)
+    reset = time.perf_counter() - t
+    steps = []
+    while True:
+        action = policy.act(obs, info)
+        t = time.perf_counter()
+        obs, _, terminated, truncated, info = env.step(action)
+        steps.append(time.perf_counter() - t)
+        for s in stages:
+            stages[s].append(info["times"][s])
+        robot = env.unwrapped.robot
+        rays = robot._scanner.rays(robot.true_pose)
+        t = time.perf_counter()
+        robot._scanner.raw_cast(rays)
+        casts.append(time.perf_counter() - t)
+        if terminated or truncated:
+            return reset, steps
+
+
 def fast(args, policy) -> None:
     import statistics
-    import time
 
     import gymnasium as gym
 
@@ -58,26 +82,11 @@ def fast(args, policy) -> None:
     print(f"part 1: nbs_env/NBS-Fast-v0 on {args.cores} core(s), {args.episodes} greedy episodes")
     env = gym.make("nbs_env/NBS-Fast-v0")
     step_times, reset_times, stages = [], [], {s: [] for s in (*STAGES, "evaluation")}
-    casts = []
+    casts: list[float] = []
     for seed in range(args.episodes):
-        t = time.perf_counter()
-        obs, info = env.reset(seed=seed)
-        reset_times.append(time.perf_counter() - t)
-        robot = env.unwrapped.robot
-        while True:
-            action = policy.act(obs, info)
-            t = time.perf_counter()
-            obs, _, terminated, truncated, info = env.step(action)
-            step_times.append(time.perf_counter() - t)
-            for s in stages:
-                stages[s].append(info["times"][s])
-            scanner = env.unwrapped.robot._scanner
-            rays = scanner.rays(robot.true_pose)
-            t = time.perf_counter()
-            scanner.raw_cast(rays)
-            casts.append(time.perf_counter() - t)
-            if terminated or truncated:
-                break
+        reset, steps = _play(env, policy, seed, stages, casts)
+        reset_times.append(reset)
+        step_times.extend(steps)
     total = sum(step_times)
     cast = statistics.median(casts)
     mean = total / len(step_times)
@@ -91,7 +100,6 @@ def fast(args, policy) -> None:
 
 def default(args, policy) -> None:
     import statistics
-    import time
 
     import gymnasium as gym
 
@@ -99,25 +107,12 @@ def default(args, policy) -> None:
 
     print(f"part 2: nbs_env/NBS-FiveRooms-v0 (default config), one greedy episode, {args.cores} core(s)")
     env = gym.make("nbs_env/NBS-FiveRooms-v0")
-    obs, info = env.reset(seed=0)
     per_stage = {s: [] for s in (*STAGES, "evaluation")}
-    steps, casts = [], []
-    while True:
-        action = policy.act(obs, info)
-        t = time.perf_counter()
-        obs, _, terminated, truncated, info = env.step(action)
-        steps.append(time.perf_counter() - t)
-        for s in per_stage:
-            per_stage[s].append(info["times"][s])
-        scanner = env.unwrapped.robot._scanner
-        rays = scanner.rays(env.unwrapped.robot.true_pose)
-        t = time.perf_counter()
-        scanner.raw_cast(rays)
-        casts.append(time.perf_counter() - t)
-        if terminated or truncated:
-            break
+    casts: list[float] = []
+    _, steps = _play(env, policy, 0, per_stage, casts)
     cast = statistics.median(casts)
-    print(f"  {len(steps)} steps; raw cast of one scan ({scanner.config.n_rays:,} rays): {1e3 * cast:.1f} ms median")
+    rays = env.unwrapped.config.robot.scanner.n_rays
+    print(f"  {len(steps)} steps; raw cast of one scan ({rays:,} rays): {1e3 * cast:.1f} ms median")
     print(f"  {'stage':15s} {'median ms':>10s} {'x raw cast':>11s}")
     for s, values in per_stage.items():
         m = statistics.median(values)

@@ -619,14 +619,12 @@ class NBSEnv(gym.Env):
         roi = robot.belief.roi
         floor_z = roi.floor_z if roi is not None else float(pose[2, 3] - self.config.robot.scanner.height)
         voxels = voxel_window(robot.belief.grid, xy, floor_z, self.config.observation)
-        mask = self.action_masks()
         table = np.zeros((self.max_candidates, len(CANDIDATE_FEATURES)), dtype=np.float32)
         if not self.complete and len(self.steps) < self.config.max_scans:
             cands, gains = robot.candidates()
             table = candidate_table(cands.xy, cands.path_length, gains, cands.mask, xy, robot.room_structural_voxels())
         yaw = float(np.arctan2(pose[1, 0], pose[0, 0]))
         pose_vec = np.array([pose[0, 3], pose[1, 3], pose[2, 3], yaw], dtype=np.float32)
-        del mask
         return {
             "voxels": voxels,
             "candidates": np.clip(table, -1e4, 1e4).reshape(-1),

@@ -21,8 +21,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import shapely
 from shapely.geometry import Polygon
-from shapely.prepared import prep
 
 from nbs_env.config import ScannerConfig
 from scenes import Scene
@@ -79,16 +79,10 @@ def _positions(scene: Scene, lattice: float, clearance: float) -> np.ndarray:
         lo, hi = np.floor(np.asarray(free.bounds[:2]) / lattice), np.ceil(np.asarray(free.bounds[2:]) / lattice)
         gx, gy = np.meshgrid(np.arange(lo[0], hi[0] + 1) * lattice, np.arange(lo[1], hi[1] + 1) * lattice)
         pts = np.column_stack([gx.ravel(), gy.ravel()])
-        inside = np.array([prep(free).contains_properly(_point(p)) for p in pts], dtype=bool)
+        inside = shapely.contains_xy(free, pts[:, 0], pts[:, 1])
         for p in pts[inside]:
             out.append([p[0], p[1], room.floor_z])
     return np.asarray(out, dtype=float).reshape(-1, 3)
-
-
-def _point(p):
-    from shapely.geometry import Point
-
-    return Point(float(p[0]), float(p[1]))
 
 
 def oracle_plan(

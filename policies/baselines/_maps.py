@@ -151,10 +151,7 @@ class MappingPolicy:
     def act(self, obs: dict[str, np.ndarray], info: dict[str, Any]) -> int:
         belief = self._belief(info)
         stop = len(belief.mask)  # the "room done" action
-        if belief.room != self._room or belief.new_room:
-            self._room = belief.room
-            self._first_best = None
-            self.new_room(belief)
+        self._track_room(belief)
         self.observe(belief)
         valid = np.flatnonzero(belief.mask)
         if not len(valid):
@@ -167,6 +164,13 @@ class MappingPolicy:
         elif self.should_stop(top, belief):
             return stop
         return best
+
+    def _track_room(self, belief: BeliefView) -> None:
+        """Start afresh when the robot has entered a room."""
+        if belief.room != self._room or belief.new_room:
+            self._room = belief.room
+            self._first_best = None
+            self.new_room(belief)
 
     # ------------------------------------------------------------------ hooks
     def new_room(self, belief: BeliefView) -> None:

@@ -106,10 +106,7 @@ class BlaerAllenPolicy(MappingPolicy):
     def act(self, obs, info) -> int:
         belief = self._belief(info)
         stop = len(belief.mask)
-        if belief.room != self._room or belief.new_room:
-            self._room = belief.room
-            self._first_best = None
-            self.new_room(belief)
+        self._track_room(belief)
         valid = np.flatnonzero(belief.mask)
         if not len(valid):
             return stop

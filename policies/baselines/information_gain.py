@@ -115,20 +115,21 @@ class InformationGainPolicy(MappingPolicy):
         unk = np.where(inside, unknown.reshape(-1)[flat], True)
         visible = _visibility(np.where(first, probs, 0.0))
         counted = first & inside & (distance[None, :] >= min_range)
+        return float((visible * self._weight(probs, unk, counted, inside, flat, extra)).sum())
+
+    def _weight(self, probs, unk, counted, inside, flat, extra) -> np.ndarray:
+        """(r, s) what each ray sample is worth when the ray reaches it, by the formulation."""
         f = self.formulation
         if f == "occlusion_aware":
-            weight = _entropy(probs) * counted
-        elif f == "unobserved_voxel":
-            weight = (unk & counted).astype(np.float32)
-        elif f in ("rear_side_voxel", "rear_side_entropy"):
+            return _entropy(probs) * counted
+        if f == "unobserved_voxel":
+            return (unk & counted).astype(np.float32)
+        if f in ("rear_side_voxel", "rear_side_entropy"):
             behind = np.zeros_like(unk)
             behind[:, 1:] = probs[:, :-1] > 0.5
             weight = (unk & counted & behind).astype(np.float32)
-            if f == "rear_side_entropy":
-                weight = weight * _entropy(probs)
-        else:  # proximity_count
-            weight = np.where(inside, extra.reshape(-1)[flat], 0.0) * counted
-        return float((visible * weight).sum())
+            return weight * _entropy(probs) if f == "rear_side_entropy" else weight
+        return np.where(inside, extra.reshape(-1)[flat], 0.0) * counted  # proximity_count
 
 
 def _visibility(blocking: np.ndarray) -> np.ndarray:
@@ -145,10 +146,6 @@ class PotthastSukhatmePolicy(InformationGainPolicy):
     def __init__(self, ray_step_deg: float = 5.0, max_range: float = 12.0, stop_fraction: float = 0.05) -> None:
         super().__init__("occlusion_aware", ray_step_deg, max_range, stop_fraction)
 
-    def _gain(self, p, unknown, extra, grid, sensor, directions, reach, min_range) -> float:
-        flat, first, inside, distance = march(grid.shape, grid.origin, grid.voxel_size, sensor, directions, reach)
-        probs = np.where(inside, p.reshape(-1)[flat], 0.5)
-        unk = np.where(inside, unknown.reshape(-1)[flat], True)
-        visible = _visibility(np.where(first, probs, 0.0))
-        counted = first & unk & inside & (distance[None, :] >= min_range)
-        return float((visible * _entropy(probs) * counted).sum())
+    def _weight(self, probs, unk, counted, inside, flat, extra) -> np.ndarray:
+        # The entropy of the unknown voxels only.
+        return _entropy(probs) * (counted & unk)
