@@ -41,7 +41,9 @@ def _information_gain(seed: int | None, option: str | None = None):
 
 def _learned(seed: int | None, option: str | None = None):
     if not option:
-        raise ValueError("ppo needs a checkpoint: ppo:PATH (a folder with policy.json and policy.pt)")
+        raise ValueError(
+            "ppo needs a checkpoint: ppo:PATH (a folder with policy.json and policy.pt) or ppo:reference (bundled)"
+        )
     from policies.learned import LearnedPolicy
 
     return LearnedPolicy(option)

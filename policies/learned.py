@@ -13,6 +13,9 @@ one shared MLP to the candidate's logit (with the candidate's gain and path rela
 largest), so an action's score depends on its own candidate and the grid, not on its slot. Masked
 actions are never chosen.
 
+Checkpoints shipped with the package are named in :data:`BUNDLED` (``ppo:reference``); see the
+README's "Train your own agent" for the command that trained them.
+
 torch is an optional dependency (``pip install "nbs-env[rl]"``), imported when a network is built.
 """
 
@@ -30,11 +33,41 @@ from nbs_env.env import candidate_table_of
 from nbs_env.errors import ModelFileError
 from policies.base import mask_of
 
-__all__ = ["CHECKPOINT_FORMAT", "LearnedPolicy", "NetworkConfig", "build_network", "load_checkpoint", "save_checkpoint"]
+__all__ = [
+    "BUNDLED",
+    "CHECKPOINT_FORMAT",
+    "LearnedPolicy",
+    "NetworkConfig",
+    "build_network",
+    "load_checkpoint",
+    "resolve_checkpoint",
+    "save_checkpoint",
+]
 
 CHECKPOINT_FORMAT = "nbs-policy"
 CHECKPOINT_VERSION = 1
 N_LABELS = 6
+
+#: Checkpoints shipped inside the package, by name: ``ppo:reference`` loads the reference run.
+BUNDLED = {"reference": Path(__file__).parent / "data" / "ppo_reference"}
+
+
+def resolve_checkpoint(spec: str | Path) -> Path:
+    """The checkpoint a ``ppo:`` option names: an existing path first, else a :data:`BUNDLED` name.
+
+    Raises
+    ------
+    ModelFileError
+        Neither an existing path nor a bundled name.
+    """
+    path = Path(spec)
+    if path.exists():
+        return path
+    if str(spec) in BUNDLED:
+        return BUNDLED[str(spec)]
+    raise ModelFileError(
+        f"{spec}: no such checkpoint (a folder with policy.json and policy.pt, or a bundled name: {', '.join(BUNDLED)})"
+    )
 
 
 def _torch():
@@ -232,16 +265,16 @@ class LearnedPolicy:
     Parameters
     ----------
     path : str or Path
-        A checkpoint folder or its ``policy.json``.
+        A checkpoint folder or its ``policy.json``, or a :data:`BUNDLED` name (``"reference"``).
     """
 
     #: Runs our pipeline (RoI, SE classification); only the choice is learned.
     structure_aware = True
 
     def __init__(self, path: str | Path) -> None:
-        self.path = Path(path)
-        self.config, self.encoder, self.scorer, self.layout, self.document = load_checkpoint(path)
-        self.name = f"ppo:{self.path}"
+        self.path = resolve_checkpoint(path)
+        self.config, self.encoder, self.scorer, self.layout, self.document = load_checkpoint(self.path)
+        self.name = f"ppo:{path}"
         if self.config.actions > self.config.candidates:
             self.env_overrides = {"completion": "policy"}
 

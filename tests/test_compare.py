@@ -94,3 +94,56 @@ def test_ray_backend_gives_the_local_results(tiny):
     results, oracles = run_grid(specs, jobs=2, backend="ray", progress=False)
     assert all(r["ok"] for r in results)
     assert strip_times(summarise(results, oracles)) == strip_times(rows)
+
+
+def _fake_run(scene, seed, scans, pct):
+    metrics = {
+        "scans": scans,
+        "structure_sensed_pct": pct,
+        "processed_points": 10 * scans,
+        "path_length_m": 2.0 * scans,
+        "processing_time_s": 1.0,
+        "acquisition_time_s": 1.0,
+        "travel_time_s": 1.0,
+        "complete": True,
+        "rooms": [{"name": "room0", "scans": scans, "structure_sensed_pct": pct, "processed_points": 10 * scans,
+                   "path_length_m": 2.0 * scans}],
+    }  # fmt: skip
+    return {"spec": {"scene": scene, "policy": "greedy", "seed": seed}, "ok": True, "metrics": metrics}
+
+
+def test_all_scenes_spread_is_over_seeds_not_over_storeys():
+    # Storeys differ by 100 scans, seeds by 2: the "all scenes" std must show the seeds' spread.
+    results = [
+        _fake_run("small", 0, 10, 90.0),
+        _fake_run("small", 1, 12, 92.0),
+        _fake_run("large", 0, 110, 80.0),
+        _fake_run("large", 1, 112, 82.0),
+    ]
+    (row,) = [r for r in summarise(results, {}) if r["scene"] == "all scenes"]
+    assert row["scans"] == pytest.approx((61.0, 2**0.5))  # per-seed means 60 and 62
+    assert row["structure_sensed_pct"] == pytest.approx((86.0, 2**0.5))
+    assert row["runs"] == 4 and "of_oracle_pct" not in row
+
+
+def test_resume_reuses_finished_runs_and_reruns_the_rest(tiny, monkeypatch):
+    import shutil
+
+    import train.compare as compare
+
+    specs, _, _, rows, out = tiny
+    resumed = out.parent / "resumed"
+    shutil.copytree(out, resumed)
+    shutil.rmtree(resumed / "runs" / "l_room" / "random" / "seed1")  # one run lost
+    finished = compare.load_finished(resumed, specs)
+    assert len(finished["runs"]) == 5 and set(finished["oracles"]) == {"l_room"}
+    calls = []
+    real = compare.run_one
+    monkeypatch.setattr(compare, "run_one", lambda spec: calls.append(spec) or real(spec))
+    monkeypatch.setattr(compare, "_oracle", lambda *a: pytest.fail("the oracle was recomputed"))
+    again, again_oracles = compare.run_grid(specs, jobs=1, progress=False, finished=finished)
+    assert [(c.policy, c.seed) for c in calls] == [("random", 1)]
+    assert strip_times(summarise(again, again_oracles)) == strip_times(rows)
+    # Another preset or scan budget is another spec: nothing is reused.
+    other = grid(**{**TINY, "max_scans": 2})
+    assert compare.load_finished(resumed, other)["runs"] == {}

@@ -151,6 +151,9 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--preset", choices=("default", "fast"), default="default", help="env preset (default)")
     compare.add_argument("--max-scans", type=_positive_int, default=80, help="scan budget per run (default 80)")
     compare.add_argument("--quiet", action="store_true", help="no progress bar")
+    compare.add_argument(
+        "--resume", action="store_true", help="reuse the successful runs and oracles already in --out (same specs)"
+    )
     return parser
 
 
@@ -163,11 +166,17 @@ def run_train(argv: Sequence[str]) -> int:
 
 def run_compare(args: argparse.Namespace) -> int:
     """``nbs compare``: the grid, its table and plots."""
-    from train.compare import CompareError, grid, run_grid, write_outputs
+    from train.compare import CompareError, grid, load_finished, run_grid, write_outputs
 
     try:
         specs = grid(args.scenes, args.policies, args.seeds, args.preset, args.max_scans)
-        results, oracles = run_grid(specs, args.jobs, args.backend, args.address, progress=not args.quiet)
+        finished = load_finished(args.out, specs) if args.resume else None
+        if finished and not args.quiet:
+            runs, oracles = len(finished["runs"]), len(finished["oracles"])
+            print(f"resuming: {runs} runs and {oracles} oracles already in {args.out}")
+        results, oracles = run_grid(
+            specs, args.jobs, args.backend, args.address, progress=not args.quiet, finished=finished
+        )
     except CompareError as exc:
         print(f"nbs compare: error: {exc}", file=sys.stderr)
         return EXIT_USAGE

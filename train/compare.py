@@ -124,9 +124,9 @@ def _oracle(scene: str, preset: str = "default") -> dict[str, Any]:
             spacing=cfg.coverage_spacing,
             radius=cfg.coverage_radius,
         )
-        return {"scene": scene, "ok": True, **plan.to_dict()}
+        return {"scene": scene, "preset": preset, "ok": True, **plan.to_dict()}
     except Exception as exc:
-        return {"scene": scene, "ok": False, "error": f"{type(exc).__name__}: {exc}"}
+        return {"scene": scene, "preset": preset, "ok": False, "error": f"{type(exc).__name__}: {exc}"}
 
 
 def run_grid(
@@ -135,6 +135,7 @@ def run_grid(
     backend: str = "local",
     address: str | None = None,
     progress: bool = True,
+    finished: dict[str, Any] | None = None,
 ) -> tuple[list[dict[str, Any]], dict[str, dict[str, Any]]]:
     """Run every spec, and the oracle of every scene.
 
@@ -146,6 +147,9 @@ def run_grid(
     backend : {"local", "ray"}
         ``"ray"`` sends each run as a Ray task to ``address`` (a running cluster), or to a local
         instance started here when ``address`` is None.
+    finished : dict, optional
+        :func:`load_finished`'s records (``"runs"``: RunSpec key → record, ``"oracles"``: scene →
+        plan): these are reused, not run again.
 
     Returns
     -------
@@ -161,12 +165,22 @@ def run_grid(
     if len(presets) > 1:
         raise CompareError(f"one preset per grid, got {sorted(presets)}")
     preset = presets.pop() if presets else "default"
+    finished = finished or {}
+    old_runs, old_oracles = finished.get("runs", {}), finished.get("oracles", {})
     tasks: list[tuple[str, Any]] = [("run", s) for s in specs] + [("oracle", s) for s in scenes]
     done: dict[int, Any] = {}
-    bar = tqdm(total=len(tasks), unit="run", disable=not progress, dynamic_ncols=True)
-    if backend == "local":
+    for k, (kind, arg) in enumerate(tasks):
+        if kind == "run" and arg.key in old_runs:
+            done[k] = old_runs[arg.key]
+        elif kind == "oracle" and arg in old_oracles:
+            done[k] = old_oracles[arg]
+    todo = [(k, task) for k, task in enumerate(tasks) if k not in done]
+    bar = tqdm(total=len(todo), unit="run", disable=not progress, dynamic_ncols=True)
+    if not todo:
+        pass
+    elif backend == "local":
         if jobs <= 1:
-            for k, (kind, arg) in enumerate(tasks):
+            for k, (kind, arg) in todo:
                 done[k] = run_one(arg) if kind == "run" else _oracle(arg, preset)
                 bar.update()
         else:
@@ -175,7 +189,7 @@ def run_grid(
             with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
                 futures = {
                     (pool.submit(run_one, arg) if kind == "run" else pool.submit(_oracle, arg, preset)): k
-                    for k, (kind, arg) in enumerate(tasks)
+                    for k, (kind, arg) in todo
                 }
                 for future in as_completed(futures):
                     done[futures[future]] = future.result()
@@ -194,10 +208,11 @@ def run_grid(
         try:
             run_remote = ray.remote(run_one)
             oracle_remote = ray.remote(_oracle)
-            refs = [
-                run_remote.remote(arg) if kind == "run" else oracle_remote.remote(arg, preset) for kind, arg in tasks
-            ]
-            index = {ref: k for k, ref in enumerate(refs)}
+            index = {
+                (run_remote.remote(arg) if kind == "run" else oracle_remote.remote(arg, preset)): k
+                for k, (kind, arg) in todo
+            }
+            refs = list(index)
             pending = list(refs)
             while pending:
                 ready, pending = ray.wait(pending, num_returns=1)
@@ -227,9 +242,33 @@ def _total_time(m: dict[str, Any]) -> float:
     return float(m["processing_time_s"] + m["acquisition_time_s"] + m["travel_time_s"])
 
 
+TOTAL_KEYS = ("scans", "time_s", "structure_sensed_pct", "processed_points", "path_length_m",
+              "of_oracle_pct", "vs_oracle_scans")  # fmt: skip
+
+
+def _run_quantities(m: dict[str, Any], oracle: dict[str, Any]) -> dict[str, float]:
+    """One run's storey totals, and its standing against the scene's oracle when there is one."""
+    q = {
+        "scans": float(m["scans"]),
+        "time_s": _total_time(m),
+        "structure_sensed_pct": float(m["structure_sensed_pct"]),
+        "processed_points": float(m["processed_points"]),
+        "path_length_m": float(m["path_length_m"]),
+    }
+    if oracle.get("ok"):
+        q["of_oracle_pct"] = 100.0 * m["structure_sensed_pct"] / oracle["max_coverage_pct"]
+        curve = np.asarray(oracle["coverage_pct"])
+        # Above the oracle's best (noise can do it), against the oracle's scans to its best.
+        reach = np.flatnonzero(curve >= min(m["structure_sensed_pct"], curve[-1]) - 1e-9)
+        if len(reach):
+            q["vs_oracle_scans"] = m["scans"] / (int(reach[0]) + 1)
+    return q
+
+
 def summarise(results: Sequence[dict[str, Any]], oracles: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
     """Rows of the table: per (scene, policy) one per true room and one ``total``, plus per policy an
-    ``all scenes`` row when there are several scenes. Each quantity is mean and std over seeds."""
+    ``all scenes`` row when there are several scenes. Each quantity is mean and std over seeds; in
+    ``all scenes``, the mean over scenes is taken per seed first."""
     rows: list[dict[str, Any]] = []
     scenes = list(dict.fromkeys(r["spec"]["scene"] for r in results))
     policies = list(dict.fromkeys(r["spec"]["policy"] for r in results))
@@ -260,32 +299,29 @@ def summarise(results: Sequence[dict[str, Any]], oracles: dict[str, dict[str, An
             row = {**base, "room": "total"}
             row["complete"] = sum(1 for m in ok if m["complete"])
             row["not_scanned"] = sum(sum(1 for p in m["rooms"] if p["scans"] == 0) for m in ok)
-            row["scans"] = _mean_std(m["scans"] for m in ok)
-            row["time_s"] = _mean_std(_total_time(m) for m in ok)
-            row["structure_sensed_pct"] = _mean_std(m["structure_sensed_pct"] for m in ok)
-            row["processed_points"] = _mean_std(m["processed_points"] for m in ok)
-            row["path_length_m"] = _mean_std(m["path_length_m"] for m in ok)
+            per_run = [_run_quantities(m, oracle) for m in ok]
+            for key in TOTAL_KEYS:
+                values = [q[key] for q in per_run if key in q]
+                if values:
+                    row[key] = _mean_std(values)
             if oracle.get("ok"):
-                best = oracle["max_coverage_pct"]
-                row["of_oracle_pct"] = _mean_std(100.0 * m["structure_sensed_pct"] / best for m in ok)
-                curve = np.asarray(oracle["coverage_pct"])
-                ratios = []
-                for m in ok:
-                    # Above the oracle's best (noise can do it), against the oracle's scans to its best.
-                    reach = np.flatnonzero(curve >= min(m["structure_sensed_pct"], curve[-1]) - 1e-9)
-                    if len(reach):
-                        ratios.append(m["scans"] / (int(reach[0]) + 1))
-                row["vs_oracle_scans"] = _mean_std(ratios) if ratios else (math.nan, math.nan)
-                row["oracle_max_pct"] = best
+                row["oracle_max_pct"] = oracle["max_coverage_pct"]
             rows.append(row)
     if len(scenes) > 1:
         for policy in policies:
-            totals = [r for r in rows if r["policy"] == policy and r["room"] == "total" and "scans" in r]
+            totals = [r for r in rows if r["policy"] == policy and r["room"] == "total"]
             row = {"scene": "all scenes", "policy": policy, "room": "total", "runs": sum(r["runs"] for r in totals)}
-            row["failed"] = sum(r["failed"] for r in rows if r["policy"] == policy and r["room"] == "total")
-            for key in ("scans", "time_s", "structure_sensed_pct", "processed_points", "path_length_m",
-                        "of_oracle_pct", "vs_oracle_scans"):  # fmt: skip
-                means = [r[key][0] for r in totals if key in r and not math.isnan(r[key][0])]
+            row["failed"] = sum(r["failed"] for r in totals)
+            # Mean over scenes per seed, then mean ± std of those over seeds: the spread a rerun
+            # with other seeds would show, not the (much larger) spread between storeys.
+            by_seed: dict[int, list[dict[str, float]]] = {}
+            for r in results:
+                if r["spec"]["policy"] == policy and r["ok"]:
+                    q = _run_quantities(r["metrics"], oracles.get(r["spec"]["scene"], {}))
+                    by_seed.setdefault(r["spec"]["seed"], []).append(q)
+            for key in TOTAL_KEYS:
+                means = [np.mean([q[key] for q in qs if key in q]) for qs in by_seed.values()]
+                means = [m for m in means if not math.isnan(m)]
                 if means:
                     row[key] = _mean_std(means)
             row["complete"] = sum(r.get("complete", 0) for r in totals)
@@ -396,10 +432,9 @@ def write_outputs(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     for r in results:
-        spec = r["spec"]
-        folder = out / "runs" / spec["scene"].replace("/", "_").replace(":", "_") / spec["policy"].replace(":", "_")
-        folder = folder / f"seed{spec['seed']}"
+        folder = _run_folder(out, r["spec"])
         folder.mkdir(parents=True, exist_ok=True)
+        (folder / "run.json").write_text(json.dumps({k: v for k, v in r.items() if k != "metrics"}, indent=1))
         if r["ok"]:
             (folder / "metrics.json").write_text(json.dumps(r["metrics"], indent=1))
         else:
@@ -410,6 +445,40 @@ def write_outputs(
     (out / "table.md").write_text(_markdown(rows))
     _plots(results, oracles, out)
     return rows
+
+
+def _run_folder(out: Path, spec: dict[str, Any]) -> Path:
+    scene = spec["scene"].replace("/", "_").replace(":", "_")
+    return out / "runs" / scene / spec["policy"].replace(":", "_") / f"seed{spec['seed']}"
+
+
+def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
+    """The successful runs and oracles an earlier ``nbs compare --out OUT`` left, for ``--resume``.
+
+    A run is reused when its ``run.json`` holds the same spec (scene, policy name, seed, preset,
+    scan budget); an oracle when ``oracle.json`` has it for the same preset. Failed runs are run
+    again. A checkpoint replaced under the same ``ppo:PATH`` is not noticed: use a new ``--out``.
+    """
+    out = Path(out)
+    runs: dict[str, Any] = {}
+    for spec in specs:
+        folder = _run_folder(out, asdict(spec))
+        try:
+            record = json.loads((folder / "run.json").read_text())
+            if record.get("ok") and record.get("spec") == asdict(spec):
+                runs[spec.key] = {**record, "metrics": json.loads((folder / "metrics.json").read_text())}
+        except (OSError, ValueError):
+            continue  # not there or unreadable: run it again
+    oracles: dict[str, Any] = {}
+    presets = {s.preset for s in specs}
+    try:
+        stored = json.loads((out / "oracle.json").read_text())
+    except (OSError, ValueError):
+        stored = {}
+    for scene, plan in stored.items() if isinstance(stored, dict) else ():
+        if isinstance(plan, dict) and plan.get("ok") and plan.get("preset") in presets:
+            oracles[scene] = plan
+    return {"runs": runs, "oracles": oracles}
 
 
 def grid(scenes: str, policies: str, seeds: str, preset: str = "default", max_scans: int = 80) -> list[RunSpec]:

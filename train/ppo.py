@@ -26,9 +26,13 @@ from policies.learned import NetworkConfig, build_network, save_checkpoint
 
 __all__ = ["TrainConfig", "main", "train"]
 
-#: Seeds of the held-out evaluation storeys; training storeys are drawn by the env's own generator,
-#: whose seeds come from the training seed (and never equal these, by the generator's own range).
+#: Seeds of the held-out test storeys (``generated:10000000`` on, the README's evaluation table).
+#: Training storeys are drawn by the env's own generator from the whole 31-bit range, with the
+#: training run's room range; a clash with one of these seeds has odds of about 1e-5 per run.
 HELD_OUT_BASE = 10_000_000
+#: Seeds of the validation storeys the periodic evaluation plays, kept apart from the test storeys
+#: so that choosing a checkpoint by the learning curve does not peek at the test table.
+VALIDATION_BASE = 20_000_000
 
 
 def _require_rl():
@@ -57,18 +61,20 @@ class TrainConfig:
         checkpoint_every: int = 0,
         max_episode_steps: int = 40,
         bc_steps: int = 0,
+        metre_cost: float = 0.05,
     ) -> None:
         self.timesteps, self.envs, self.seed, self.rooms = timesteps, envs, seed, tuple(rooms)
         self.n_steps, self.batch_size, self.learning_rate = n_steps, batch_size, learning_rate
         self.eval_every, self.eval_storeys, self.checkpoint_every = eval_every, eval_storeys, checkpoint_every
         self.max_episode_steps = max_episode_steps
         self.bc_steps = bc_steps
+        self.metre_cost = metre_cost
 
     def to_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)
 
 
-def _env_factory(rooms: tuple[int, int], max_episode_steps: int):
+def _env_factory(rooms: tuple[int, int], max_episode_steps: int, metre_cost: float = 0.05):
     def make():
         import gymnasium as gym
         from stable_baselines3.common.monitor import Monitor
@@ -77,7 +83,9 @@ def _env_factory(rooms: tuple[int, int], max_episode_steps: int):
         from scenes.generator import GeneratorConfig
 
         config = make_config("fast")
-        config = replace(config, generator=GeneratorConfig(rooms=rooms))
+        config = replace(
+            config, generator=GeneratorConfig(rooms=rooms), reward=replace(config.reward, metre_cost=metre_cost)
+        )
         # Monitor puts each episode's return in info["episode"], for the learning-curve log.
         return Monitor(gym.make("nbs_env:nbs_env/NBS-Fast-v0", config=config, max_episode_steps=max_episode_steps))
 
@@ -173,7 +181,7 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    factory = _env_factory(config.rooms, config.max_episode_steps)
+    factory = _env_factory(config.rooms, config.max_episode_steps, config.metre_cost)
     workers = [factory] * config.envs
     venv = SubprocVecEnv(workers, start_method="spawn") if config.envs > 1 else DummyVecEnv(workers)
     venv.seed(config.seed)
@@ -191,7 +199,7 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
         policy_kwargs={"network": network},
         verbose=0,
     )
-    held_out = [HELD_OUT_BASE + k for k in range(config.eval_storeys)]
+    held_out = [VALIDATION_BASE + k for k in range(config.eval_storeys)]
     log = out / "learning_curve.jsonl"
     log.write_text("")
     greedy = GreedyPolicy()
@@ -254,6 +262,7 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
             "behaviour_cloning": warm,
         },
     )
+    plot_learning_curve(log, out / "learning_curve.png")
     return final, model
 
 
@@ -310,8 +319,9 @@ def behaviour_clone(model, steps: int, epochs: int = 30, batch_size: int = 64, p
 
 
 def plot_learning_curve(log: str | Path, out: str | Path) -> Path | None:
-    """``learning_curve.png`` from ``learning_curve.jsonl``: the learned policy's held-out SE % and
-    scans against timesteps, with the greedy's as lines. None when nothing was evaluated."""
+    """``learning_curve.png`` from ``learning_curve.jsonl``: the learned policy's SE %, scans and path
+    on the validation storeys against timesteps, with the greedy's as lines. None when nothing was
+    evaluated."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -319,11 +329,12 @@ def plot_learning_curve(log: str | Path, out: str | Path) -> Path | None:
     if not records:
         return None
     steps = [r["timesteps"] for r in records]
-    fig = Figure(figsize=(9, 3.6), dpi=110)
+    fig = Figure(figsize=(12, 3.6), dpi=110)
     FigureCanvasAgg(fig)
-    for k, (key, label) in enumerate((("structure_sensed_pct", "SE sensed (%)"), ("scans", "scans"))):
-        ax = fig.add_subplot(1, 2, k + 1)
-        ax.plot(steps, [r["learned"][key] for r in records], "o-", label="learned (held-out storeys)")
+    panels = (("structure_sensed_pct", "SE sensed (%)"), ("scans", "scans"), ("path_length_m", "path (m)"))
+    for k, (key, label) in enumerate(panels):
+        ax = fig.add_subplot(1, 3, k + 1)
+        ax.plot(steps, [r["learned"][key] for r in records], "o-", label="learned (validation storeys)")
         if records[0].get("greedy"):
             ax.axhline(records[0]["greedy"][key], color="k", ls="--", label="greedy")
         ax.set_xlabel("timesteps")
@@ -354,6 +365,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--eval-every", type=int, default=0, help="timesteps between evaluations (0: none)")
     p.add_argument("--checkpoint-every", type=int, default=0, help="timesteps between checkpoints (0: none)")
     p.add_argument("--bc-steps", type=int, default=0, help="vector steps of greedy play to warm-start from (0: none)")
+    p.add_argument("--eval-storeys", type=int, default=4, help="validation storeys per evaluation")
+    p.add_argument("--learning-rate", type=float, default=3e-4)
+    p.add_argument("--n-steps", type=int, default=64, help="steps per worker between PPO updates")
+    p.add_argument("--metre-cost", type=float, default=0.05, help="reward per metre driven, subtracted")
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--quiet", action="store_true")
     return p
@@ -375,6 +390,10 @@ def main(argv: list[str] | None = None) -> int:
         eval_every=args.eval_every,
         checkpoint_every=args.checkpoint_every,
         bc_steps=args.bc_steps,
+        eval_storeys=args.eval_storeys,
+        learning_rate=args.learning_rate,
+        n_steps=args.n_steps,
+        metre_cost=args.metre_cost,
     )
     path, _ = train(config, args.out, progress=not args.quiet)
     print(f"wrote {path}")
