@@ -21,7 +21,7 @@ def trained(tmp_path_factory):
     from train.ppo import TrainConfig, train
 
     out = tmp_path_factory.mktemp("ppo")
-    config = TrainConfig(timesteps=128, envs=2, seed=0, rooms=(1, 1), n_steps=32, batch_size=32)
+    config = TrainConfig(timesteps=256, envs=2, seed=0, rooms=(1, 1), n_steps=32, batch_size=32)
     path, model = train(config, out, progress=False)
     return path, model
 
@@ -42,7 +42,7 @@ def test_training_smoke_run_writes_a_safe_checkpoint(trained):
     path, model = trained
     document = json.loads(path.read_text())
     assert document["format"] == "nbs-policy" and document["training"]["algo"] == "maskable_ppo"
-    assert model.num_timesteps >= 128
+    assert model.num_timesteps >= 256
     # Tensors only: loadable with weights_only=True (no pickle to trust).
     state = torch.load(path.parent / document["weights"], weights_only=True)
     assert any(k.startswith("encoder.") for k in state) and any(k.startswith("scorer.") for k in state)
@@ -92,8 +92,10 @@ def test_bad_checkpoints_raise_clear_errors(tmp_path):
     state.update({f"scorer.{k}": v for k, v in scorer.state_dict().items()})
     path = save_checkpoint(tmp_path / "ok", config, state)
     LearnedPolicy(path)
-    with pytest.raises(ModelFileError, match="no such checkpoint"):
+    with pytest.raises(ModelFileError, match=r"no such checkpoint.*bundled name: reference"):
         LearnedPolicy(tmp_path / "missing")
+    with pytest.raises(ModelFileError, match="no such checkpoint"):
+        make_policy("ppo:nonesuch")
     # A modified weights file.
     weights = path.parent / "policy.pt"
     data = bytearray(weights.read_bytes())
@@ -127,3 +129,31 @@ def test_bad_checkpoints_raise_clear_errors(tmp_path):
     (evil / "policy.json").write_text(json.dumps(good))
     with pytest.raises(ModelFileError, match="tensors-only"):
         LearnedPolicy(evil)
+
+
+def test_the_bundled_reference_policy_reproduces_its_learning_curve():
+    """``ppo:reference`` ships with the package (checksum-verified on load) with its learning curve,
+    and replays the curve's last point: the same validation storeys give its recorded scans, SE %
+    and path (loose tolerances, for other CPUs' floating point), never taking a masked action."""
+    from policies.learned import BUNDLED
+    from train.ppo import VALIDATION_BASE, evaluate
+
+    folder = BUNDLED["reference"]
+    assert (folder / "learning_curve.png").stat().st_size > 10_000
+    policy = make_policy("ppo:reference")
+    training = policy.document["training"]
+    assert training["algo"] == "maskable_ppo" and training["timesteps"] >= 10_000
+    records = [json.loads(line) for line in (folder / "learning_curve.jsonl").read_text().splitlines()]
+    assert records[-1]["timesteps"] >= training["timesteps"]
+
+    def act(obs, info):
+        action = policy.act(obs, info)
+        assert info["action_mask"][action]
+        return action
+
+    storeys = [VALIDATION_BASE + k for k in range(training["eval_storeys"])]
+    replay = evaluate(act, storeys, training["max_episode_steps"])
+    recorded = records[-1]["learned"]
+    assert replay["scans"] == pytest.approx(recorded["scans"], abs=1.0)
+    assert replay["structure_sensed_pct"] == pytest.approx(recorded["structure_sensed_pct"], abs=2.0)
+    assert replay["path_length_m"] == pytest.approx(recorded["path_length_m"], rel=0.1)

@@ -31,5 +31,11 @@ def test_the_wheel_holds_every_package_and_its_data(tmp_path):
     packages = [p.parent.relative_to(ROOT).as_posix() for top in TOP for p in (ROOT / top).rglob("__init__.py")]
     missing = [p for p in packages if f"{p}/__init__.py" not in names]
     assert not missing, f"packages left out of the wheel: {missing}"
-    for data in ("scenes/data/five_rooms.json", "nbs_env/perception/data/se_svm.json"):
+    for data in (
+        "scenes/data/five_rooms.json",
+        "nbs_env/perception/data/se_svm.json",
+        "policies/data/ppo_reference/policy.json",
+        "policies/data/ppo_reference/policy.pt",
+        "policies/data/ppo_reference/learning_curve.png",
+    ):
         assert data in names, data

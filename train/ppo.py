@@ -207,7 +207,10 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
 
     class Progress(BaseCallback):
         def _on_training_start(self) -> None:
-            self.bar = tqdm(total=config.timesteps, unit="step", disable=not progress, dynamic_ncols=True)
+            # SB3 collects whole rollouts, so it stops at the next multiple of n_steps × envs.
+            rollout = config.n_steps * config.envs
+            total = -(-config.timesteps // rollout) * rollout
+            self.bar = tqdm(total=total, unit="step", disable=not progress, dynamic_ncols=True)
             self.last_eval = 0
             self.last_checkpoint = 0
             self.episodes: list[float] = []
@@ -337,7 +340,7 @@ def plot_learning_curve(log: str | Path, out: str | Path) -> Path | None:
         ax.plot(steps, [r["learned"][key] for r in records], "o-", label="learned (validation storeys)")
         if records[0].get("greedy"):
             ax.axhline(records[0]["greedy"][key], color="k", ls="--", label="greedy")
-        ax.set_xlabel("timesteps")
+        ax.set_xlabel("PPO timesteps (0: after behaviour cloning)" if steps[0] == 0 else "PPO timesteps")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
