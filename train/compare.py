@@ -320,8 +320,8 @@ def summarise(results: Sequence[dict[str, Any]], oracles: dict[str, dict[str, An
                     q = _run_quantities(r["metrics"], oracles.get(r["spec"]["scene"], {}))
                     by_seed.setdefault(r["spec"]["seed"], []).append(q)
             for key in TOTAL_KEYS:
-                means = [np.mean([q[key] for q in qs if key in q]) for qs in by_seed.values()]
-                means = [m for m in means if not math.isnan(m)]
+                per_seed = [[q[key] for q in qs if key in q] for qs in by_seed.values()]
+                means = [float(np.mean(v)) for v in per_seed if v]
                 if means:
                     row[key] = _mean_std(means)
             row["complete"] = sum(r.get("complete", 0) for r in totals)
