@@ -15,6 +15,21 @@ SE_COLOUR = "#1f77b4"
 NON_SE_COLOUR = "#d62728"
 
 
+def _draw_faces(ax, polygon: np.ndarray, se: Sequence[bool] | np.ndarray, lw: float) -> None:
+    """The polygon's edges as wall faces: SE solid blue, non-SE dashed red (missing entries non-SE)."""
+    se = np.asarray(se, dtype=bool)
+    for k in range(len(polygon)):
+        a, b = polygon[k], polygon[(k + 1) % len(polygon)]
+        is_se = bool(se[k]) if k < len(se) else False
+        ax.plot(
+            [a[0], b[0]],
+            [a[1], b[1]],
+            color=SE_COLOUR if is_se else NON_SE_COLOUR,
+            lw=lw,
+            ls="-" if is_se else "--",
+        )
+
+
 def plot_roi(
     roi: RoI,
     se: Sequence[bool] | np.ndarray,
@@ -54,15 +69,7 @@ def plot_roi(
         step = max(1, len(points) // 20_000)
         ax.scatter(points[::step, 0], points[::step, 1], s=0.2, c="#c837ab", alpha=0.5, linewidths=0)
     p = roi.polygon
-    for k, is_se in enumerate(se):
-        a, b = p[k], p[(k + 1) % len(p)]
-        ax.plot(
-            [a[0], b[0]],
-            [a[1], b[1]],
-            color=SE_COLOUR if is_se else NON_SE_COLOUR,
-            lw=3,
-            ls="-" if is_se else "--",
-        )
+    _draw_faces(ax, p, se, lw=3)
     for o in origins:
         ax.plot(o[0], o[1], marker="*", color="black", markersize=12)
     ax.set_aspect("equal")
@@ -191,18 +198,7 @@ def render_topdown(
         extent = (x0, x0 + top.shape[0] * grid.voxel_size, y0, y0 + top.shape[1] * grid.voxel_size)
         ax.imshow(rgba, origin="lower", extent=extent, interpolation="nearest")
     if roi is not None:
-        p = roi.polygon
-        se_arr = np.asarray(se, dtype=bool)
-        for k in range(len(p)):
-            a, b = p[k], p[(k + 1) % len(p)]
-            is_se = bool(se_arr[k]) if k < len(se_arr) else False
-            ax.plot(
-                [a[0], b[0]],
-                [a[1], b[1]],
-                color=SE_COLOUR if is_se else NON_SE_COLOUR,
-                lw=2.5,
-                ls="-" if is_se else "--",
-            )
+        _draw_faces(ax, roi.polygon, se, lw=2.5)
     for path in paths:
         ax.plot(path[:, 0], path[:, 1], color="black", lw=1, alpha=0.7)
     if candidates_xy is not None and len(candidates_xy):

@@ -272,10 +272,15 @@ def summarise(results: Sequence[dict[str, Any]], oracles: dict[str, dict[str, An
     rows: list[dict[str, Any]] = []
     scenes = list(dict.fromkeys(r["spec"]["scene"] for r in results))
     policies = list(dict.fromkeys(r["spec"]["policy"] for r in results))
+    # Each successful run's storey totals, once, for its scene's row and the "all scenes" row.
+    quantities = [
+        _run_quantities(r["metrics"], oracles.get(r["spec"]["scene"], {})) if r["ok"] else None for r in results
+    ]
     for scene in scenes:
         oracle = oracles.get(scene, {})
         for policy in policies:
-            runs = [r for r in results if r["spec"]["scene"] == scene and r["spec"]["policy"] == policy]
+            index = [i for i, r in enumerate(results) if r["spec"]["scene"] == scene and r["spec"]["policy"] == policy]
+            runs = [results[i] for i in index]
             ok = [r["metrics"] for r in runs if r["ok"]]
             failed = [r for r in runs if not r["ok"]]
             base = {"scene": scene, "policy": policy, "runs": len(runs), "failed": len(failed)}
@@ -299,7 +304,7 @@ def summarise(results: Sequence[dict[str, Any]], oracles: dict[str, dict[str, An
             row = {**base, "room": "total"}
             row["complete"] = sum(1 for m in ok if m["complete"])
             row["not_scanned"] = sum(sum(1 for p in m["rooms"] if p["scans"] == 0) for m in ok)
-            per_run = [_run_quantities(m, oracle) for m in ok]
+            per_run = [quantities[i] for i in index if quantities[i] is not None]
             for key in TOTAL_KEYS:
                 values = [q[key] for q in per_run if key in q]
                 if values:
@@ -315,9 +320,8 @@ def summarise(results: Sequence[dict[str, Any]], oracles: dict[str, dict[str, An
             # Mean over scenes per seed, then mean ± std of those over seeds: the spread a rerun
             # with other seeds would show, not the (much larger) spread between storeys.
             by_seed: dict[int, list[dict[str, float]]] = {}
-            for r in results:
-                if r["spec"]["policy"] == policy and r["ok"]:
-                    q = _run_quantities(r["metrics"], oracles.get(r["spec"]["scene"], {}))
+            for r, q in zip(results, quantities, strict=True):
+                if r["spec"]["policy"] == policy and q is not None:
                     by_seed.setdefault(r["spec"]["seed"], []).append(q)
             for key in TOTAL_KEYS:
                 per_seed = [[q[key] for q in qs if key in q] for qs in by_seed.values()]
