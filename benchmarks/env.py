@@ -63,7 +63,7 @@ def _play(env, policy, seed: int, stages: dict, casts: list) -> tuple[float, lis
         steps.append(time.perf_counter() - t)
         for s in stages:
             stages[s].append(info["times"][s])
-        robot = env.unwrapped.robot
+        robot = env.unwrapped.storey.robot
         rays = robot._scanner.rays(robot.true_pose)
         t = time.perf_counter()
         robot._scanner.raw_cast(rays)
@@ -77,7 +77,7 @@ def fast(args, policy) -> None:
 
     import gymnasium as gym
 
-    from nbs_env.env import STAGES
+    from nbs_env.storey import STAGES
 
     print(f"part 1: nbs_env/NBS-Fast-v0 on {args.cores} core(s), {args.episodes} greedy episodes")
     env = gym.make("nbs_env/NBS-Fast-v0")
@@ -103,7 +103,7 @@ def default(args, policy) -> None:
 
     import gymnasium as gym
 
-    from nbs_env.env import STAGES
+    from nbs_env.storey import STAGES
 
     print(f"part 2: nbs_env/NBS-FiveRooms-v0 (default config), one greedy episode, {args.cores} core(s)")
     env = gym.make("nbs_env/NBS-FiveRooms-v0")

@@ -19,7 +19,7 @@ from _timing import median_seconds
 from nbs_env.belief import RoomBelief
 from nbs_env.config import ScannerConfig
 from nbs_env.labels import VoxelLabel
-from nbs_env.planning.navigation import NavigationConfig, assume_blind_zone_free, candidates, traversability
+from nbs_env.planning.planner import PlanningConfig, plan, sensor_positions
 from nbs_env.planning.visibility import VisibilityModel
 from nbs_env.sensing.pose import pose_from_xyz_rpy
 from nbs_env.sensing.scanner import Scanner
@@ -52,12 +52,9 @@ def state(voxel_size: float):
     belief = RoomBelief(cfg, voxel_size=voxel_size)
     pose = pose_from_xyz_rpy(5.0, 2.0, 1.5, 0.0, 0.0, 0.3)
     belief.add_scan(Scanner(scene, cfg).scan(pose, np.random.default_rng(0)), pose)
-    grid = belief.grid
-    walkable = assume_blind_zone_free(grid.labels, grid.origin, grid.voxel_size, [pose[:3, 3]], cfg.elevation_min)
-    tmap = traversability(walkable, grid.origin, grid.voxel_size, belief.roi.floor_z, NavigationConfig(), [(5.0, 2.0)])
-    cands = candidates(tmap, np.array([5.0, 2.0]), NavigationConfig())
-    sensors = np.column_stack([cands.points, np.full(cands.count, belief.roi.floor_z + cfg.height)])
-    return grid, sensors, cfg
+    # The robot's NVPs (the planner's blind zone and footprint); the gains are timed below.
+    cands = plan(belief, pose, [pose[:3, 3]], [(5.0, 2.0)], PlanningConfig(scanner=cfg, predict_gains=False)).candidates
+    return belief.grid, sensor_positions(cands.points, belief.roi.floor_z, cfg), cfg
 
 
 def main() -> None:

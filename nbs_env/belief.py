@@ -9,12 +9,12 @@ robot's own pose estimates.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from nbs_env.config import ScannerConfig
-from nbs_env.labels import VoxelLabel
+from nbs_env.labels import VoxelLabel, is_occupied
 from nbs_env.mapping.voxels import IntegrationStats, VoxelGrid
 from nbs_env.perception.faces import WallFace
 from nbs_env.perception.roi import RoI, RoIConfig, RoIScan, compute_roi
@@ -22,7 +22,7 @@ from nbs_env.perception.structure import SEClassifier, label_points
 from nbs_env.sensing.registration import AccumulatedCloud
 from nbs_env.sensing.scanner import Scan
 
-__all__ = ["BeliefUpdate", "RoomBelief"]
+__all__ = ["BeliefUpdate", "RoomBelief", "RoomModel"]
 
 
 @dataclass(frozen=True)
@@ -33,6 +33,35 @@ class BeliefUpdate:
     structure_points: int
     clutter_points: int
     times: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class RoomModel:
+    """The structural model the robot recovered for one room, from its own measurements.
+
+    Attributes
+    ----------
+    index : int
+        The robot's number for the room (the order it entered them in).
+    polygon : (n, 2) float
+        The RoI outline, counter-clockwise.
+    floor_z, ceiling_z : float
+    se_faces : list of WallFace
+        The RoI wall faces classified SE.
+    points : (m, 3) float
+        The room's registered points, downsampled to 5 cm (the perception working copy, whatever
+        the voxel size of V(t)).
+    structure : (m,) bool
+        Which of ``points`` are labelled Structure.
+    """
+
+    index: int
+    polygon: np.ndarray
+    floor_z: float
+    ceiling_z: float
+    se_faces: list[WallFace]
+    points: np.ndarray = field(repr=False)
+    structure: np.ndarray = field(repr=False)
 
 
 class RoomBelief:
@@ -54,6 +83,7 @@ class RoomBelief:
     margin : float
         How far V(t) extends beyond the RoI prism, metres.
     roi_config : RoIConfig, optional
+        Its ``azimuth_bins`` is capped at the scanner's columns.
     exclude : list of (k, 2) float, optional
         Outlines of the rooms scanned before (the robot's own RoIs), kept out of this room's RoI.
     """
@@ -74,7 +104,8 @@ class RoomBelief:
         self.margin = margin
         # More azimuth bins than the scanner has columns leave most bins empty, and the RoI would
         # refuse a scan that sees a quarter of them or less (measured: every door-frame scan at 1°).
-        self.roi_config = roi_config or RoIConfig(azimuth_bins=min(RoIConfig().azimuth_bins, scanner.n_cols))
+        roi_config = roi_config or RoIConfig()
+        self.roi_config = replace(roi_config, azimuth_bins=min(roi_config.azimuth_bins, scanner.n_cols))
         self.exclude = list(exclude or [])
         self.scans: list[RoIScan] = []
         self.cloud = AccumulatedCloud(voxel_size=perception_voxel, normals=False, rooms=False)
@@ -141,12 +172,35 @@ class RoomBelief:
         structure = label_points(working[ok], se_faces, roi.floor_z, roi.ceiling_z, roi.polygon)
         flat = np.ravel_multi_index(idx.T, grid.shape)
         labels = grid.labels.reshape(-1)
-        occupied = (labels[flat] == VoxelLabel.CLUTTER) | (labels[flat] == VoxelLabel.STRUCTURE)
+        occupied = is_occupied(labels[flat])
         # A voxel is Structure when any of its points is.
         has_structure = np.zeros(labels.size, dtype=bool)
         has_structure[flat[structure]] = True
         target = flat[occupied]
         labels[target] = np.where(has_structure[target], VoxelLabel.STRUCTURE, VoxelLabel.CLUTTER)
+
+    def cover(self, xy: np.ndarray, reach: float) -> None:
+        """Grow V(t) (with Unknown) to hold the floor within ``reach`` metres of ``xy``.
+
+        A poor registration can put the pose estimate outside the room's grid; the robot still
+        stands somewhere, and the planner needs its cell.
+        """
+        grid = self.grid
+        if grid is None:
+            return
+        xy = np.asarray(xy, dtype=float)[:2]
+        if np.any(xy < grid.origin[:2]) or np.any(xy >= grid.upper[:2]):
+            grid.ensure_covers(np.array([*(xy - reach), grid.origin[2]]), np.array([*(xy + reach), grid.upper[2]]))
+
+    def model(self, index: int) -> RoomModel | None:
+        """The room's recovered model (None before its first scan), under the robot's number ``index``."""
+        roi = self.roi
+        if roi is None:
+            return None
+        points = self.cloud.working_points()
+        se_faces = self.se_faces
+        structure = label_points(points, se_faces, roi.floor_z, roi.ceiling_z, roi.polygon)
+        return RoomModel(index, roi.polygon.copy(), roi.floor_z, roi.ceiling_z, se_faces, points, structure)
 
     def occluded_structure_centres(self) -> np.ndarray:
         """(n, 3) float: world centres of the OCCLUDED_STRUCTURE voxels."""

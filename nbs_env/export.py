@@ -3,7 +3,7 @@
 :func:`write_report` writes, from an :class:`~nbs_env.env.NBSEnv` after an episode:
 
 ================  ====================================================================================
-``metrics.json``  :func:`metrics_dict`, the schema below
+``metrics.json``  :func:`nbs_env.evaluation.metrics_dict` (its schema is documented there)
 ``structure.ply`` the registered points labelled Structure, of every room model
 ``cloud.ply``     every registered point of the room models, with a ``label`` (1 Structure, 0 Clutter)
 ``model.obj``     the recovered structural model (:func:`structural_model`): SE walls, floors, ceilings
@@ -11,89 +11,22 @@
 ================  ====================================================================================
 
 The point clouds are the rooms' 5 cm working copies (the voxel-downsampled clouds that perception
-works on, :attr:`nbs_env.robot.RoomModel.points`), not the full-resolution scans, placed with the
+works on, :attr:`nbs_env.belief.RoomModel.points`), not the full-resolution scans, placed with the
 robot's own pose estimates.
-
-The metrics schema, ``"nbs-metrics/1"``
----------------------------------------
-A stable, versioned format: a later version may add keys, never remove or retype one without
-changing the version. Every value is a plain JSON type. Lengths are metres, times seconds,
-percentages in 0..100 of the true structural surface (floor, ceiling and wall samples of the
-evaluation, :class:`nbs_env.metrics.CoverageMeter`). This is the evaluation side: it reads the
-scene's ground truth (true positions, true rooms), which the robot never sees.
-
-.. code-block:: text
-
-    schema                  "nbs-metrics/1"
-    scene                   str     the scene as given (bundled name, file, generated:SEED)
-    policy                  str     the policy's name
-    seed                    int | null
-    complete                bool    the storey was completed (False: the scan budget ran out)
-    scans                   int     scans taken, door-frame scans included
-    structure_sensed_pct    float   true structural surface sensed, % of the storey's
-    path_length_m           float   distance driven
-    processed_points        int     points the pipeline processed (the paper's measure): the SE
-                                    points for a structure-aware policy (ours), every point for
-                                    the structure-agnostic compared methods
-    measured_points         int     points of all scans
-    processing_time_s       float   registration, RoI, classification, voxels, planning, and the
-                                    policy's own decision time
-    policy_time_s           float   the policy's decision time alone
-    acquisition_time_s      float   simulated scanner time
-    travel_time_s           float   path_length_m / config.travel_speed
-    registration_error      {mean_m, max_m, mean_deg, max_deg}: pose estimate vs true pose,
-                            over the scans
-    rooms                   list, one per TRUE room of the scene, in scene order:
-        id                  int     the scene's room id
-        name                str
-        scans               int     scans whose true position lies in the room (0: never scanned)
-        structure_sensed_pct float  the room's structural surface sensed, % of the room's
-        path_length_m       float   the legs driven to the room's scans
-        processed_points    int
-        processing_time_s   float
-    steps                   list, one per scan, in order:
-        scan                int     0, 1, ...
-        room                int | null  the true room of the scan (see below)
-        position            [x, y, z]   true scanner position
-        estimated_position  [x, y, z]   the robot's estimate
-        predicted_gain      int     predicted Occluded-structure→Structure conversions (0: first scan
-                                    of a room)
-        structure_sensed_pct float  cumulative
-        path_length_m       float   cumulative
-        processing_time_s   float
-        points              int     points of the scan
-        structure_points    int     of which labelled Structure
-        door                bool    a scan taken in a door frame on entering a room
-        times               {stage: seconds}: scan, registration, roi, classification, voxels,
-                            planning, evaluation
-    door_events             list of the env's door events (detected, crossed, unreachable)
-    config                  the env's EnvConfig as a dict (tuples as lists)
-
-A scan belongs to the true room whose floor polygon (clear floor inside the walls) contains its
-true position, with one exception: a door-frame scan (``door``: the first scan of a room, taken
-standing in the door) stands on the wall face of the room just left, a few centimetres inside its
-polygon, but belongs to the room entered. It goes to the true room that holds most of the other
-scans the robot took in the same room; when there are none (the budget ran out on entering), to the
-nearest room within 0.5 m that no earlier scan was in. A scan in no polygon (drift at a wall) goes to
-the majority room of its robot room, else to the nearest room within 0.5 m, else to none
-(``null``). A room's ``path_length_m`` is the sum of the legs driven to its scans, so the drive to a
-door counts for the room entered.
 """
 
 from __future__ import annotations
 
 import json
-import math
-from collections import Counter
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import shapely
 import trimesh
-from shapely.geometry import MultiPolygon, Point, Polygon
+from shapely.geometry import MultiPolygon, Polygon
 
-from nbs_env.robot import RoomModel
+from nbs_env.belief import RoomModel
+from nbs_env.evaluation import metrics_dict
 
 if TYPE_CHECKING:
     from nbs_env.env import NBSEnv
@@ -101,25 +34,17 @@ if TYPE_CHECKING:
 __all__ = [
     "FACE_KINDS",
     "REPORT_FILES",
-    "SCHEMA",
-    "metrics_dict",
     "structural_model",
     "write_model_obj",
     "write_points_ply",
     "write_report",
 ]
 
-#: The version tag of :func:`metrics_dict`'s output.
-SCHEMA = "nbs-metrics/1"
-
 #: Face kinds of :func:`structural_model`, indexed by its ``face_attributes["kind"]``.
 FACE_KINDS = ("wall", "floor", "ceiling")
 
 #: The files :func:`write_report` writes, in its output folder.
 REPORT_FILES = ("metrics.json", "structure.ply", "cloud.ply", "model.obj", "topdown.png")
-
-#: How far (m) a scan outside every room polygon may lie from a room to be counted in it.
-ROOM_TOLERANCE = 0.5
 
 
 # ---------------------------------------------------------------------- point clouds
@@ -303,185 +228,6 @@ def write_model_obj(path: str | Path, rooms: list[RoomModel]) -> Path:
     return path
 
 
-# ---------------------------------------------------------------------- metrics
-def _jsonable(value: Any) -> Any:
-    """``value`` with numpy scalars and arrays, tuples and Paths made plain JSON types."""
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        value = float(value)
-        return value if math.isfinite(value) else None
-    if isinstance(value, Path):
-        return str(value)
-    if value is None or isinstance(value, str):
-        return value
-    raise TypeError(f"cannot make a {type(value).__name__} JSON-safe")
-
-
-def _true_rooms(env: NBSEnv) -> list[int | None]:
-    """The true room id of every scan (the module docstring says how door-frame scans are placed)."""
-    rooms = env.scene.rooms
-    polys = [Polygon(np.asarray(r.polygon, dtype=float)) for r in rooms]
-    steps = env.steps
-    points = [Point(float(s.true_position[0]), float(s.true_position[1])) for s in steps]
-    contained: list[int | None] = []
-    for point in points:
-        inside = [r.id for r, p in zip(rooms, polys, strict=True) if shapely.contains_xy(p, point.x, point.y)]
-        contained.append(int(inside[0]) if inside else None)
-    # The true room of each robot room, by the majority of its scans away from doors.
-    votes: dict[int, Counter] = {}
-    for step, room in zip(steps, contained, strict=True):
-        if room is not None and not step.door:
-            votes.setdefault(int(step.room), Counter())[room] += 1
-
-    def nearest(point: Point, exclude: set[int | None]) -> int | None:
-        best, best_distance = None, ROOM_TOLERANCE
-        for room, poly in zip(rooms, polys, strict=True):
-            distance = poly.distance(point)
-            if room.id not in exclude and distance <= best_distance:
-                best, best_distance = int(room.id), distance
-        return best
-
-    out: list[int | None] = []
-    for i, step in enumerate(steps):
-        vote = votes.get(int(step.room))
-        majority = int(vote.most_common(1)[0][0]) if vote else None
-        if step.door:
-            # Taken in a door frame, which stands on the wall face of the room just left: the scan
-            # belongs to the room entered, a room no earlier scan was in.
-            room = majority if majority is not None else nearest(points[i], set(out))
-            out.append(room if room is not None else contained[i])
-        elif contained[i] is not None:
-            out.append(contained[i])
-        else:
-            out.append(majority if majority is not None else nearest(points[i], set()))
-    return out
-
-
-def metrics_dict(
-    env: NBSEnv,
-    scene_name: str,
-    policy: str,
-    seed: int | None,
-    policy_times: dict[int, float] | None = None,
-    structure_aware: bool | None = None,
-) -> dict[str, Any]:
-    """The ``metrics.json`` content of an episode (schema ``"nbs-metrics/1"``, module docstring).
-
-    Parameters
-    ----------
-    env : NBSEnv
-        After ``reset`` and any number of steps.
-    scene_name : str
-        The scene as the user named it.
-    policy : str
-        The policy's name (an object with a ``name`` attribute is also taken).
-    seed : int or None
-        The seed given to ``reset``.
-    policy_times : dict of int to float, optional
-        Seconds the policy spent deciding, by the index of the scan its decision led to; added to
-        that scan's processing time (the greedy's gains are already in the env's planning stage).
-    structure_aware : bool, optional
-        Whether the policy's pipeline keeps only the SE points (the paper's method) or processes
-        every point (the structure-agnostic methods), for ``processed_points``; by default the
-        policy object's ``structure_aware`` attribute, else True.
-
-    Returns
-    -------
-    dict
-        Plain JSON types only.
-    """
-    if structure_aware is None:
-        structure_aware = bool(getattr(policy, "structure_aware", True))
-    policy_times = policy_times or {}
-    steps = env.steps
-    if not steps:
-        raise ValueError("the env has no scans: call reset() first")
-
-    def processed(s) -> int:
-        return int(s.structure_points if structure_aware else s.points)
-
-    def processing(i: int) -> float:
-        return float(steps[i].processing_time + policy_times.get(i, 0.0))
-
-    policy_name = str(getattr(policy, "name", policy))
-    meter = env.meter
-    true_rooms = _true_rooms(env)
-    cumulative = np.array([float(s.path_length) for s in steps])
-    legs = np.diff(cumulative, prepend=0.0)
-    path_length = float(cumulative[-1])
-    reg = np.array([s.registration_error for s in steps], dtype=float).reshape(-1, 2)
-
-    rooms = []
-    for room in env.scene.rooms:
-        mine = [i for i, r in enumerate(true_rooms) if r == room.id]
-        rooms.append(
-            {
-                "id": int(room.id),
-                "name": str(room.name),
-                "scans": len(mine),
-                "structure_sensed_pct": float(meter.percent(room=room.id)),
-                "path_length_m": float(sum(legs[i] for i in mine)),
-                "processed_points": int(sum(processed(steps[i]) for i in mine)),
-                "processing_time_s": float(sum(processing(i) for i in mine)),
-            }
-        )
-
-    step_rows = [
-        {
-            "scan": int(s.scan),
-            "room": room,
-            "position": [float(v) for v in s.true_position[:3]],
-            "estimated_position": [float(v) for v in s.estimated_position[:3]],
-            "predicted_gain": int(s.predicted_gain),
-            "structure_sensed_pct": float(s.structure_sensed_pct),
-            "path_length_m": float(s.path_length),
-            "processing_time_s": processing(k),
-            "points": int(s.points),
-            "structure_points": int(s.structure_points),
-            "door": bool(s.door),
-            "times": {str(k): float(v) for k, v in s.times.items()},
-        }
-        for k, (s, room) in enumerate(zip(steps, true_rooms, strict=True))
-    ]
-
-    metrics = {
-        "schema": SCHEMA,
-        "scene": str(scene_name),
-        "policy": policy_name,
-        "seed": None if seed is None else int(seed),
-        "complete": bool(env.complete),
-        "scans": len(steps),
-        "structure_sensed_pct": float(meter.percent()),
-        "path_length_m": path_length,
-        "processed_points": int(sum(processed(s) for s in steps)),
-        "measured_points": int(sum(s.points for s in steps)),
-        "processing_time_s": float(sum(processing(i) for i in range(len(steps)))),
-        "policy_time_s": float(sum(policy_times.values())),
-        "acquisition_time_s": float(sum(s.acquisition_time for s in steps)),
-        "travel_time_s": path_length / float(env.config.travel_speed),
-        "registration_error": {
-            "mean_m": float(reg[:, 0].mean()),
-            "max_m": float(reg[:, 0].max()),
-            "mean_deg": float(reg[:, 1].mean()),
-            "max_deg": float(reg[:, 1].max()),
-        },
-        "rooms": rooms,
-        "steps": step_rows,
-        "door_events": env.door_events,
-        "config": env.config.to_dict(),
-    }
-    return _jsonable(metrics)
-
-
 # ---------------------------------------------------------------------- the report
 def write_report(
     env: NBSEnv,
@@ -501,7 +247,7 @@ def write_report(
     out_dir : str or Path
         Created if missing; existing report files are overwritten.
     scene_name, policy, seed, policy_times
-        As for :func:`metrics_dict`.
+        As for :func:`nbs_env.evaluation.metrics_dict`.
 
     Returns
     -------
@@ -518,10 +264,10 @@ def write_report(
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    metrics = metrics_dict(env, scene_name, policy, seed, policy_times)
+    metrics = metrics_dict(env.storey, scene_name, policy, seed, policy_times)
     (out / "metrics.json").write_text(json.dumps(metrics, indent=1) + "\n")
 
-    models = env.room_models()
+    models = env.storey.room_models()
     if models:
         points = np.concatenate([np.asarray(m.points, dtype=float).reshape(-1, 3) for m in models])
         structure = np.concatenate([np.asarray(m.structure, dtype=bool).reshape(-1) for m in models])

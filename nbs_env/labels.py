@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from enum import IntEnum
 
-__all__ = ["OCCUPIED", "VoxelLabel"]
+import numpy as np
+
+__all__ = ["LABEL_COLOURS", "OCCUPIED", "VoxelLabel", "is_occupied"]
 
 
 class VoxelLabel(IntEnum):
@@ -20,3 +22,26 @@ class VoxelLabel(IntEnum):
 
 #: Labels of voxels that hold points.
 OCCUPIED = (VoxelLabel.CLUTTER, VoxelLabel.STRUCTURE)
+
+
+def is_occupied(labels: np.ndarray) -> np.ndarray:
+    """Bool array of ``labels``' shape: which voxels are :data:`OCCUPIED` (hold points)."""
+    labels = np.asarray(labels)
+    return (labels == OCCUPIED[0]) | (labels == OCCUPIED[1])
+
+
+#: (6, 3) uint8 RGB of each VoxelLabel, by value: the one palette of pictures and PLY exports.
+#: Structure blue and Occluded-structure green as in the paper's Fig. 4; Unknown white and Empty a
+#: light grey, so that a top-down picture shows what was seen.
+LABEL_COLOURS = np.array(
+    [
+        [255, 255, 255],  # UNKNOWN
+        [237, 237, 230],  # EMPTY
+        [242, 153, 51],  # CLUTTER
+        [31, 119, 180],  # STRUCTURE
+        [252, 217, 140],  # OCCLUDED_CLUTTER
+        [44, 160, 44],  # OCCLUDED_STRUCTURE
+    ],
+    dtype=np.uint8,
+)
+LABEL_COLOURS.setflags(write=False)

@@ -1,4 +1,5 @@
-"""Fixed-shape views of the robot's belief for a policy: the voxel window and the candidate table.
+"""What a policy sees: the robot's belief as a :class:`BeliefView`, and its fixed-shape observation
+(the voxel window and the candidate table).
 
 The labelled grid V(t) grows as the room is discovered, and every room has its own. A policy needs
 a fixed shape, so the observation is a window of the current room's grid, centred on the robot's
@@ -8,21 +9,36 @@ keeps, per cell, the label that matters most to the method, by a fixed priority:
     STRUCTURE > OCCLUDED_STRUCTURE > CLUTTER > OCCLUDED_CLUTTER > EMPTY > UNKNOWN
 
 so that one Structure voxel among many Empty ones still shows, and an unsensed piece of wall is never
-hidden by the free space in front of it. Cells outside the grid are UNKNOWN. No gymnasium import.
+hidden by the free space in front of it. Cells outside the grid are UNKNOWN.
+
+The candidate table has one row per NVP slot and the columns :class:`CandidateColumn`; policies
+index it by name (``table[:, CandidateColumn.PATH_LENGTH]``), never by number. No gymnasium import.
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from enum import IntEnum
 from typing import Any
 
 import numpy as np
 
-from nbs_env.config import _finite, _require
+from nbs_env.config import ScannerConfig, _finite, _require
 from nbs_env.labels import VoxelLabel
 from nbs_env.mapping.voxels import VoxelGrid
+from nbs_env.perception.roi import RoI
 
-__all__ = ["CANDIDATE_FEATURES", "ObservationConfig", "candidate_table", "pool_labels", "voxel_window"]
+__all__ = [
+    "CANDIDATE_FEATURES",
+    "BeliefView",
+    "CandidateColumn",
+    "ObservationConfig",
+    "candidate_table",
+    "candidate_table_of",
+    "observe",
+    "pool_labels",
+    "voxel_window",
+]
 
 #: Pooling priority, lowest first (see the module docstring).
 _PRIORITY = (
@@ -38,8 +54,80 @@ for _rank, _label in enumerate(_PRIORITY):
     _RANK[int(_label)] = _rank
 _LABEL_OF_RANK = np.array([int(label) for label in _PRIORITY], dtype=np.uint8)
 
-#: Columns of the candidate table, in order.
-CANDIDATE_FEATURES = ("dx", "dy", "path_length", "predicted_gain", "valid")
+
+class CandidateColumn(IntEnum):
+    """The columns of the candidate table."""
+
+    DX = 0  # metres along world x from the robot's estimated position
+    DY = 1  # metres along world y
+    PATH_LENGTH = 2  # geodesic path length, metres
+    PREDICTED_GAIN = 3  # predicted conversions as a share of the room's structural voxels
+    VALID = 4  # 1 for a real NVP, 0 for padding
+
+
+#: Names of the candidate table's columns, in order.
+CANDIDATE_FEATURES = tuple(c.name.lower() for c in CandidateColumn)
+
+
+@dataclass(frozen=True)
+class BeliefView:
+    """What the robot believes, for policies that keep their own state (``info["belief"]``), and
+    what the observation is built from.
+
+    Everything here is the robot's: measured points placed with its pose estimates, its own grid,
+    RoI and plan. Nothing is ground truth. Arrays are references into the live belief: read, never
+    write.
+
+    Attributes
+    ----------
+    pose : (4, 4) float
+        The pose estimate.
+    room : int
+        The robot's number of the room it is in.
+    new_room : bool
+        This step (or reset) started the room: maps of the previous room no longer apply.
+    scans : list of ((n, 3) float, (3,) float)
+        The scans registered during this step (a door crossing adds one): world points and the
+        scanner position.
+    grid : VoxelGrid or None
+        The room's labelled voxel space V(t).
+    roi : RoI or None
+        The room's region of interest.
+    se : (f,) bool
+        Which of ``roi.wall_faces`` are classified SE.
+    candidates_xy : (K, 2) float
+        World positions of the NVPs (zeros for padding, and all padding once the episode is over).
+    path_length : (K,) float
+        Geodesic path lengths to them.
+    mask : (K,) bool
+        Which entries are real.
+    gains : (K,) int64
+        The greedy's predicted Occluded-structure→Structure conversions, voxels (zeros when the
+        robot does not predict gains).
+    gain_share : (K,) float
+        ``gains`` as shares of the room's structural voxels.
+    scanner : ScannerConfig
+        The scanner's pattern and limits.
+    """
+
+    pose: np.ndarray
+    room: int
+    new_room: bool
+    scans: list[tuple[np.ndarray, np.ndarray]]
+    grid: VoxelGrid | None
+    roi: RoI | None
+    se: np.ndarray
+    candidates_xy: np.ndarray
+    path_length: np.ndarray
+    mask: np.ndarray
+    gains: np.ndarray
+    gain_share: np.ndarray
+    scanner: ScannerConfig
+
+    @property
+    def count(self) -> int:
+        """How many NVPs are real."""
+        return int(np.count_nonzero(self.mask))
 
 
 @dataclass(frozen=True)
@@ -146,25 +234,49 @@ def voxel_window(
     return pool_labels(grid.labels, tuple(cell_of), shape)
 
 
-def candidate_table(
-    xy: np.ndarray,
-    path_length: np.ndarray,
-    gains: np.ndarray,
-    mask: np.ndarray,
-    robot_xy: np.ndarray,
-    structural_voxels: int,
-) -> np.ndarray:
-    """(K, 5) float32 rows ``CANDIDATE_FEATURES`` for the K candidate slots.
+def candidate_table(view: BeliefView) -> np.ndarray:
+    """(K, 5) float32: the rows of the K candidate slots, columns :class:`CandidateColumn`.
 
-    ``predicted_gain`` is the predicted Occluded-structure→Structure conversions as a share of the
+    ``PREDICTED_GAIN`` is the predicted Occluded-structure→Structure conversions as a share of the
     room's structural voxels (Structure + Occluded-structure), so that it reads alike at any voxel
     size. Padding rows are all zero.
     """
-    k = len(mask)
-    table = np.zeros((k, len(CANDIDATE_FEATURES)), dtype=np.float32)
-    m = np.asarray(mask, dtype=bool)
-    table[m, 0:2] = np.asarray(xy, dtype=float)[m] - np.asarray(robot_xy, dtype=float)
-    table[m, 2] = np.asarray(path_length, dtype=float)[m]
-    table[m, 3] = np.asarray(gains, dtype=float)[m] / max(1, int(structural_voxels))
-    table[m, 4] = 1.0
+    m = np.asarray(view.mask, dtype=bool)
+    table = np.zeros((len(m), len(CandidateColumn)), dtype=np.float32)
+    # The lattice points at float32, as the candidate list stores them (Candidates.xy).
+    xy = np.asarray(view.candidates_xy, dtype=np.float32).astype(float)
+    table[m, CandidateColumn.DX : CandidateColumn.DY + 1] = xy[m] - np.asarray(view.pose, dtype=float)[:2, 3]
+    table[m, CandidateColumn.PATH_LENGTH] = np.asarray(view.path_length, dtype=float)[m]
+    table[m, CandidateColumn.PREDICTED_GAIN] = np.asarray(view.gain_share, dtype=float)[m]
+    table[m, CandidateColumn.VALID] = 1.0
     return table
+
+
+def candidate_table_of(obs: dict[str, np.ndarray]) -> np.ndarray:
+    """(..., K, 5) float32: ``obs["candidates"]`` as a table with columns :class:`CandidateColumn`
+    (works on a single observation and on a batch from a vector env)."""
+    flat = np.asarray(obs["candidates"])
+    return flat.reshape(*flat.shape[:-1], -1, len(CandidateColumn))
+
+
+def observe(view: BeliefView, config: ObservationConfig) -> dict[str, np.ndarray]:
+    """The env's observation of a belief: ``voxels``, ``candidates`` (flat) and ``pose``.
+
+    Returns
+    -------
+    dict
+        ``voxels`` ``config.shape`` uint8; ``candidates`` (K·5,) float32; ``pose`` (4,) float32 x, y,
+        z (m) and yaw (rad); all clipped to the observation space's ±1e4.
+    """
+    pose = view.pose
+    xy = pose[:2, 3]
+    floor_z = view.roi.floor_z if view.roi is not None else float(pose[2, 3] - view.scanner.height)
+    voxels = voxel_window(view.grid, xy, floor_z, config)
+    table = candidate_table(view)
+    yaw = float(np.arctan2(pose[1, 0], pose[0, 0]))
+    pose_vec = np.array([pose[0, 3], pose[1, 3], pose[2, 3], yaw], dtype=np.float32)
+    return {
+        "voxels": voxels,
+        "candidates": np.clip(table, -1e4, 1e4).reshape(-1),
+        "pose": np.clip(pose_vec, -1e4, 1e4),
+    }

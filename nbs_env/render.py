@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nbs_env.labels import LABEL_COLOURS as LABEL_PALETTE
 from nbs_env.perception.roi import RoI
 
 __all__ = ["plot_roi", "save_roi_png"]
@@ -107,17 +108,8 @@ def save_roi_png(roi: RoI, se: Sequence[bool] | np.ndarray, path: str | Path, **
     return path
 
 
-#: Colours of the voxel labels in top-down pictures (RGB in 0..1), by VoxelLabel value.
-LABEL_COLOURS = np.array(
-    [
-        [1.00, 1.00, 1.00],  # UNKNOWN
-        [0.93, 0.93, 0.90],  # EMPTY
-        [0.95, 0.60, 0.20],  # CLUTTER
-        [0.12, 0.47, 0.71],  # STRUCTURE
-        [0.99, 0.85, 0.55],  # OCCLUDED_CLUTTER
-        [0.84, 0.15, 0.16],  # OCCLUDED_STRUCTURE
-    ]
-)
+#: The voxel labels' palette (nbs_env.labels.LABEL_COLOURS) as RGB in 0..1, for matplotlib.
+LABEL_COLOURS = np.asarray(LABEL_PALETTE, dtype=float) / 255.0
 
 
 def top_labels(labels: np.ndarray, origin_z: float, voxel_size: float, floor_z: float, ceiling_z: float) -> np.ndarray:

@@ -1,97 +1,49 @@
-"""One cycle of the method, with no gymnasium import: move, scan, register, perceive, map, plan.
+"""The mobile scanner, with no gymnasium import: move, scan, register, perceive and map; doors.
 
-The :class:`Robot` couples the simulator (the true scene, the true pose, the scanner) with the
-robot's belief (its pose estimate, S(t), the current room's RoI and V(t), its candidates). Everything
+The :class:`Robot` couples the simulator (the true scene, the true pose, the scanner, odometry) with
+the robot's estimator and belief (its pose estimate, S(t), the current room's RoI and V(t)). Everything
 the robot decides from is in its belief; the simulator's state is kept in attributes named ``true_*``.
 
-It scans the room it is in (METHOD §6-7); when the room is complete, :meth:`Robot.finish_room`
-detects its doors, and :meth:`Robot.cross_door` drives to the nearest unvisited one, stands under its
-frame and takes the first scan of the next room (METHOD §8).
+- :meth:`Robot.scan` and :meth:`Robot.move_to`: one cycle of the method in a room (METHOD §1-6):
+  drive (with drift), scan the true building, register, update the belief.
+- :meth:`Robot.plan`: the next decision's NVPs and gains, from
+  :func:`nbs_env.planning.planner.plan` (a query: it never writes into the belief).
+- The door memory (METHOD §8): :meth:`Robot.finish_room` detects the doors of the room just done,
+  :meth:`Robot.next_door` picks the nearest unvisited one, :meth:`Robot.cross_door` drives there,
+  stands under its frame and takes the first scan of the next room.
+
+When a room is done is the storey session's decision (:mod:`nbs_env.storey`), not the robot's.
 """
 
 from __future__ import annotations
 
 import itertools
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from shapely.geometry import Point, Polygon
 
-from nbs_env.belief import BeliefUpdate, RoomBelief
-from nbs_env.config import OdometryConfig, RegistrationConfig, ScannerConfig, _finite, _require
+from nbs_env.belief import BeliefUpdate, RoomBelief, RoomModel
+from nbs_env.config import OdometryConfig
 from nbs_env.errors import UnreachableDoorError
 from nbs_env.labels import VoxelLabel
 from nbs_env.perception.doors import detect_doors
-from nbs_env.perception.faces import WallFace
-from nbs_env.perception.structure import label_points
-from nbs_env.planning.navigation import (
-    Candidates,
-    NavigationConfig,
-    assume_blind_zone_free,
-    candidates,
-    geodesic,
-    traversability,
-)
-from nbs_env.planning.visibility import GainConfig, VisibilityModel
+from nbs_env.planning.navigation import Geodesic, TraversabilityMap, geodesic
+from nbs_env.planning.planner import Plan, plan, traversable_floor
 from nbs_env.sensing.odometry import Odometry
 from nbs_env.sensing.pose import planar, pose_error, yaw_of
 from nbs_env.sensing.registration import AccumulatedCloud, RegistrationResult, register
 from nbs_env.sensing.scanner import Scan, Scanner
+from nbs_env.settings import RobotConfig
 from scenes import Scene
 
-__all__ = ["KnownDoor", "Robot", "RobotConfig", "RoomModel", "StepReport"]
+__all__ = ["DOOR_APPROACH", "SAME_DOOR", "KnownDoor", "Robot", "StepReport"]
 
-
-@dataclass(frozen=True)
-class RobotConfig:
-    """Everything the robot is made of (JSON-safe, frozen).
-
-    Attributes
-    ----------
-    completion_fraction : float
-        The room is complete when the best predicted gain falls below this share of the room's
-        structural voxels (Structure + Occluded-structure), METHOD §7. METHOD's 1% was changed to 3%
-        after measuring greedy runs (default config, seed 0): on ``five_rooms`` 1% took 30 scans for
-        95.0% of the structural surface, 3% 21 scans for 93.6%, 5% 17 scans for 93.6%; on six
-        generated 2-3-room storeys (seeds 500000-500005) 1% took 88 scans for a mean 80.9%, 3% 73
-        scans for 88.1%, 5% 49 scans for 78.0% (the coverage there depends mostly on which doors are
-        found, which changes with the scans taken).
-    max_scans_per_room : int
-        The scan cap per room.
-    perfect_localisation : bool
-        Skip odometry drift and registration (the belief is the true pose): for fast RL.
-    predict_gains : bool
-        Compute the greedy's predicted gain of every NVP. Policies with their own utility turn it
-        off, so that their processing time does not carry the greedy's; room completion by gain
-        (METHOD §7) then cannot run.
-    """
-
-    scanner: ScannerConfig = field(default_factory=ScannerConfig)
-    odometry: OdometryConfig = field(default_factory=OdometryConfig)
-    registration: RegistrationConfig = field(default_factory=RegistrationConfig)
-    navigation: NavigationConfig = field(default_factory=NavigationConfig)
-    gain: GainConfig = field(default_factory=GainConfig)
-    voxel_size: float = 0.05
-    completion_fraction: float = 0.03
-    max_scans_per_room: int = 12
-    perfect_localisation: bool = False
-    predict_gains: bool = True
-
-    def __post_init__(self) -> None:
-        _finite(voxel_size=self.voxel_size, completion_fraction=self.completion_fraction)
-        _require(0.01 <= self.voxel_size <= 1.0, f"voxel_size must be within [0.01, 1] metres, got {self.voxel_size}")
-        _require(
-            0.0 <= self.completion_fraction < 1.0,
-            f"completion_fraction is a share in [0, 1), got {self.completion_fraction}",
-        )
-        _require(
-            isinstance(self.max_scans_per_room, int) and self.max_scans_per_room >= 1,
-            f"max_scans_per_room must be an integer >= 1, got {self.max_scans_per_room!r}",
-        )
-
-    def to_dict(self) -> dict:
-        return asdict(self)
+#: How far in front of a door frame the robot stops to approach it, metres.
+DOOR_APPROACH = 0.5
+#: Doors detected closer than this (metres) are one door seen from both sides.
+SAME_DOOR = 0.6
 
 
 @dataclass
@@ -108,37 +60,12 @@ class KnownDoor:
 
 
 @dataclass(frozen=True)
-class RoomModel:
-    """The structural model the robot recovered for one room, from its own measurements.
-
-    Attributes
-    ----------
-    index : int
-        The robot's number for the room (the order it entered them in).
-    polygon : (n, 2) float
-        The RoI outline, counter-clockwise.
-    floor_z, ceiling_z : float
-    se_faces : list of WallFace
-        The RoI wall faces classified SE.
-    points : (m, 3) float
-        The room's registered points, downsampled to 5 cm (the perception working copy, whatever
-        the voxel size of V(t)).
-    structure : (m,) bool
-        Which of ``points`` are labelled Structure.
-    """
-
-    index: int
-    polygon: np.ndarray
-    floor_z: float
-    ceiling_z: float
-    se_faces: list[WallFace]
-    points: np.ndarray = field(repr=False)
-    structure: np.ndarray = field(repr=False)
-
-
-@dataclass(frozen=True)
 class StepReport:
-    """What one scan cycle did (``true_*`` fields are the simulator's, for evaluation only)."""
+    """What one scan cycle did (``true_*`` fields are the simulator's, for evaluation only).
+
+    ``conversions``: the voxels that were Occluded-structure before the move and are Structure
+    after its scan (counted when :meth:`Robot.move_to` is asked to; 0 otherwise).
+    """
 
     scan_index: int
     path_length: float
@@ -151,6 +78,7 @@ class StepReport:
     acquisition_time: float
     times: dict[str, float]
     world_points: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 3)))
+    conversions: int = 0
 
 
 class Robot:
@@ -177,24 +105,26 @@ class Robot:
         self.cloud = AccumulatedCloud(
             self.config.registration.voxel_size, normals=not self.config.perfect_localisation, rooms=False
         )
-        self.belief = RoomBelief(self.config.scanner, voxel_size=self.config.voxel_size)
+        self.belief = RoomBelief(self.config.scanner, voxel_size=self.config.voxel_size, roi_config=self.config.roi)
         self.visited: list[np.ndarray] = []
         self.stops: list[np.ndarray] = []
-        self.scans_in_room = 0
         self.path_length = 0.0
         start = np.asarray(scene.start[:2], dtype=float)
         self.true_pose = self._odometry.true_sensor_pose(start, 0.0, self._floor_z, self.config.scanner.height)
         # The robot knows where it starts (the origin of its map); it does not know its tilt.
         self.pose = planar(start[0], start[1], 0.0, self._floor_z + self.config.scanner.height)
-        self._candidates: Candidates | None = None
-        self._gains: np.ndarray | None = None
-        self._door_map = None
+        self._plan: Plan | None = None
+        self._door_map: tuple[TraversabilityMap, Geodesic] | None = None
         self.doors: list[KnownDoor] = []
         self.room_index = 0
         self.rooms_done: list[int] = []
         self.room_polygons: dict[int, Polygon] = {}
         self.room_models: list[RoomModel] = []
-        self.planning_time = 0.0
+
+    @property
+    def scans_in_room(self) -> int:
+        """Scans taken in the current room (its door-frame scan included)."""
+        return len(self.stops)
 
     # ------------------------------------------------------------------ the cycle
     def scan(
@@ -216,12 +146,12 @@ class Robot:
         world = scan.to_world(self.pose)
         self.cloud.add(world, self.pose[:3, 3], room=self.room_index)
         update = self.belief.add_scan(scan, self.pose, keep_direction)
+        nav = self.config.navigation
+        self.belief.cover(self.pose[:2, 3], nav.robot_radius + nav.safety_distance + 2 * self.config.voxel_size)
         times.update(update.times)
         self.visited.append(self.pose[:2, 3].copy())
         self.stops.append(self.pose[:3, 3].copy())
-        self.scans_in_room += 1
-        self._candidates = None
-        self._gains = None
+        self._plan = None
         self._door_map = None
         return StepReport(
             scan_index=len(self.stops) - 1,
@@ -237,41 +167,32 @@ class Robot:
             world_points=world,
         )
 
-    def candidates(self) -> tuple[Candidates, np.ndarray]:
-        """The next valid positions and their predicted gains, from the robot's own grid."""
-        if self._candidates is None:
-            t = time.perf_counter()
-            grid = self.belief.grid
-            assert grid is not None and self.belief.roi is not None, "scan first"
-            cfg = self.config
-            # A poor registration can put the pose estimate outside the room's grid; the robot
-            # still stands somewhere, so the grid grows (with Unknown) to hold it.
-            xy = self.pose[:2, 3]
-            if np.any(xy < grid.origin[:2]) or np.any(xy >= grid.upper[:2]):
-                reach = cfg.navigation.robot_radius + cfg.navigation.safety_distance + 2 * grid.voxel_size
-                grid.ensure_covers(np.array([*(xy - reach), grid.origin[2]]), np.array([*(xy + reach), grid.upper[2]]))
-            tmap = self._traversability(cfg.navigation)
-            self._candidates = candidates(tmap, self.pose[:2, 3], cfg.navigation)
-            sensors = np.column_stack(
-                [self._candidates.points, np.full(self._candidates.count, self.belief.roi.floor_z + cfg.scanner.height)]
-            )
-            gains = np.zeros(cfg.navigation.max_candidates, dtype=np.int64)
-            if cfg.predict_gains:
-                model = VisibilityModel(grid.labels, grid.origin, grid.voxel_size, cfg.gain)
-                gains[: self._candidates.count] = model.gains(sensors, cfg.scanner)
-            self._gains = gains
-            self.planning_time = time.perf_counter() - t
-        return self._candidates, self._gains
+    def plan(self) -> Plan:
+        """The next decision's NVPs and predicted gains, from the robot's own belief (kept until the
+        next scan)."""
+        if self._plan is None:
+            self._plan = plan(self.belief, self.pose, self.stops, self.visited, self.config.planning)
+        return self._plan
 
-    def move_to(self, index: int) -> StepReport:
-        """Drive the planned path to candidate ``index`` and scan there."""
-        cands, gains = self.candidates()
+    def move_to(self, index: int, count_conversions: bool = False) -> StepReport:
+        """Drive the planned path to NVP ``index`` and scan there.
+
+        ``count_conversions``: count the Occluded-structure voxels the scan turned into Structure
+        (:attr:`StepReport.conversions`).
+        """
+        planned = self.plan()
+        cands = planned.candidates
         if not (0 <= index < cands.count):
             raise IndexError(f"candidate {index} is not valid: {cands.count} candidates")
+        watched = self.belief.occluded_structure_centres() if count_conversions else None
         path = cands.path(index)
         heading = path[-1] - path[-2] if len(path) >= 2 else np.array([1.0, 0.0])
         self._drive(cands.points[index], float(np.arctan2(heading[1], heading[0])), float(cands.path_length[index]))
-        return self.scan(float(cands.path_length[index]), int(gains[index]))
+        report = self.scan(float(cands.path_length[index]), int(planned.gains[index]))
+        if watched is not None and len(watched):
+            converted = int(np.count_nonzero(self.belief.labels_at(watched) == VoxelLabel.STRUCTURE))
+            report = replace(report, conversions=converted)
+        return report
 
     def _drive(self, target_xy: np.ndarray, yaw: float, distance: float) -> None:
         """Execute a planned motion: the true robot moves by the planned displacement from where it
@@ -291,12 +212,12 @@ class Robot:
     def finish_room(self) -> list[KnownDoor]:
         """Detect the doors of the room just completed and add the new ones to the storey's list."""
         belief = self.belief
-        found = detect_doors(belief.se_faces, [(s.points, s.origin) for s in belief.scans])
+        found = detect_doors(belief.se_faces, [(s.points, s.origin) for s in belief.scans], self.config.doors)
         polygon = Polygon(belief.roi.polygon) if belief.roi is not None else None
         if polygon is not None:
             self.room_polygons[self.room_index] = polygon
         for door in found:
-            known = next((d for d in self.doors if np.linalg.norm(d.centre[:2] - door.centre[:2]) < 0.6), None)
+            known = next((d for d in self.doors if np.linalg.norm(d.centre[:2] - door.centre[:2]) < SAME_DOOR), None)
             if known is not None:
                 continue  # a door seen from both sides is one door
             self.doors.append(KnownDoor(door.centre, door.outward, door.width, self.room_index))
@@ -304,7 +225,7 @@ class Robot:
         for known in self.doors:
             if known.visited:
                 continue
-            beyond = Point(*(known.centre[:2] + 0.6 * known.outward))
+            beyond = Point(*(known.centre[:2] + SAME_DOOR * known.outward))
             for room, poly in self.room_polygons.items():
                 if room != known.found_in_room and poly.contains(beyond):
                     known.visited, known.entered_room = True, room
@@ -316,14 +237,7 @@ class Robot:
 
     def room_model(self) -> RoomModel | None:
         """The current room's recovered model (None before its first scan)."""
-        belief = self.belief
-        roi = belief.roi
-        if roi is None:
-            return None
-        points = belief.cloud.working_points()
-        se_faces = belief.se_faces
-        structure = label_points(points, se_faces, roi.floor_z, roi.ceiling_z, roi.polygon)
-        return RoomModel(self.room_index, roi.polygon.copy(), roi.floor_z, roi.ceiling_z, se_faces, points, structure)
+        return self.belief.model(self.room_index)
 
     def next_door(self) -> int | None:
         """The nearest unvisited door the robot can reach, by its estimated travel, or None."""
@@ -364,26 +278,20 @@ class Robot:
         return float(sum(np.linalg.norm(b - a) for a, b in itertools.pairwise(legs)))
 
     def _approach(self, door: KnownDoor) -> np.ndarray:
-        """The point 0.5 m in front of a door, on this side of it."""
+        """The point :data:`DOOR_APPROACH` in front of a door, on this side of it."""
         side = 1.0 if np.dot(self.pose[:2, 3] - door.centre[:2], door.outward) > 0 else -1.0
-        return door.centre[:2] + side * 0.5 * door.outward
+        return door.centre[:2] + side * DOOR_APPROACH * door.outward
 
-    def _traversability(self, navigation: NavigationConfig):
-        """The traversable floor of the current room from the robot's own grid."""
-        grid = self.belief.grid
-        assert grid is not None and self.belief.roi is not None, "scan first"
-        scanner = self.config.scanner
-        walkable = assume_blind_zone_free(
-            grid.labels, grid.origin, grid.voxel_size, self.stops, scanner.elevation_min, scanner.min_range
-        )
-        return traversability(walkable, grid.origin, grid.voxel_size, self.belief.roi.floor_z, navigation, self.visited)
-
-    def _door_routes(self):
+    def _door_routes(self) -> tuple[TraversabilityMap, Geodesic]:
         """Routes from here in the current room, kept until the next scan (one per room, not per door)."""
         if self._door_map is None:
+            belief = self.belief
+            assert belief.grid is not None and belief.roi is not None, "scan first"
             # Standing at a door needs only the robot's radius: its clearance would close a 0.8 m door.
-            narrow = NavigationConfig(**{**self.config.navigation.to_dict(), "safety_distance": 0.0})
-            tmap = self._traversability(narrow)
+            narrow = replace(self.config.navigation, safety_distance=0.0)
+            tmap = traversable_floor(
+                belief.grid, belief.roi.floor_z, self.stops, self.visited, self.config.scanner, narrow
+            )
             self._door_map = (tmap, geodesic(tmap, self.pose[:2, 3]))
         return self._door_map
 
@@ -396,7 +304,7 @@ class Robot:
             return None
         i, j = tmap.cell_of(target, "door approach")[0]
         length = float(route.distances[i, j])
-        return length + 0.5 if np.isfinite(length) else None
+        return length + DOOR_APPROACH if np.isfinite(length) else None
 
     def cross_door(self, k: int) -> StepReport:
         """Drive to door ``k``, stand under its frame, and take the first scan of the next room."""
@@ -415,36 +323,12 @@ class Robot:
             self.config.scanner,
             self.belief.classifier,
             voxel_size=self.config.voxel_size,
+            roi_config=self.config.roi,
             exclude=[m.polygon for m in self.room_models],
         )
-        self.scans_in_room = 0
         self.visited = [self.pose[:2, 3].copy()]
         self.stops = []
         return self.scan(length, 0, keep_direction=into)
-
-    # ------------------------------------------------------------------ room completion (METHOD §7)
-    def room_structural_voxels(self) -> int:
-        grid = self.belief.grid
-        if grid is None:
-            return 0
-        return int(
-            np.count_nonzero((grid.labels == VoxelLabel.STRUCTURE) | (grid.labels == VoxelLabel.OCCLUDED_STRUCTURE))
-        )
-
-    def room_exhausted(self) -> bool:
-        """The room's scan cap is reached, or no NVP is left."""
-        return self.scans_in_room >= self.config.max_scans_per_room or self.candidates()[0].count == 0
-
-    def room_complete(self) -> bool:
-        """Best predicted gain below the completion share, no NVP, or the scan cap reached."""
-        if not self.config.predict_gains:
-            raise RuntimeError("room completion by gain needs RobotConfig.predict_gains")
-        if self.scans_in_room >= self.config.max_scans_per_room:
-            return True
-        cands, gains = self.candidates()
-        if cands.count == 0:
-            return True
-        return int(gains[: cands.count].max()) < self.config.completion_fraction * self.room_structural_voxels()
 
     def registration_error(self) -> tuple[float, float]:
         """(m, degrees) between the pose estimate and the true pose: evaluation only."""

@@ -18,8 +18,28 @@ from policies.random import RandomPolicy
 __all__ = ["POLICIES", "GreedyPolicy", "Policy", "RandomPolicy", "UnknownPolicyError", "env_settings", "make_policy"]
 
 
+class UnknownPolicyError(ValueError):
+    """A policy name that is not registered, or an option the policy does not take."""
+
+
+def _no_option(name: str, option: str | None) -> None:
+    if option:
+        raise UnknownPolicyError(f"policy {name!r} takes no option, got {name}:{option}")
+
+
+def _greedy(seed: int | None, option: str | None = None):
+    _no_option("greedy", option)
+    return GreedyPolicy()
+
+
+def _random(seed: int | None, option: str | None = None):
+    _no_option("random", option)
+    return RandomPolicy(seed)
+
+
 def _baseline(name: str):
     def factory(seed: int | None, option: str | None = None):
+        _no_option(name, option)
         from policies import baselines
 
         cls = {
@@ -34,14 +54,17 @@ def _baseline(name: str):
 
 
 def _information_gain(seed: int | None, option: str | None = None):
-    from policies.baselines import InformationGainPolicy
+    from policies.baselines.information_gain import FORMULATIONS, InformationGainPolicy
 
+    if option is not None and option not in FORMULATIONS:
+        known = ", ".join(FORMULATIONS)
+        raise UnknownPolicyError(f"information_gain:{option}: unknown formulation {option!r}; formulations: {known}")
     return InformationGainPolicy(option or "occlusion_aware")
 
 
 def _learned(seed: int | None, option: str | None = None):
     if not option:
-        raise ValueError(
+        raise UnknownPolicyError(
             "ppo needs a checkpoint: ppo:PATH (a folder with policy.json and policy.pt) or ppo:reference (bundled)"
         )
     from policies.learned import LearnedPolicy
@@ -51,19 +74,15 @@ def _learned(seed: int | None, option: str | None = None):
 
 #: Policy names → factories taking a seed (and, after a colon, an option: ``information_gain:rear_side_voxel``).
 POLICIES = {
-    "greedy": lambda seed, option=None: GreedyPolicy(),
+    "greedy": _greedy,
     "stachniss_burgard": _baseline("stachniss_burgard"),
     "blaer_allen": _baseline("blaer_allen"),
     "potthast_sukhatme": _baseline("potthast_sukhatme"),
     "information_gain": _information_gain,
     "nearest_frontier": _baseline("nearest_frontier"),
-    "random": lambda seed, option=None: RandomPolicy(seed),
+    "random": _random,
     "ppo": _learned,
 }
-
-
-class UnknownPolicyError(ValueError):
-    """A policy name that is not registered."""
 
 
 def make_policy(name: str, seed: int | None = None) -> Policy:
@@ -73,21 +92,15 @@ def make_policy(name: str, seed: int | None = None) -> Policy:
     Raises
     ------
     UnknownPolicyError
-        An unknown name or option.
+        An unknown name, or an option the policy does not take.
     ModelFileError
         ``ppo:PATH`` with a missing, corrupt or mismatched checkpoint.
     """
     base, _, option = str(name).partition(":")
     if base not in POLICIES:
         raise UnknownPolicyError(f"unknown policy {name!r}; policies: {', '.join(POLICIES)}")
-    from nbs_env.errors import ModelFileError
-
-    try:
-        return POLICIES[base](seed, option or None)
-    except ModelFileError:
-        raise  # a checkpoint problem: its own message names the file
-    except ValueError as exc:
-        raise UnknownPolicyError(f"policy {name!r}: {exc}") from None
+    # A constructor's own errors (a bug, a bad checkpoint) pass through as they are.
+    return POLICIES[base](seed, option or None)
 
 
 def env_settings(policy: Any) -> tuple[dict[str, Any], dict[str, Any]]:

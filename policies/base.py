@@ -6,7 +6,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from nbs_env.env import candidate_table_of
+from nbs_env.observation import CandidateColumn, candidate_table_of
 
 __all__ = ["Policy", "mask_of"]
 
@@ -30,4 +30,4 @@ def mask_of(obs: dict[str, np.ndarray], info: dict[str, Any]) -> np.ndarray:
     """(K,) bool: the action mask, from ``info["action_mask"]`` or else the candidates' valid column."""
     if "action_mask" in info:
         return np.asarray(info["action_mask"], dtype=bool)
-    return candidate_table_of(obs)[:, -1] > 0.5
+    return candidate_table_of(obs)[:, CandidateColumn.VALID] > 0.5

@@ -1,5 +1,10 @@
 """The paper's next-best-scan: the candidate with the most predicted Occluded-structure→Structure
-conversions, ties to the shorter path (paper §4, METHOD §7)."""
+conversions, ties to the shorter path (paper §4, METHOD §7).
+
+The gain and the order are the planner's (:mod:`nbs_env.planning.planner`); this module only
+chooses by them, in an env loop (:class:`GreedyPolicy`) or on a storey session directly
+(:func:`scan_storey`).
+"""
 
 from __future__ import annotations
 
@@ -7,18 +12,12 @@ from typing import Any
 
 import numpy as np
 
-from nbs_env.env import candidate_table_of
-from nbs_env.planning.navigation import Candidates
-from nbs_env.planning.visibility import greedy_order
-from nbs_env.robot import Robot
+from nbs_env.observation import CandidateColumn, candidate_table_of
+from nbs_env.planning.planner import greedy_order
+from nbs_env.storey import Storey
 from policies.base import mask_of
 
-__all__ = ["GreedyPolicy", "greedy_index", "scan_room"]
-
-
-def greedy_index(cands: Candidates, gains: np.ndarray) -> int:
-    """Index of the next best scan among the valid candidates."""
-    return int(greedy_order(gains[: cands.count], cands.path_length[: cands.count])[0])
+__all__ = ["GreedyPolicy", "scan_storey"]
 
 
 class GreedyPolicy:
@@ -36,17 +35,26 @@ class GreedyPolicy:
         if "candidate_gains" not in info:
             raise KeyError("GreedyPolicy needs info['candidate_gains'], which NBSEnv's reset and step provide")
         mask = mask_of(obs, info)
-        path = candidate_table_of(obs)[:, 2]
+        path = candidate_table_of(obs)[:, CandidateColumn.PATH_LENGTH]
         return int(greedy_order(info["candidate_gains"], path, mask)[0])
 
 
-def scan_room(robot: Robot, max_scans: int | None = None) -> int:
-    """Scan the robot's current room greedily until it is complete; returns the scans taken.
+def scan_storey(storey: Storey, max_rooms: int | None = None) -> int:
+    """Scan a storey session greedily until it ends (complete or out of budget), with no env.
 
-    ``max_scans`` caps the robot's total number of stops (on top of the room's own scan cap).
+    Parameters
+    ----------
+    storey : Storey
+        A session with gain completion (``completion="gain"``).
+    max_rooms : int, optional
+        Stop once this many rooms are done.
+
+    Returns
+    -------
+    int
+        The scans taken here.
     """
-    taken = 0
-    while not robot.room_complete() and (max_scans is None or len(robot.stops) < max_scans):
-        robot.move_to(greedy_index(*robot.candidates()))
-        taken += 1
-    return taken
+    before = len(storey.scans)
+    while storey.open and (max_rooms is None or storey.rooms_done < max_rooms):
+        storey.scan_at(storey.plan.best())
+    return len(storey.scans) - before

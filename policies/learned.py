@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from nbs_env.env import candidate_table_of
 from nbs_env.errors import ModelFileError
+from nbs_env.observation import CandidateColumn, candidate_table_of
 from policies.base import mask_of
 
 __all__ = [
@@ -47,6 +47,8 @@ __all__ = [
 CHECKPOINT_FORMAT = "nbs-policy"
 CHECKPOINT_VERSION = 1
 N_LABELS = 6
+#: Candidate columns the scorer also reads relative to their step's largest value.
+_RELATIVE = (int(CandidateColumn.PREDICTED_GAIN), int(CandidateColumn.PATH_LENGTH))
 
 #: Checkpoints shipped inside the package, by name: ``ppo:reference`` loads the reference run.
 BUNDLED = {"reference": Path(__file__).parent / "data" / "ppo_reference"}
@@ -164,7 +166,7 @@ def build_network(config: NetworkConfig):
             c = latent[:, config.grid_dim :].reshape(len(latent), config.candidates, config.features)
             # Each candidate's gain and path relative to the best gain and the longest path of its
             # step: the raw gain share is small (1e-3 to 1e-1) and its scale varies with the room.
-            rel = [c[..., col] / (c[..., col].amax(dim=1, keepdim=True) + 1e-6) for col in (3, 2)]  # gain, path
+            rel = [c[..., col] / (c[..., col].amax(dim=1, keepdim=True) + 1e-6) for col in _RELATIVE]
             pair = torch.cat([g[:, None, :].expand(-1, config.candidates, -1), c, *[r[..., None] for r in rel]], dim=-1)
             logits = self.mlp(pair).squeeze(-1)
             if self.stop is not None:

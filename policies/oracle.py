@@ -4,7 +4,7 @@ It is not a competitor. With the true building it lists the scan positions a rob
 (a lattice keeping the 0.45 m clearance from walls and furniture in every room), takes a noise-free
 scan of the true building from each with the same scanner as the robot, finds which samples of the
 true structural surface each scan senses by the evaluation's own rule (a point within the
-meter's radius, :class:`nbs_env.metrics.CoverageMeter`), and picks positions by greedy set cover.
+meter's radius, :class:`nbs_env.evaluation.CoverageMeter`), and picks positions by greedy set cover.
 That gives, per scene and scanner:
 
 - the largest share of the structural surface any plan of scans from those positions senses
@@ -25,8 +25,9 @@ import shapely
 from shapely.geometry import Polygon
 
 from nbs_env.config import ScannerConfig
+from nbs_env.planning.navigation import NavigationConfig
 from scenes import Scene
-from scenes.geometry import CLEARANCE, free_region
+from scenes.geometry import free_region
 
 __all__ = ["OraclePlan", "oracle_plan"]
 
@@ -90,7 +91,7 @@ def oracle_plan(
     scanner: ScannerConfig | None = None,
     *,
     lattice: float = 0.5,
-    clearance: float = CLEARANCE,
+    clearance: float | None = None,
     spacing: float = 0.05,
     radius: float = 0.05,
 ) -> OraclePlan:
@@ -104,8 +105,9 @@ def oracle_plan(
         The robot's scanner; its range noise is left out.
     lattice : float
         Spacing of the candidate positions, metres (the robot's NVP lattice).
-    clearance : float
-        Distance to keep from walls and furniture, metres.
+    clearance : float, optional
+        Distance to keep from walls and furniture, metres; by default the robot's footprint
+        (``NavigationConfig().required_clearance``: radius plus safety distance).
     spacing, radius : float
         The evaluation's sample spacing and sensing radius (as the env's ``coverage_spacing`` and
         ``coverage_radius``).
@@ -119,6 +121,8 @@ def oracle_plan(
 
     scanner = replace(scanner or ScannerConfig(), range_noise=0.0)
     samples = scene.structure_samples(spacing, interior_only=True).points
+    if clearance is None:
+        clearance = NavigationConfig().required_clearance
     positions = _positions(scene, lattice, clearance)
     caster = Scanner(scene, scanner)
     sees = np.zeros((len(positions), len(samples)), dtype=bool)

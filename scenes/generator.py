@@ -39,7 +39,7 @@ from scenes.floorplan import (
     WindowPlan,
     _rectangle,
 )
-from scenes.geometry import CLEARANCE
+from scenes.geometry import STOREY_CLEARANCE as CLEARANCE
 from scenes.validation import validate_plan_scene
 
 __all__ = ["GeneratorConfig", "generate_plan", "generate_scene"]

@@ -8,12 +8,12 @@ only what the simulated robot measures.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import IntEnum
 
 import numpy as np
 import trimesh
 
 from scenes.errors import InvalidMeshError, MissingStructureError
+from scenes.labels import STRUCTURAL_CLASSES, SurfaceClass
 
 __all__ = [
     "STRUCTURAL_CLASSES",
@@ -23,24 +23,6 @@ __all__ = [
     "StructureSamples",
     "SurfaceClass",
 ]
-
-
-class SurfaceClass(IntEnum):
-    """The class of a mesh face. FLOOR, CEILING and WALL are the structural elements (SE)."""
-
-    FLOOR = 0
-    CEILING = 1
-    WALL = 2
-    DOOR = 3
-    WINDOW = 4
-    CLUTTER = 5
-
-    @property
-    def is_structural(self) -> bool:
-        return self in STRUCTURAL_CLASSES
-
-
-STRUCTURAL_CLASSES: frozenset[SurfaceClass] = frozenset({SurfaceClass.FLOOR, SurfaceClass.CEILING, SurfaceClass.WALL})
 
 
 @dataclass(frozen=True)

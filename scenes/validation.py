@@ -1,15 +1,18 @@
 """Checks that a storey built from a plan can be scanned by the robot.
 
-- **Reachable**: every room can be reached from the start through doors by a robot of
-  :data:`~scenes.geometry.ROBOT_RADIUS` that keeps :data:`~scenes.geometry.SAFETY_DISTANCE` from walls
-  and clutter inside rooms. A door is crossed straight along its axis, so it needs only the robot's
-  width plus 10 cm: doors of 0.8-1.0 m could never be crossed with 0.2 m of safety on each side, and
-  the method drives to the door frame deliberately (METHOD §8).
+- **Reachable**: every room can be reached from the start through doors by a disc of radius
+  :data:`~scenes.geometry.STOREY_CLEARANCE` (a robot's radius plus its safety distance) that touches
+  no wall or clutter inside rooms. A door is crossed straight along its axis, so it needs only to be
+  :data:`MIN_DOOR_WIDTH` wide (a 0.5 m wide robot plus 10 cm): doors of 0.8-1.0 m could never be
+  crossed with 0.2 m of safety on each side, and the method drives to the door frame deliberately
+  (METHOD §8).
 - **Free start**: the start keeps the same clearance.
 - **Closed**: no ray cast from inside any room escapes the building.
 """
 
 from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 import numpy as np
 import shapely
@@ -17,14 +20,16 @@ from shapely.geometry import Point, Polygon
 
 from scenes._open3d import open3d
 from scenes.errors import StoreyValidationError
-from scenes.floorplan import FloorPlan
-from scenes.geometry import CLEARANCE, ROBOT_RADIUS
+from scenes.geometry import STOREY_CLEARANCE as CLEARANCE
 from scenes.model import Scene
 
-__all__ = ["count_escaping_rays", "fibonacci_sphere", "room_free_space", "validate_plan_scene"]
+if TYPE_CHECKING:
+    from scenes.floorplan import FloorPlan
 
-#: How much wider than the robot a door must be.
-DOOR_MARGIN = 0.10
+__all__ = ["MIN_DOOR_WIDTH", "count_escaping_rays", "fibonacci_sphere", "room_free_space", "validate_plan_scene"]
+
+#: The narrowest door a valid storey may have, metres.
+MIN_DOOR_WIDTH = 0.60
 
 
 def fibonacci_sphere(n: int) -> np.ndarray:
@@ -96,9 +101,9 @@ def validate_plan_scene(plan: FloorPlan, scene: Scene) -> None:
     reach = plan.wall_thickness / 2 + CLEARANCE + 0.05
     for j, door in enumerate(scene.doors):
         a, b = door.rooms
-        if door.width < 2 * ROBOT_RADIUS + DOOR_MARGIN:
+        if door.width < MIN_DOOR_WIDTH:
             raise StoreyValidationError(
-                name, f"door doors[{j}] is {door.width} m wide; the robot needs {2 * ROBOT_RADIUS + DOOR_MARGIN} m"
+                name, f"door doors[{j}] is {door.width} m wide; the robot needs {MIN_DOOR_WIDTH} m"
             )
         c = door.position[:2]
         na = node_of(a, c - door.normal * reach)

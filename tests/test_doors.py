@@ -64,16 +64,15 @@ def test_size_limits():
 
 @pytest.mark.expensive
 def test_the_living_room_of_five_rooms_has_its_two_doors():
-    from nbs_env.robot import Robot, RobotConfig
-    from policies.greedy import scan_room
+    from nbs_env.settings import EnvConfig
+    from nbs_env.storey import Storey
+    from policies.greedy import scan_storey
     from scenes import load_scene
 
     scene = load_scene("five_rooms")
-    robot = Robot(scene, RobotConfig(), np.random.default_rng(0))
-    robot.scan()
-    scan_room(robot)
-    belief = robot.belief
-    found = detect_doors(belief.se_faces, [(s.points, s.origin) for s in belief.scans])
+    storey = Storey(scene, EnvConfig(), np.random.default_rng(0))
+    scan_storey(storey, max_rooms=1)
+    found = [d for d in storey.robot.doors if d.found_in_room == 0]  # what the robot detected in the room
     truth = [d for d in scene.doors if 0 in d.rooms]  # evaluation: the living room's true doors
     assert len(found) == len(truth) == 2
     for door in truth:

@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 
 import nbs_env
-from nbs_env.env import NBSEnv, candidate_table_of, make_config
+from nbs_env.env import NBSEnv
 from nbs_env.errors import ConfigError, InvalidActionError, InvalidPoseError
 from nbs_env.labels import VoxelLabel
-from nbs_env.observation import ObservationConfig, pool_labels
+from nbs_env.observation import CandidateColumn, ObservationConfig, candidate_table_of, pool_labels
+from nbs_env.settings import make_config
 from policies import GreedyPolicy, RandomPolicy
 
 ENV_IDS = sorted(nbs_env.ENV_IDS)
@@ -98,13 +99,16 @@ def test_pickled_env_continues_the_same_episode(env_id):
 def test_observation_matches_the_robot_belief():
     env = gym.make("nbs_env/NBS-Fast-v0", scene="l_room")
     obs, info = env.reset(seed=0)
-    robot = env.unwrapped.robot
+    robot = env.unwrapped.storey.robot
     assert env.observation_space.contains(obs)
-    cands, gains = robot.candidates()
+    planned = robot.plan()
+    cands, gains = planned.candidates, planned.gains
     table = candidate_table_of(obs)
-    assert int(table[:, 4].sum()) == cands.count > 0
-    np.testing.assert_allclose(table[: cands.count, :2], cands.points - robot.pose[:2, 3], atol=1e-4)
-    np.testing.assert_allclose(table[: cands.count, 2], cands.path_length[: cands.count])
+    assert int(table[:, CandidateColumn.VALID].sum()) == cands.count > 0
+    np.testing.assert_allclose(
+        table[: cands.count, [CandidateColumn.DX, CandidateColumn.DY]], cands.points - robot.pose[:2, 3], atol=1e-4
+    )
+    np.testing.assert_allclose(table[: cands.count, CandidateColumn.PATH_LENGTH], cands.path_length[: cands.count])
     assert np.array_equal(info["action_mask"], cands.mask) and np.array_equal(env.unwrapped.action_masks(), cands.mask)
     assert np.array_equal(info["candidate_gains"], gains)
     # The window is centred on the robot and starts 0.2 m under its floor: the cell under the
@@ -156,7 +160,7 @@ def test_reset_options_and_bad_input():
     assert env.scene.name == "l_room"
     start = np.add(env.scene.start[:2], (0.5, 0.0))
     env.reset(seed=0, options={"scene": "l_room", "start": tuple(start)})
-    np.testing.assert_allclose(env.robot.true_pose[:2, 3], start, atol=0.05)
+    np.testing.assert_allclose(env.storey.robot.true_pose[:2, 3], start, atol=0.05)
     with pytest.raises(InvalidPoseError, match="not free floor"):
         env.reset(seed=0, options={"scene": "l_room", "start": (100.0, 100.0)})
     with pytest.raises(ConfigError, match="not known"):
@@ -174,12 +178,12 @@ def test_reset_options_and_bad_input():
 
 
 def test_conversions_reward_reads_no_ground_truth(monkeypatch):
-    from nbs_env.env import RewardConfig
+    from nbs_env.settings import RewardConfig
 
     env = NBSEnv("fast", scene="l_room", reward=RewardConfig(kind="conversions", scan_cost=0.0, metre_cost=0.0))
     obs, info = env.reset(seed=0)
     # Evaluation must not feed the reward: a meter that reports nothing leaves it unchanged.
-    monkeypatch.setattr(env.meter, "percent", lambda *a, **k: 0.0)
+    monkeypatch.setattr(env.storey.meter, "percent", lambda *a, **k: 0.0)
     obs, reward, *_, info = env.step(GreedyPolicy().act(obs, info))
     assert info["conversions"] > 0 and reward > 0
 
@@ -253,10 +257,10 @@ def test_200_random_masked_episodes_on_generated_storeys_raise_nothing():
 def test_greedy_scans_five_rooms_to_the_target():
     env = gym.make("nbs_env/NBS-FiveRooms-v0")
     trace = rollout(env, seed=0, steps=60, policy=GreedyPolicy())
-    info_scans = env.unwrapped.steps
+    info_scans = env.unwrapped.storey.scans
     assert trace[-1][3]  # terminated: the robot judged the storey complete
-    assert env.unwrapped.robot.rooms_done and len(env.unwrapped.robot.rooms_done) == 5
-    meter = env.unwrapped.meter
+    assert env.unwrapped.storey.rooms_done == 5
+    meter = env.unwrapped.storey.meter
     assert all(meter.percent(room=r.id) > 85.0 for r in env.unwrapped.scene.rooms)
     assert len(info_scans) <= 22 and meter.percent() >= 90.0
 
@@ -283,7 +287,7 @@ def test_greedy_completes_the_fzk_haus_ground_floor():
     )
     terminated, info = greedy_episode(env)
     assert terminated
-    rooms = {r.name: env.meter.percent(room=r.id) for r in env.scene.rooms}
+    rooms = {r.name: env.storey.meter.percent(room=r.id) for r in env.scene.rooms}
     assert all(pct > 90.0 for pct in rooms.values()), rooms
     assert info["structure_sensed_pct"] > 90.0
 
@@ -303,7 +307,7 @@ def test_greedy_completes_a_labelled_mesh_scene(tmp_path, plan_dict):
     terminated, info = greedy_episode(env)
     assert env.scene.name.endswith("two.glb") and len(env.scene.rooms) == 2
     assert terminated and info["rooms_done"] == 2
-    assert all(env.meter.percent(room=r.id) > 85.0 for r in env.scene.rooms)
+    assert all(env.storey.meter.percent(room=r.id) > 85.0 for r in env.scene.rooms)
 
 
 @pytest.mark.expensive

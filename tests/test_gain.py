@@ -7,7 +7,8 @@ import pytest
 
 from nbs_env.config import ScannerConfig
 from nbs_env.labels import VoxelLabel
-from nbs_env.planning.visibility import GainConfig, VisibilityModel, greedy_order, occupied_surface
+from nbs_env.planning.planner import greedy_order
+from nbs_env.planning.visibility import GainConfig, VisibilityModel, occupied_surface
 
 S = 0.1
 

@@ -9,7 +9,7 @@ import pytest
 from shapely.geometry import Point, Polygon
 
 from scenes import GeneratorConfig, SurfaceClass, generate_plan, load_scene
-from scenes.geometry import point_is_free
+from scenes.geometry import STOREY_CLEARANCE, point_is_free
 from scenes.validation import count_escaping_rays
 
 N_SEEDS = 50
@@ -50,7 +50,7 @@ def test_fifty_seeds_are_all_valid(storeys):
         assert 1 <= len(scene.rooms) <= 8
         assert _connected(len(scene.rooms), scene.doors), seed
         # Checks independent of the validator: the start is free by the mesh, and nothing leaks.
-        assert point_is_free(scene, scene.start[:2], 0.0), seed
+        assert point_is_free(scene, scene.start[:2], 0.0, STOREY_CLEARANCE), seed
         origins = [np.append(scene.start[:2], 1.5)] + [
             [*Polygon(r.polygon).representative_point().coords[0], 1.0] for r in scene.rooms
         ]

@@ -94,3 +94,76 @@ def _imported_modules(path: Path) -> set[str]:
             for alias in node.names:
                 out |= set(alias.name.split("."))
     return out
+
+
+# ---------------------------------------------------------------------- one step, top-down
+#: The modules one NBSEnv.step passes through, top to bottom: each may import only those below it.
+STEP_LAYERS = [
+    "nbs_env/env.py",
+    "nbs_env/storey.py",
+    "nbs_env/robot.py",
+    "nbs_env/planning/planner.py",
+    "nbs_env/belief.py",
+]
+
+
+def _runtime_nbs_imports(path: Path) -> set[str]:
+    """nbs_env modules ``path`` imports at run time (imports under ``if TYPE_CHECKING:`` left out)."""
+    tree = ast.parse(path.read_text())
+    typing_only = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING":
+            typing_only |= {id(n) for n in ast.walk(node)}
+    out = set()
+    for node in ast.walk(tree):
+        if id(node) in typing_only:
+            continue
+        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("nbs_env"):
+            out.add(node.module)
+        elif isinstance(node, ast.Import):
+            out |= {a.name for a in node.names if a.name.startswith("nbs_env")}
+    return out
+
+
+def _module_path(module: str) -> str:
+    return module.replace(".", "/") + ".py"
+
+
+def test_a_step_reads_top_down():
+    """env → storey → robot → planner → belief: nothing lower imports a module above it."""
+    for k, name in enumerate(STEP_LAYERS):
+        above = set(STEP_LAYERS[:k])
+        imported = {_module_path(m) for m in _runtime_nbs_imports(ROOT / name)}
+        assert not imported & above, f"{name} imports {sorted(imported & above)}, which call it"
+
+
+def test_the_env_talks_to_the_storey_only():
+    """The env never reaches into the robot, its belief or the planner: it reads the storey session,
+    the belief view and the configuration."""
+    allowed = {"nbs_env.errors", "nbs_env.observation", "nbs_env.settings", "nbs_env.storey", "nbs_env.render"}
+    path = ROOT / "nbs_env" / "env.py"
+    assert _runtime_nbs_imports(path) <= allowed
+    tree = ast.parse(path.read_text())
+    reached = {
+        node.attr
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Attribute)
+        and node.attr in {"robot", "belief", "meter"}
+        and not (isinstance(node.value, ast.Name) and node.value.id == "config")
+    }
+    assert not reached, f"nbs_env/env.py reaches into {sorted(reached)}"
+
+
+def test_scenes_knows_no_robot_and_the_footprints_agree():
+    """scenes promises a clearance (STOREY_CLEARANCE); the robot's footprint is nbs_env's, and its
+    defaults need exactly that clearance and fit the narrowest valid door."""
+    from nbs_env.planning.navigation import NavigationConfig
+    from scenes.geometry import STOREY_CLEARANCE
+    from scenes.validation import MIN_DOOR_WIDTH
+
+    nav = NavigationConfig()
+    assert nav.required_clearance == pytest.approx(STOREY_CLEARANCE)
+    assert 2 * nav.robot_radius < MIN_DOOR_WIDTH
+    for path in (ROOT / "scenes").rglob("*.py"):
+        text = path.read_text()
+        assert "ROBOT_RADIUS" not in text and "SAFETY_DISTANCE" not in text, path

@@ -99,14 +99,14 @@ def test_scene_without_floor_or_walls_is_rejected(missing):
 def test_auto_start_is_free_and_inside_largest_room():
     from shapely.geometry import Point, Polygon
 
-    from scenes.geometry import CLEARANCE, point_is_free
+    from scenes.geometry import STOREY_CLEARANCE, point_is_free
 
     scene = load_scene("office")  # its plan has no start
     start = scene.start
     assert Polygon(scene.rooms[0].polygon).contains(Point(start[:2]))
-    assert point_is_free(scene, start[:2], 0.0)
+    assert point_is_free(scene, start[:2], 0.0, STOREY_CLEARANCE)
     # "Well inside": clearly more than the bare clearance from every obstacle.
-    assert point_is_free(scene, start[:2], 0.0, clearance=CLEARANCE + 0.3)
+    assert point_is_free(scene, start[:2], 0.0, clearance=STOREY_CLEARANCE + 0.3)
 
 
 def test_start_override():

@@ -9,7 +9,7 @@ import pytest
 from skimage.graph import MCP_Geometric
 
 from nbs_env.errors import ConfigError
-from nbs_env.labels import VoxelLabel
+from nbs_env.labels import VoxelLabel, is_occupied
 from nbs_env.planning.navigation import (
     NavigationConfig,
     candidates,
@@ -40,7 +40,7 @@ def box_room(nx: int, ny: int, nz: int = 40, vs: float = VS) -> np.ndarray:
 
 def brute_clearance(labels, origin, vs, floor_z, xy) -> np.ndarray:
     """(n,) horizontal distance from each point to every occupied voxel centre in the height band, directly."""
-    ijk = np.argwhere((labels == VoxelLabel.CLUTTER) | (labels == VoxelLabel.STRUCTURE))
+    ijk = np.argwhere(is_occupied(labels))
     centres = np.asarray(origin) + (ijk + 0.5) * vs
     band = (centres[:, 2] >= floor_z + CFG.floor_clearance - 1e-9) & (centres[:, 2] <= floor_z + CFG.robot_height)
     c = centres[band, :2]

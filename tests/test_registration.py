@@ -12,7 +12,7 @@ from nbs_env.sensing.pose import planar, pose_error, pose_from_xyz_rpy, yaw_of
 from nbs_env.sensing.registration import AccumulatedCloud, register
 from nbs_env.sensing.scanner import Scanner
 from scenes import load_scene
-from scenes.geometry import point_is_free
+from scenes.geometry import STOREY_CLEARANCE, point_is_free
 
 
 def second_stop(scene, rng):
@@ -21,7 +21,7 @@ def second_stop(scene, rng):
     for _ in range(200):
         p = scene.start[:2] + rng.uniform(-1.5, 1.5, 2)
         inside = any(room.contains(Point(p)) for room in rooms)
-        if inside and np.linalg.norm(p - scene.start[:2]) >= 0.5 and point_is_free(scene, p, 0.0):
+        if inside and np.linalg.norm(p - scene.start[:2]) >= 0.5 and point_is_free(scene, p, 0.0, STOREY_CLEARANCE):
             return p
     return scene.start[:2]
 

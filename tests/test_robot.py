@@ -1,4 +1,4 @@
-"""The robot's cycle in one room, and the coverage metric."""
+"""The robot's cycle in one room, the storey session's room-and-door loop, and the coverage metric."""
 
 from __future__ import annotations
 
@@ -6,9 +6,11 @@ import numpy as np
 import pytest
 
 from nbs_env.config import ScannerConfig
-from nbs_env.metrics import CoverageMeter
-from nbs_env.robot import Robot, RobotConfig
-from policies.greedy import greedy_index, scan_room
+from nbs_env.evaluation import CoverageMeter
+from nbs_env.robot import Robot
+from nbs_env.settings import EnvConfig, RobotConfig
+from nbs_env.storey import Storey
+from policies.greedy import scan_storey
 from scenes import SurfaceClass, load_scene
 
 
@@ -32,18 +34,16 @@ def test_coverage_meter_counts_against_the_full_surface():
 
 
 def greedy_run(scene_name: str, seed: int, config: RobotConfig | None = None, max_scans: int = 10):
+    """Scan the first room of a scene greedily in a storey session; returns its robot and meter."""
     scene = load_scene(scene_name)
-    robot = Robot(scene, config or RobotConfig(), np.random.default_rng(seed))
-    meter = CoverageMeter(scene)
-    robot.scan()
-    meter.add(robot.cloud.storey_points())
-    while not robot.room_complete() and len(robot.stops) < max_scans:
-        cands, gains = robot.candidates()
-        best = greedy_index(cands, gains)
-        report = robot.move_to(best)
-        assert report.predicted_gain == gains[best]
-        meter.add(robot.cloud.storey_points()[-report.points :])
-    return robot, meter
+    storey = Storey(scene, EnvConfig(robot=config or RobotConfig(), max_scans=max_scans), np.random.default_rng(seed))
+    while storey.open and storey.rooms_done == 0:
+        planned = storey.plan
+        best = planned.best()
+        storey.scan_at(best)
+        # The scan's record carries the gain the plan predicted for the chosen NVP.
+        assert storey.scans[len(storey.robot.stops) - 1].predicted_gain == planned.gains[best]
+    return storey.robot, storey.meter
 
 
 @pytest.mark.expensive
@@ -88,19 +88,11 @@ def test_the_robot_finds_the_door_and_scans_the_next_room(tmp_path, plan_dict):
     path = tmp_path / "two.json"
     path.write_text(json.dumps(plan_dict))
     scene = load(str(path))
-    robot = Robot(scene, RobotConfig(), np.random.default_rng(1))
-    meter = CoverageMeter(scene)
-    robot.scan()
-    rooms_entered = 1
-    while True:
-        scan_room(robot)
-        doors = robot.finish_room()
-        k = robot.next_door()
-        if k is None:
-            break
-        robot.cross_door(k)
-        rooms_entered += 1
-    meter.add(robot.cloud.storey_points())
+    storey = Storey(scene, EnvConfig(), np.random.default_rng(1))
+    scan_storey(storey)
+    robot, meter = storey.robot, storey.meter
+    rooms_entered, doors = robot.room_index + 1, robot.doors
+    assert storey.complete
     assert rooms_entered == 2 and len(doors) == 1
     assert np.linalg.norm(doors[0].centre[:2] - [5.0, 2.0]) < 0.3  # the door between the rooms
     assert meter.percent(room=0) > 85.0 and meter.percent(room=1) > 85.0

@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from nbs_env.export import FACE_KINDS, SCHEMA, metrics_dict, structural_model, write_model_obj, write_points_ply
+from nbs_env.belief import RoomModel
+from nbs_env.evaluation import SCHEMA, metrics_dict
+from nbs_env.export import FACE_KINDS, structural_model, write_model_obj, write_points_ply
 from nbs_env.perception.faces import WallFace
-from nbs_env.robot import RoomModel
 from scenes import Room, load_scene
 from train.cli import EXIT_SCENE_ERROR, EXIT_USAGE, main
 
@@ -387,10 +388,10 @@ def test_door_frame_scans_belong_to_the_room_entered():
     ]
     config = SimpleNamespace(travel_speed=0.5, to_dict=lambda: {"max_scans": 10, "shape": (1, 2)})
     meter = SimpleNamespace(percent=lambda room=None: {None: 40.0, 0: 60.0, 1: 30.0, 2: 0.0}[room])
-    env = SimpleNamespace(
-        steps=steps, scene=SimpleNamespace(rooms=rooms), meter=meter, config=config, complete=True, door_events=[]
+    storey = SimpleNamespace(
+        scans=steps, scene=SimpleNamespace(rooms=rooms), meter=meter, config=config, complete=True, door_events=[]
     )
-    m = metrics_dict(env, "fake", "stachniss_burgard", 0, structure_aware=False)
+    m = metrics_dict(storey, "fake", "stachniss_burgard", 0, structure_aware=False)
     json.dumps(m)  # plain JSON types only
     assert [s["room"] for s in m["steps"]] == [0, 0, 1, 1, 1, 2]
     a, b, c = m["rooms"]
@@ -399,7 +400,7 @@ def test_door_frame_scans_belong_to_the_room_entered():
     assert c["path_length_m"] == pytest.approx(4.5)
     # A structure-agnostic method processes every point; ours keeps the SE points (the paper's measure).
     assert b["processed_points"] == 1002 + 1003 + 1004 and c["processed_points"] == 1005
-    ours = metrics_dict(env, "fake", "greedy", 0, policy_times={1: 0.25})
+    ours = metrics_dict(storey, "fake", "greedy", 0, policy_times={1: 0.25})
     assert (
         ours["processed_points"] == sum(500 + k for k in range(6)) and ours["measured_points"] == m["measured_points"]
     )

@@ -21,18 +21,15 @@ EXIT_USAGE = 2
 
 
 def _rooms(text: str) -> int | tuple[int, int]:
+    from train.arguments import parse_range
+
     try:
-        if "-" in text:
-            lo, hi = (int(v) for v in text.split("-", 1))
-            value: int | tuple[int, int] = (lo, hi)
-        else:
-            lo = hi = int(text)
-            value = lo
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected R or LO-HI with integers, got {text!r}") from None
+        lo, hi = parse_range(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
     if not 1 <= lo <= hi <= 8:
         raise argparse.ArgumentTypeError(f"rooms must be within 1..8, got {text!r}")
-    return value
+    return lo if "-" not in text else (lo, hi)
 
 
 def _non_negative(text: str) -> float:
@@ -279,8 +276,8 @@ def _scan_config(args: argparse.Namespace):
     """The EnvConfig of ``nbs scan``'s options (raises ConfigError for bad values)."""
     from dataclasses import replace
 
-    from nbs_env.env import make_config
     from nbs_env.errors import ConfigError
+    from nbs_env.settings import make_config
 
     overrides: dict = {"scene": args.scene, "max_scans": args.max_scans}
     if args.storey is not None:

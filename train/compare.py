@@ -31,6 +31,8 @@ from typing import Any
 
 import numpy as np
 
+from train.arguments import parse_range
+
 __all__ = ["RunSpec", "expand_scenes", "run_grid", "run_one", "summarise", "write_outputs"]
 
 #: The table's quantities: (key, heading, format).
@@ -69,13 +71,10 @@ def expand_scenes(text: str) -> list[str]:
         if not part:
             continue
         if part.startswith("generated:") and "-" in part[len("generated:") :]:
-            lo, _, hi = part[len("generated:") :].partition("-")
             try:
-                a, b = int(lo), int(hi)
-            except ValueError:
-                raise CompareError(f"scene range {part!r}: use generated:A-B with integers A <= B") from None
-            if a > b:
-                raise CompareError(f"scene range {part!r}: {a} > {b}")
+                a, b = parse_range(part[len("generated:") :])
+            except ValueError as exc:
+                raise CompareError(f"scene range {part!r}: use generated:A-B ({exc})") from None
             out.extend(f"generated:{k}" for k in range(a, b + 1))
         else:
             out.append(part)
@@ -88,8 +87,9 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
     """Play one run; returns ``{"spec", "ok", "metrics" | "error"}`` and never raises."""
     started = time.perf_counter()
     try:
-        from nbs_env.env import NBSEnv, make_config
-        from nbs_env.export import metrics_dict
+        from nbs_env.env import NBSEnv
+        from nbs_env.evaluation import metrics_dict
+        from nbs_env.settings import make_config
         from policies import make_policy
         from train.episode import config_for, run_episode
 
@@ -97,7 +97,7 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
         config = config_for(make_config(spec.preset, scene=spec.scene, max_scans=spec.max_scans), policy)
         env = NBSEnv(config)
         times = run_episode(env, policy, spec.seed)
-        metrics = metrics_dict(env, spec.scene, policy, spec.seed, times)
+        metrics = metrics_dict(env.storey, spec.scene, policy, spec.seed, times)
         metrics["policy"] = spec.policy
         return {"spec": asdict(spec), "ok": True, "metrics": metrics, "wall_s": time.perf_counter() - started}
     except Exception as exc:  # a failed run is recorded, the others go on
@@ -113,7 +113,7 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
 def _oracle(scene: str, preset: str = "default") -> dict[str, Any]:
     """The oracle's plan of ``scene`` with the preset's scanner and evaluation (never raises)."""
     try:
-        from nbs_env.env import make_config
+        from nbs_env.settings import make_config
         from policies.oracle import oracle_plan
         from scenes import load_scene
 

@@ -7,7 +7,8 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
-from nbs_env.env import EnvConfig, NBSEnv
+from nbs_env.env import NBSEnv
+from nbs_env.settings import EnvConfig
 from policies import Policy, env_settings
 
 __all__ = ["config_for", "run_episode"]
@@ -34,7 +35,7 @@ def run_episode(
     -------
     dict of int to float
         The policy's decision time by the index of the scan the decision led to (for
-        :func:`nbs_env.export.metrics_dict`).
+        :func:`nbs_env.evaluation.metrics_dict`).
 
     Raises
     ------
@@ -47,7 +48,7 @@ def run_episode(
         on_step(info)
     times: dict[int, float] = {}
     invalid = 0
-    done = env.complete or info["scans"] >= env.config.max_scans
+    done = not env.storey.open
     while not done:
         before = info["scans"]
         t = time.perf_counter()

@@ -5,9 +5,10 @@ Usage::
     python -m train.evaluate_doors --rooms 12
 
 For rooms of generated storeys (seeds from 400000 on, 2-4 rooms each), the robot starts in the room
-(at a free point chosen from ground truth), scans it with the greedy NBS until the room is complete,
-and detects doors in its SE wall faces. A detection matches a true door of that room when its centre
-lies within 0.3 m of the door's centre line position. Reports precision, recall and width error.
+(at a free point chosen from ground truth), scans it with the greedy NBS in a storey session until the
+room is complete, and takes the doors the robot detected in its SE wall faces. A detection matches a
+true door of that room when its centre lies within 0.3 m of the door's centre line position.
+Reports precision, recall and width error.
 """
 
 from __future__ import annotations
@@ -18,9 +19,9 @@ import time
 
 import numpy as np
 
-from nbs_env.perception.doors import detect_doors
-from nbs_env.robot import Robot, RobotConfig
-from policies.greedy import scan_room
+from nbs_env.settings import EnvConfig
+from nbs_env.storey import Storey
+from policies.greedy import scan_storey
 from scenes import load_scene
 from train.perception_data import spread_positions
 
@@ -46,11 +47,9 @@ def main(argv: list[str] | None = None) -> int:
             if not start:
                 continue
             scene = load_scene(f"generated:{storey - 1}", rooms=(2, 4), start=tuple(start[0]))
-            robot = Robot(scene, RobotConfig(), rng)
-            robot.scan()
-            scan_room(robot)
-            belief = robot.belief
-            found = detect_doors(belief.se_faces, [(s.points, s.origin) for s in belief.scans])
+            session = Storey(scene, EnvConfig(), rng)
+            scan_storey(session, max_rooms=1)
+            found = [d for d in session.robot.doors if d.found_in_room == 0]
             truth = [d for d in scene.doors if room.id in d.rooms]
             matched, width_errors = set(), []
             for f in found:
@@ -63,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
                 {
                     "scene": scene.name,
                     "room": room.name,
-                    "scans": len(robot.stops),
+                    "scans": sum(1 for s in session.scans if s.room == 0),
                     "true_doors": len(truth),
                     "found": len(found),
                     "matched": len(matched),

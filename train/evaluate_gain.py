@@ -5,10 +5,11 @@ Usage::
     python -m train.evaluate_gain --rooms 20 [--occluded-clutter-blocks]
 
 For rooms of generated storeys (seeds from 300000 on; 2-4 rooms each), the robot scans once from a
-well-spread free position, builds its belief (RoI, SE faces, V(t)), and lists its next valid
-positions. For up to 8 candidates spread along that list it predicts the Occluded-structure→Structure
-conversions (the greedy gain), then actually scans from each candidate (in a copy of the belief) and
-counts the voxels that were Occluded-structure before and are Structure after. The Spearman rank
+well-spread free position, builds its belief (RoI, SE faces, V(t)), and plans as the robot does
+(:func:`nbs_env.planning.planner.plan`: the same blind zone, NVPs and gain). For up to 8 candidates
+spread along the NVP list it takes the predicted Occluded-structure→Structure conversions (the greedy
+gain), then actually scans from each candidate (in a copy of the belief) and counts the voxels that
+were Occluded-structure before and are Structure after. The Spearman rank
 correlation of predicted and realised counts is averaged over the rooms.
 """
 
@@ -25,8 +26,8 @@ from scipy.stats import spearmanr
 from nbs_env.belief import RoomBelief
 from nbs_env.config import ScannerConfig
 from nbs_env.labels import VoxelLabel
-from nbs_env.planning.navigation import NavigationConfig, assume_blind_zone_free, candidates, traversability
-from nbs_env.planning.visibility import GainConfig, VisibilityModel
+from nbs_env.planning.planner import PlanningConfig, plan, sensor_positions
+from nbs_env.planning.visibility import GainConfig
 from nbs_env.sensing.pose import pose_from_xyz_rpy
 from nbs_env.sensing.scanner import Scanner
 from scenes import load_scene
@@ -53,19 +54,13 @@ def room_correlations(n_rooms: int, gain: GainConfig, seed: int = 0, per_room: i
             pose = pose_from_xyz_rpy(first[0][0], first[0][1], room.floor_z + cfg.height, 0.0, 0.0, 0.0)
             belief = RoomBelief(cfg)
             belief.add_scan(scanner.scan(pose, rng), pose)
-            grid = belief.grid
-            walkable = assume_blind_zone_free(
-                grid.labels, grid.origin, grid.voxel_size, [pose[:3, 3]], cfg.elevation_min
-            )
-            tmap = traversability(
-                walkable, grid.origin, grid.voxel_size, belief.roi.floor_z, NavigationConfig(), [first[0]]
-            )
-            cands = candidates(tmap, first[0], NavigationConfig())
+            planned = plan(belief, pose, [pose[:3, 3]], [first[0]], PlanningConfig(scanner=cfg, gain=gain))
+            cands = planned.candidates
             if cands.count < 5:
                 continue
             pick = np.unique(np.linspace(0, cands.count - 1, min(per_room, cands.count)).astype(int))
-            sensors = np.column_stack([cands.points[pick], np.full(len(pick), belief.roi.floor_z + cfg.height)])
-            predicted = VisibilityModel(grid.labels, grid.origin, grid.voxel_size, gain).gains(sensors, cfg)
+            sensors = sensor_positions(cands.points[pick], belief.roi.floor_z, cfg)
+            predicted = planned.gains[pick]
             before = belief.occluded_structure_centres()
             realised = []
             for sensor in sensors:

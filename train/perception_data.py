@@ -20,14 +20,14 @@ from nbs_env.sensing.pose import pose_from_xyz_rpy
 from nbs_env.sensing.scanner import Scanner
 from scenes import Room, Scene, SurfaceClass
 from scenes._open3d import open3d
-from scenes.geometry import free_region
+from scenes.geometry import STOREY_CLEARANCE, free_region
 
 __all__ = ["RoomCase", "face_is_structural", "room_cases", "spread_positions"]
 
 
 def spread_positions(scene: Scene, room: Room, rng: np.random.Generator, k: int = 3) -> list[np.ndarray]:
     """``k`` well-spread free stops in ``room``: farthest-point picks among 200 random free points."""
-    free = free_region(scene, Polygon(room.polygon), room.floor_z)
+    free = free_region(scene, Polygon(room.polygon), room.floor_z, STOREY_CLEARANCE)
     if free.is_empty:
         return []
     x0, y0, x1, y1 = free.bounds

@@ -16,13 +16,16 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from nbs_env.config import _finite, _require
+from nbs_env.errors import ConfigError
 from policies.learned import NetworkConfig, build_network, save_checkpoint
+from train.arguments import parse_range
 
 __all__ = ["TrainConfig", "main", "train"]
 
@@ -44,34 +47,46 @@ def _require_rl():
         raise SystemExit('nbs train needs the rl extra: pip install torch==2.13.0 "nbs-env[rl]"') from None
 
 
+@dataclass(frozen=True)
 class TrainConfig:
-    """What a training run is (JSON-safe); see ``nbs train --help``."""
+    """What a training run is (JSON-safe, frozen, checked on construction); see ``nbs train --help``."""
 
-    def __init__(
-        self,
-        timesteps: int = 2048,
-        envs: int = 2,
-        seed: int = 0,
-        rooms: tuple[int, int] = (1, 5),
-        n_steps: int = 64,
-        batch_size: int = 64,
-        learning_rate: float = 3e-4,
-        eval_every: int = 0,
-        eval_storeys: int = 4,
-        checkpoint_every: int = 0,
-        max_episode_steps: int = 40,
-        bc_steps: int = 0,
-        metre_cost: float = 0.05,
-    ) -> None:
-        self.timesteps, self.envs, self.seed, self.rooms = timesteps, envs, seed, tuple(rooms)
-        self.n_steps, self.batch_size, self.learning_rate = n_steps, batch_size, learning_rate
-        self.eval_every, self.eval_storeys, self.checkpoint_every = eval_every, eval_storeys, checkpoint_every
-        self.max_episode_steps = max_episode_steps
-        self.bc_steps = bc_steps
-        self.metre_cost = metre_cost
+    timesteps: int = 2048
+    envs: int = 2
+    seed: int = 0
+    rooms: tuple[int, int] = (1, 5)
+    n_steps: int = 64
+    batch_size: int = 64
+    learning_rate: float = 3e-4
+    eval_every: int = 0
+    eval_storeys: int = 4
+    checkpoint_every: int = 0
+    max_episode_steps: int = 40
+    bc_steps: int = 0
+    metre_cost: float = 0.05
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "rooms", tuple(self.rooms))
+        positive = ("timesteps", "envs", "n_steps", "batch_size", "eval_storeys", "max_episode_steps")
+        for name in (*positive, "seed", "eval_every", "checkpoint_every", "bc_steps"):
+            value = getattr(self, name)
+            _require(
+                isinstance(value, int) and not isinstance(value, bool), f"{name} must be an integer, got {value!r}"
+            )
+            least = 1 if name in positive else 0
+            _require(value >= least, f"{name} must be >= {least}, got {value}")
+        _require(
+            len(self.rooms) == 2
+            and all(isinstance(r, int) for r in self.rooms)
+            and 1 <= self.rooms[0] <= self.rooms[1] <= 8,
+            f"rooms must be (A, B) with 1 <= A <= B <= 8, got {self.rooms!r}",
+        )
+        _finite(learning_rate=self.learning_rate, metre_cost=self.metre_cost)
+        _require(self.learning_rate > 0, f"learning_rate must be > 0, got {self.learning_rate}")
+        _require(self.metre_cost >= 0, f"metre_cost must be >= 0, got {self.metre_cost}")
 
     def to_dict(self) -> dict[str, Any]:
-        return dict(self.__dict__)
+        return asdict(self)
 
 
 def _env_factory(rooms: tuple[int, int], max_episode_steps: int, metre_cost: float = 0.05):
@@ -79,7 +94,7 @@ def _env_factory(rooms: tuple[int, int], max_episode_steps: int, metre_cost: flo
         import gymnasium as gym
         from stable_baselines3.common.monitor import Monitor
 
-        from nbs_env.env import make_config
+        from nbs_env.settings import make_config
         from scenes.generator import GeneratorConfig
 
         config = make_config("fast")
@@ -142,7 +157,8 @@ def _layout(model) -> str:
 
 def evaluate(policy_fn, storeys: list[int], max_episode_steps: int) -> dict[str, float]:
     """Mean scans, SE % and path of a policy over held-out generated storeys (the fast preset)."""
-    from nbs_env.env import NBSEnv, make_config
+    from nbs_env.env import NBSEnv
+    from nbs_env.settings import make_config
 
     scans, pct, path = [], [], []
     for seed in storeys:
@@ -279,7 +295,8 @@ def behaviour_clone(model, steps: int, epochs: int = 30, batch_size: int = 64, p
     import torch
     from sb3_contrib.common.maskable.utils import get_action_masks
 
-    from nbs_env.planning.visibility import greedy_order
+    from nbs_env.observation import CandidateColumn, candidate_table_of
+    from nbs_env.planning.planner import greedy_order
 
     venv = model.env
     obs = venv.reset()
@@ -287,8 +304,8 @@ def behaviour_clone(model, steps: int, epochs: int = 30, batch_size: int = 64, p
     for _ in range(steps):
         masks = get_action_masks(venv)
         gains = np.stack(venv.env_method("candidate_gains"))
-        table = obs["candidates"].reshape(len(masks), -1, 5)
-        actions = np.array([int(greedy_order(gains[i], table[i, :, 2], masks[i][: gains.shape[1]])[0])
+        path = candidate_table_of(obs)[..., CandidateColumn.PATH_LENGTH]
+        actions = np.array([int(greedy_order(gains[i], path[i], masks[i][: gains.shape[1]])[0])
                             for i in range(len(masks))])  # fmt: skip
         samples.append(({k: v.copy() for k, v in obs.items()}, masks.copy(), actions))
         obs, _, _, _ = venv.step(actions)
@@ -379,25 +396,28 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    lo, _, hi = args.rooms.partition("-")
     try:
-        rooms = (int(lo), int(hi or lo))
-    except ValueError:
-        print(f"nbs train: error: --rooms must be A-B, got {args.rooms!r}", file=sys.stderr)
+        rooms = parse_range(args.rooms)
+    except ValueError as exc:
+        print(f"nbs train: error: --rooms: {exc}", file=sys.stderr)
         return 2
-    config = TrainConfig(
-        timesteps=args.timesteps,
-        envs=args.envs,
-        seed=args.seed,
-        rooms=rooms,
-        eval_every=args.eval_every,
-        checkpoint_every=args.checkpoint_every,
-        bc_steps=args.bc_steps,
-        eval_storeys=args.eval_storeys,
-        learning_rate=args.learning_rate,
-        n_steps=args.n_steps,
-        metre_cost=args.metre_cost,
-    )
+    try:
+        config = TrainConfig(
+            timesteps=args.timesteps,
+            envs=args.envs,
+            seed=args.seed,
+            rooms=rooms,
+            eval_every=args.eval_every,
+            checkpoint_every=args.checkpoint_every,
+            bc_steps=args.bc_steps,
+            eval_storeys=args.eval_storeys,
+            learning_rate=args.learning_rate,
+            n_steps=args.n_steps,
+            metre_cost=args.metre_cost,
+        )
+    except ConfigError as exc:
+        print(f"nbs train: error: {exc}", file=sys.stderr)
+        return 2
     path, _ = train(config, args.out, progress=not args.quiet)
     print(f"wrote {path}")
     return 0

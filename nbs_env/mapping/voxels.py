@@ -25,24 +25,11 @@ import shapely
 from shapely.geometry import Polygon
 
 from nbs_env.config import ScannerConfig
-from nbs_env.labels import VoxelLabel
+from nbs_env.labels import LABEL_COLOURS, VoxelLabel, is_occupied
 from nbs_env.perception.faces import WallFace
 from nbs_env.sensing.pose import check_pose
 
-__all__ = ["LABEL_COLOURS", "IntegrationStats", "VoxelGrid"]
-
-#: RGB colours of the labels in PLY exports (Structure blue, Occluded-structure green as in Fig. 4).
-LABEL_COLOURS = np.array(
-    [
-        [200, 200, 200],  # unknown
-        [255, 255, 255],  # empty
-        [214, 39, 40],  # clutter
-        [31, 119, 180],  # structure
-        [255, 127, 14],  # occluded clutter
-        [44, 160, 44],  # occluded structure
-    ],
-    dtype=np.uint8,
-)
+__all__ = ["IntegrationStats", "VoxelGrid"]
 
 _POOL_SIZES = (1, 3, 5, 7, 9, 13, 17, 25, 33, 49, 65)
 
@@ -298,7 +285,7 @@ class VoxelGrid:
         idx, structure = idx[ok], structure[ok]
         flat = (idx[:, 0].astype(np.int64) * shape[1] + idx[:, 1]) * shape[2] + idx[:, 2]
         labels = self.labels.reshape(-1)
-        before_occupied = (labels == VoxelLabel.CLUTTER) | (labels == VoxelLabel.STRUCTURE)
+        before_occupied = is_occupied(labels)
         before_structure = labels == VoxelLabel.STRUCTURE
         # Whole-grid masks count distinct voxels without sorting the points.
         hit = np.zeros(labels.size, dtype=bool)

@@ -9,10 +9,12 @@ That last test tells a door from the shadow a cabinet casts on the wall behind i
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
+from nbs_env.config import _finite, _require
 from nbs_env.perception.faces import WallFace
 from nbs_env.perception.structure import face_image
 
@@ -49,6 +51,36 @@ class DoorConfig:
     behind: float = 0.3
     min_behind_points: int = 50
     pixel: float = 0.05
+
+    def __post_init__(self) -> None:
+        _finite(
+            min_width=self.min_width,
+            max_width=self.max_width,
+            min_height=self.min_height,
+            max_height=self.max_height,
+            floor_gap=self.floor_gap,
+            behind=self.behind,
+            pixel=self.pixel,
+        )
+        _require(
+            0 < self.min_width <= self.max_width,
+            f"need 0 < min_width <= max_width, got {self.min_width}, {self.max_width}",
+        )
+        _require(
+            0 < self.min_height <= self.max_height,
+            f"need 0 < min_height <= max_height, got {self.min_height}, {self.max_height}",
+        )
+        _require(self.floor_gap >= 0, f"floor_gap must be >= 0 metres, got {self.floor_gap}")
+        _require(self.behind >= 0, f"behind must be >= 0 metres, got {self.behind}")
+        _require(self.pixel > 0, f"pixel must be > 0 metres, got {self.pixel}")
+        _require(
+            isinstance(self.min_behind_points, int) and not isinstance(self.min_behind_points, bool)
+            and self.min_behind_points >= 0,
+            f"min_behind_points must be an integer >= 0, got {self.min_behind_points!r}",
+        )  # fmt: skip
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
 
 
 @dataclass(frozen=True)

@@ -37,7 +37,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from nbs_env.config import _finite, _require
-from nbs_env.labels import VoxelLabel
+from nbs_env.labels import VoxelLabel, is_occupied
 
 __all__ = [
     "Candidates",
@@ -394,10 +394,7 @@ def traversability(
     band = labels[:, :, k_lo : min(k_hi, nz - 1) + 1]
     # When the band reaches above the grid, its top is Unknown and no column passes.
     column_empty = np.all(band == VoxelLabel.EMPTY, axis=2) & (k_hi < nz)
-    if band.shape[2]:
-        obstacle = np.any((band == VoxelLabel.CLUTTER) | (band == VoxelLabel.STRUCTURE), axis=2)
-    else:
-        obstacle = np.zeros((nx, ny), dtype=bool)
+    obstacle = np.any(is_occupied(band), axis=2) if band.shape[2] else np.zeros((nx, ny), dtype=bool)
 
     if obstacle.any():
         clearance = ndimage.distance_transform_edt(~obstacle, sampling=voxel_size)

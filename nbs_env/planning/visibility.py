@@ -9,15 +9,16 @@ never the scene.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
-from nbs_env.config import ScannerConfig
-from nbs_env.labels import VoxelLabel
+from nbs_env.config import ScannerConfig, _finite, _require
+from nbs_env.labels import VoxelLabel, is_occupied
 from scenes._open3d import open3d
 
-__all__ = ["GainConfig", "VisibilityModel", "greedy_order", "occupied_surface"]
+__all__ = ["GainConfig", "VisibilityModel", "occupied_surface"]
 
 
 @dataclass(frozen=True)
@@ -26,6 +27,11 @@ class GainConfig:
 
     Attributes
     ----------
+    model : str
+        The gain model, by its name in :data:`nbs_env.planning.planner.GAIN_MODELS`: ``"visibility"``
+        (this module's :class:`VisibilityModel`, the paper's gain) or one registered with
+        :func:`nbs_env.planning.planner.register_gain_model`. The options below are the visibility
+        model's; another model may read them or not.
     occluded_clutter_blocks : bool
         Whether OCCLUDED_CLUTTER voxels block lines of sight as occupied ones do. Unsensed space
         may hold furniture; blocking is the pessimistic reading (see benchmarks/README.md for the
@@ -39,9 +45,28 @@ class GainConfig:
         2 cut the rays about fourfold at 5 cm (measured in benchmarks/gain.py); 1 casts to every voxel.
     """
 
+    model: str = "visibility"
     occluded_clutter_blocks: bool = False
     tolerance_voxels: float = 1.0
     group: int = 2
+
+    def __post_init__(self) -> None:
+        _require(
+            isinstance(self.model, str) and self.model != "", f"model must be a gain model's name, got {self.model!r}"
+        )
+        _require(
+            isinstance(self.occluded_clutter_blocks, bool),
+            f"occluded_clutter_blocks must be true or false, got {self.occluded_clutter_blocks!r}",
+        )
+        _finite(tolerance_voxels=self.tolerance_voxels)
+        _require(self.tolerance_voxels >= 0, f"tolerance_voxels must be >= 0, got {self.tolerance_voxels}")
+        _require(
+            isinstance(self.group, int) and not isinstance(self.group, bool) and self.group >= 1,
+            f"group must be an integer >= 1, got {self.group!r}",
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
 
 
 def occupied_surface(blocking: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -103,7 +128,7 @@ class VisibilityModel:
         self.config = config or GainConfig()
         self.origin = np.asarray(origin, dtype=float)
         self.voxel_size = float(voxel_size)
-        blocking = (labels == VoxelLabel.CLUTTER) | (labels == VoxelLabel.STRUCTURE)
+        blocking = is_occupied(labels)
         if self.config.occluded_clutter_blocks:
             blocking |= labels == VoxelLabel.OCCLUDED_CLUTTER
         targets = np.argwhere(labels == VoxelLabel.OCCLUDED_STRUCTURE)
@@ -130,29 +155,12 @@ class VisibilityModel:
         self.n_triangles = len(triangles)
 
     def visible(self, sensor: np.ndarray, scanner: ScannerConfig) -> np.ndarray:
-        """(n,) bool: which OCCLUDED_STRUCTURE voxels a scanner at ``sensor`` (3,) would see."""
-        sensor = np.asarray(sensor, dtype=float)
-        rel = self.targets - sensor
-        dist = np.linalg.norm(rel, axis=1)
-        elevation = np.degrees(np.arcsin(np.clip(rel[:, 2] / np.maximum(dist, 1e-9), -1.0, 1.0)))
-        candidate = (
-            (dist >= scanner.min_range)
-            & (dist <= scanner.max_range)
-            & (elevation >= scanner.elevation_min)
-            & (elevation <= scanner.elevation_max)
-        )
-        out = np.zeros(len(self.targets), dtype=bool)
-        idx = np.flatnonzero(candidate)
-        if not len(idx):
-            return out
-        if self.n_triangles == 0:
-            out[idx] = True
-            return out
-        rays = np.empty((len(idx), 6), dtype=np.float32)
-        rays[:, :3] = sensor
-        rays[:, 3:] = rel[idx] / dist[idx, None]
-        t_hit = self._scene.cast_rays(self._o3d.core.Tensor(rays))["t_hit"].numpy()
-        out[idx] = t_hit >= dist[idx] - self.config.tolerance_voxels * self.voxel_size
+        """(n,) bool: which OCCLUDED_STRUCTURE voxels (:attr:`targets`) a scanner at ``sensor`` (3,)
+        would see, one line of sight each (no grouping): for inspecting the model."""
+        targets = self.targets.astype(np.float32)
+        _, idx = self._lines_of_sight(np.asarray(sensor, dtype=np.float32).reshape(1, 3), targets, scanner)
+        out = np.zeros(len(targets), dtype=bool)
+        out[idx] = True
         return out
 
     def gains(self, sensors: np.ndarray, scanner: ScannerConfig, chunk: int = 16) -> np.ndarray:
@@ -166,35 +174,31 @@ class VisibilityModel:
         if not len(self.targets) or not len(sensors):
             return out
         targets = self.group_centres.astype(np.float32)
-        weights = self.group_counts
+        for start in range(0, len(sensors), chunk):
+            block = sensors[start : start + chunk].astype(np.float32)
+            which, idx = self._lines_of_sight(block, targets, scanner)
+            out[start : start + chunk] = np.bincount(which, weights=self.group_counts[idx], minlength=len(block))
+        return out
+
+    def _lines_of_sight(
+        self, sensors: np.ndarray, targets: np.ndarray, scanner: ScannerConfig
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(sensor, target) index pairs with a clear line of sight inside the field of view and the
+        range limits, for (c, 3) and (n, 3) float32 positions."""
         lo = np.float32(np.sin(np.radians(scanner.elevation_min)))
         hi = np.float32(np.sin(np.radians(scanner.elevation_max)))
         tolerance = np.float32(self.config.tolerance_voxels * self.voxel_size)
-        for start in range(0, len(sensors), chunk):
-            block = sensors[start : start + chunk].astype(np.float32)
-            rel = targets[None, :, :] - block[:, None, :]  # (c, n, 3)
-            dist = np.sqrt(np.einsum("cni,cni->cn", rel, rel))
-            sine = rel[..., 2] / np.maximum(dist, np.float32(1e-9))
-            ok = (dist >= scanner.min_range) & (dist <= scanner.max_range) & (sine >= lo) & (sine <= hi)
-            which, idx = np.nonzero(ok)
-            if not len(idx):
-                continue
-            if self.n_triangles == 0:
-                out[start : start + chunk] = (ok * weights[None, :]).sum(axis=1)
-                continue
-            d = dist[which, idx]
-            rays = np.empty((len(idx), 6), dtype=np.float32)
-            rays[:, :3] = block[which]
-            rays[:, 3:] = rel[which, idx] / d[:, None]
-            t_hit = self._scene.cast_rays(self._o3d.core.Tensor.from_numpy(rays))["t_hit"].numpy()
-            seen = t_hit >= d - tolerance
-            out[start : start + chunk] = np.bincount(which[seen], weights=weights[idx[seen]], minlength=len(block))
-        return out
-
-
-def greedy_order(gains: np.ndarray, path_lengths: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
-    """Candidate indices ranked by gain, ties to the shorter path; masked-out entries last."""
-    gains = np.asarray(gains, dtype=float)
-    path_lengths = np.asarray(path_lengths, dtype=float)
-    valid = np.ones(len(gains), dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-    return np.lexsort((path_lengths, -gains, ~valid))
+        rel = targets[None, :, :] - sensors[:, None, :]  # (c, n, 3)
+        dist = np.sqrt(np.einsum("cni,cni->cn", rel, rel))
+        sine = rel[..., 2] / np.maximum(dist, np.float32(1e-9))
+        ok = (dist >= scanner.min_range) & (dist <= scanner.max_range) & (sine >= lo) & (sine <= hi)
+        which, idx = np.nonzero(ok)
+        if not len(idx) or self.n_triangles == 0:
+            return which, idx
+        d = dist[which, idx]
+        rays = np.empty((len(idx), 6), dtype=np.float32)
+        rays[:, :3] = sensors[which]
+        rays[:, 3:] = rel[which, idx] / d[:, None]
+        t_hit = self._scene.cast_rays(self._o3d.core.Tensor.from_numpy(rays))["t_hit"].numpy()
+        seen = t_hit >= d - tolerance
+        return which[seen], idx[seen]

@@ -13,8 +13,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from nbs_env.env import BeliefView
-from nbs_env.labels import VoxelLabel
+from nbs_env.labels import VoxelLabel, is_occupied
+from nbs_env.observation import BeliefView
 
 __all__ = ["MappingPolicy", "band_columns", "collapse", "march", "sphere_directions", "visible_cells_2d"]
 
@@ -22,7 +22,7 @@ __all__ = ["MappingPolicy", "band_columns", "collapse", "march", "sphere_directi
 def collapse(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(free, occupied, unknown) bool arrays of the labels' shape: what a structure-agnostic method sees."""
     free = labels == VoxelLabel.EMPTY
-    occupied = (labels == VoxelLabel.CLUTTER) | (labels == VoxelLabel.STRUCTURE)
+    occupied = is_occupied(labels)
     return free, occupied, ~(free | occupied)
 
 

@@ -23,9 +23,10 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from nbs_env.env import BeliefView
 from nbs_env.labels import VoxelLabel
-from nbs_env.planning.visibility import VisibilityModel
+from nbs_env.observation import BeliefView
+from nbs_env.planning.planner import predict_gains
+from nbs_env.planning.visibility import GainConfig
 from policies.baselines._maps import MappingPolicy, band_columns, collapse, visible_cells_2d
 
 __all__ = ["BlaerAllenPolicy"]
@@ -97,11 +98,13 @@ class BlaerAllenPolicy(MappingPolicy):
         # the occupied voxels as blockers, with no structure knowledge.
         proxy = np.where(occupied, VoxelLabel.CLUTTER, VoxelLabel.UNKNOWN).astype(np.uint8)
         proxy[frontier] = VoxelLabel.OCCLUDED_STRUCTURE
-        model = VisibilityModel(proxy, grid.origin, grid.voxel_size)
-        sensors = np.column_stack(
-            [belief.candidates_xy[valid], np.full(len(valid), belief.roi.floor_z + belief.scanner.height)]
-        )
-        return model.gains(sensors, belief.scanner).astype(float)
+        # The paper's visibility model whatever gain the greedy is configured with: this is B&A's
+        # own utility, counted with the same lines of sight.
+        counts = predict_gains(
+            proxy, grid.origin, grid.voxel_size, belief.candidates_xy[valid], belief.roi.floor_z, belief.scanner,
+            GainConfig(model="visibility"),
+        )  # fmt: skip
+        return counts.astype(float)
 
     def act(self, obs, info) -> int:
         belief = self._belief(info)

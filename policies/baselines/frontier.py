@@ -17,7 +17,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 from shapely.geometry import Polygon
 
-from nbs_env.env import BeliefView
+from nbs_env.observation import BeliefView
 from policies.baselines._maps import MappingPolicy, collapse
 
 __all__ = ["NearestFrontierPolicy"]

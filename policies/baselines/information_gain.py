@@ -32,7 +32,7 @@ from typing import ClassVar
 import numpy as np
 from scipy import ndimage
 
-from nbs_env.env import BeliefView
+from nbs_env.observation import BeliefView
 from policies.baselines._maps import MappingPolicy, collapse, march, sphere_directions
 
 __all__ = ["FORMULATIONS", "InformationGainPolicy", "PotthastSukhatmePolicy"]

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nbs_env.env import BeliefView
+from nbs_env.observation import BeliefView
 from policies.baselines._maps import MappingPolicy, band_columns, collapse, visible_cells_2d
 
 __all__ = ["StachnissBurgardPolicy"]

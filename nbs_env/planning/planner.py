@@ -1,0 +1,309 @@
+"""The planning pipeline of one decision, assembled in one place (METHOD §6-7).
+
+Everything the robot, the compared methods, ``train.evaluate_gain`` and the README's example plan
+with goes through here::
+
+    plan(belief, pose, stops, visited, config) -> Plan(candidates, gains, structural_voxels, seconds)
+
+1. :func:`traversable_floor`: V(t) with the blind zone under each stop taken as free
+   (:func:`~nbs_env.planning.navigation.assume_blind_zone_free`, with the scanner's lowest
+   elevation *and* its minimum range), then the traversability test with the robot's footprint;
+2. the next valid positions (NVPs) on that floor
+   (:func:`~nbs_env.planning.navigation.candidates`);
+3. :func:`sensor_positions`: the scanner above each NVP, at its height over the room's floor;
+4. :func:`predict_gains`: each NVP's predicted Occluded-structure→Structure conversions, from the
+   gain model that :attr:`GainConfig.model` names in :data:`GAIN_MODELS` (the paper's
+   :class:`~nbs_env.planning.visibility.VisibilityModel` by default);
+5. :meth:`Plan.order`: most gain first, ties to the shorter path (:func:`greedy_order`).
+
+The gain's unit is voxels converted. Room completion (:meth:`Plan.gain_below`) and the
+observation (:meth:`Plan.gain_share`) read it as a share of the room's structural voxels
+(Structure + Occluded-structure), computed here and nowhere else, so that a new gain model changes
+one entry of :data:`GAIN_MODELS` and nothing downstream.
+
+Only the robot's belief is read, never a scene.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+
+from nbs_env.config import ScannerConfig
+from nbs_env.errors import ConfigError
+from nbs_env.labels import VoxelLabel
+from nbs_env.mapping.voxels import VoxelGrid
+from nbs_env.planning.navigation import (
+    Candidates,
+    NavigationConfig,
+    TraversabilityMap,
+    assume_blind_zone_free,
+    candidates,
+    traversability,
+)
+from nbs_env.planning.visibility import GainConfig, VisibilityModel
+
+if TYPE_CHECKING:
+    from nbs_env.belief import RoomBelief
+
+__all__ = [
+    "GAIN_MODELS",
+    "GainModel",
+    "Plan",
+    "PlanningConfig",
+    "greedy_order",
+    "make_gain_model",
+    "plan",
+    "predict_gains",
+    "register_gain_model",
+    "sensor_positions",
+    "structural_voxels",
+    "traversable_floor",
+]
+
+
+class GainModel(Protocol):
+    """What a gain model does: predicted conversions of scanner positions in one state of V(t)."""
+
+    def gains(self, sensors: np.ndarray, scanner: ScannerConfig) -> np.ndarray:
+        """(m,) int: predicted Occluded-structure→Structure conversions (voxels) for (m, 3) sensors."""
+        ...
+
+
+#: Builds a gain model from one state of V(t): ``factory(labels, origin, voxel_size, config)``.
+GainModelFactory = Callable[[np.ndarray, np.ndarray, float, GainConfig], GainModel]
+
+#: Gain models by the name :attr:`GainConfig.model` selects; :func:`register_gain_model` adds one.
+GAIN_MODELS: dict[str, GainModelFactory] = {"visibility": VisibilityModel}
+
+
+def register_gain_model(name: str, factory: GainModelFactory, *, replace: bool = False) -> None:
+    """Make a gain model selectable as ``GainConfig(model=name)``.
+
+    Parameters
+    ----------
+    name : str
+        The name configurations use.
+    factory : callable
+        ``factory(labels, origin, voxel_size, config) -> GainModel``: ``labels`` (nx, ny, nz) uint8
+        VoxelLabels of V(t), ``origin`` (3,) float, ``voxel_size`` float, ``config`` GainConfig.
+    replace : bool
+        Allow replacing a registered model of the same name.
+
+    Raises
+    ------
+    ConfigError
+        ``name`` is empty or taken (and ``replace`` is False), or ``factory`` is not callable.
+    """
+    if not isinstance(name, str) or not name:
+        raise ConfigError(f"a gain model needs a non-empty name, got {name!r}")
+    if not callable(factory):
+        raise ConfigError(f"gain model {name!r}: the factory must be callable, got {type(factory).__name__}")
+    if name in GAIN_MODELS and not replace:
+        raise ConfigError(f"gain model {name!r} is registered already; pass replace=True to replace it")
+    GAIN_MODELS[name] = factory
+
+
+def make_gain_model(labels: np.ndarray, origin: np.ndarray, voxel_size: float, config: GainConfig) -> GainModel:
+    """The gain model ``config.model`` names, built on one state of V(t)."""
+    if config.model not in GAIN_MODELS:
+        raise ConfigError(f"unknown gain model {config.model!r}; registered: {', '.join(sorted(GAIN_MODELS))}")
+    return GAIN_MODELS[config.model](labels, origin, voxel_size, config)
+
+
+@dataclass(frozen=True)
+class PlanningConfig:
+    """What the planner is given: the scanner, the robot's footprint, the gain (JSON-safe, frozen).
+
+    Attributes
+    ----------
+    scanner : ScannerConfig
+        Its height over the floor places the sensors; its lowest elevation and minimum range make
+        the blind zone; its field of view and range limit the gain.
+    navigation : NavigationConfig
+        The robot's footprint and the candidate list.
+    gain : GainConfig
+        Which gain model, and its options.
+    predict_gains : bool
+        Predict the gain of every NVP. Off for policies with their own utility (their processing
+        time then does not carry the greedy's); :attr:`Plan.gains` is all zero.
+    """
+
+    scanner: ScannerConfig = field(default_factory=ScannerConfig)
+    navigation: NavigationConfig = field(default_factory=NavigationConfig)
+    gain: GainConfig = field(default_factory=GainConfig)
+    predict_gains: bool = True
+
+
+def greedy_order(gains: np.ndarray, path_lengths: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+    """Candidate indices ranked by gain, ties to the shorter path; masked-out entries last."""
+    gains = np.asarray(gains, dtype=float)
+    path_lengths = np.asarray(path_lengths, dtype=float)
+    valid = np.ones(len(gains), dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    return np.lexsort((path_lengths, -gains, ~valid))
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """The planner's answer for one decision.
+
+    Attributes
+    ----------
+    candidates : Candidates
+        The NVPs (K slots, the real ones first).
+    gains : (K,) int64
+        Predicted conversions of each slot, voxels; 0 for padding and when gains are not predicted.
+    structural_voxels : int
+        Structure + Occluded-structure voxels of the room's V(t): the unit the gain is read in.
+    seconds : float
+        How long planning took.
+    """
+
+    candidates: Candidates
+    gains: np.ndarray
+    structural_voxels: int
+    seconds: float
+
+    @property
+    def count(self) -> int:
+        """How many slots are real NVPs."""
+        return self.candidates.count
+
+    def gain_share(self) -> np.ndarray:
+        """(K,) float: the gains as shares of the room's structural voxels (0 for padding)."""
+        return np.asarray(self.gains, dtype=float) / max(1, int(self.structural_voxels))
+
+    def order(self) -> np.ndarray:
+        """(count,) int: the real NVPs ranked by gain, ties to the shorter path."""
+        n = self.count
+        return greedy_order(self.gains[:n], self.candidates.path_length[:n])
+
+    def best(self) -> int:
+        """The next best scan: the NVP with the most predicted gain, ties to the shorter path.
+
+        Raises
+        ------
+        IndexError
+            There is no NVP.
+        """
+        if self.count == 0:
+            raise IndexError("the plan has no next valid position")
+        return int(self.order()[0])
+
+    def gain_below(self, fraction: float) -> bool:
+        """Whether no NVP predicts ``fraction`` of the room's structural voxels (METHOD §7); True
+        when there is no NVP."""
+        if self.count == 0:
+            return True
+        return int(self.gains[: self.count].max()) < fraction * self.structural_voxels
+
+
+def structural_voxels(labels: np.ndarray) -> int:
+    """Structure + Occluded-structure voxels of (nx, ny, nz) uint8 labels."""
+    return int(np.count_nonzero((labels == VoxelLabel.STRUCTURE) | (labels == VoxelLabel.OCCLUDED_STRUCTURE)))
+
+
+def traversable_floor(
+    grid: VoxelGrid,
+    floor_z: float,
+    stops: np.ndarray | Sequence[Sequence[float]],
+    visited: np.ndarray | Sequence[Sequence[float]],
+    scanner: ScannerConfig,
+    navigation: NavigationConfig,
+) -> TraversabilityMap:
+    """Where the robot may stand in the room: V(t) with each stop's blind zone free, then the
+    footprint's traversability test.
+
+    Parameters
+    ----------
+    grid : VoxelGrid
+        The room's V(t).
+    floor_z : float
+        The room's floor height (the RoI's).
+    stops : (m, 3) float
+        Scanner positions of the room's stops (the robot's estimates).
+    visited : (v, 2) float
+        Where the robot has stood in the room (its footprint there is known to be free).
+    scanner : ScannerConfig
+    navigation : NavigationConfig
+    """
+    walkable = assume_blind_zone_free(
+        grid.labels, grid.origin, grid.voxel_size, stops, scanner.elevation_min, scanner.min_range
+    )
+    return traversability(walkable, grid.origin, grid.voxel_size, floor_z, navigation, visited)
+
+
+def sensor_positions(points_xy: np.ndarray, floor_z: float, scanner: ScannerConfig) -> np.ndarray:
+    """(m, 3) float: the scanner's optical centre above each of the (m, 2) floor points."""
+    points_xy = np.asarray(points_xy, dtype=float).reshape(-1, 2)
+    return np.column_stack([points_xy, np.full(len(points_xy), floor_z + scanner.height)])
+
+
+def predict_gains(
+    labels: np.ndarray,
+    origin: np.ndarray,
+    voxel_size: float,
+    points_xy: np.ndarray,
+    floor_z: float,
+    scanner: ScannerConfig,
+    config: GainConfig | None = None,
+) -> np.ndarray:
+    """(m,) int64: predicted conversions of a scan from each of the (m, 2) floor points.
+
+    ``labels``, ``origin`` and ``voxel_size`` describe V(t) (or a proxy of it a compared method
+    builds); the model is :attr:`GainConfig.model`'s.
+    """
+    config = config or GainConfig()
+    points_xy = np.asarray(points_xy, dtype=float).reshape(-1, 2)
+    if not len(points_xy):
+        return np.zeros(0, dtype=np.int64)
+    model = make_gain_model(labels, origin, voxel_size, config)
+    gains = np.asarray(model.gains(sensor_positions(points_xy, floor_z, scanner), scanner))
+    if gains.shape != (len(points_xy),):
+        raise ValueError(f"gain model {config.model!r} returned shape {gains.shape} for {len(points_xy)} sensors")
+    return gains.astype(np.int64, copy=False)
+
+
+def plan(
+    belief: RoomBelief,
+    pose: np.ndarray,
+    stops: np.ndarray | Sequence[Sequence[float]],
+    visited: np.ndarray | Sequence[Sequence[float]],
+    config: PlanningConfig,
+) -> Plan:
+    """Plan the next decision from the robot's belief (module docstring).
+
+    Parameters
+    ----------
+    belief : RoomBelief
+        The current room's belief, after at least one scan.
+    pose : (4, 4) float
+        The robot's pose estimate.
+    stops : (m, 3) float
+        Scanner positions of the room's stops.
+    visited : (v, 2) float
+        Floor points the robot stood on in the room.
+    config : PlanningConfig
+
+    Raises
+    ------
+    ValueError
+        The belief has no scan yet.
+    """
+    t = time.perf_counter()
+    grid, roi = belief.grid, belief.roi
+    if grid is None or roi is None:
+        raise ValueError("plan needs a belief with at least one scan")
+    xy = np.asarray(pose, dtype=float)[:2, 3]
+    tmap = traversable_floor(grid, roi.floor_z, stops, visited, config.scanner, config.navigation)
+    cands = candidates(tmap, xy, config.navigation)
+    gains = np.zeros(config.navigation.max_candidates, dtype=np.int64)
+    if config.predict_gains and cands.count:
+        gains[: cands.count] = predict_gains(
+            grid.labels, grid.origin, grid.voxel_size, cands.points, roi.floor_z, config.scanner, config.gain
+        )
+    return Plan(cands, gains, structural_voxels(grid.labels), time.perf_counter() - t)

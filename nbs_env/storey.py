@@ -1,0 +1,437 @@
+"""The storey session: one episode of the method over a storey, room by room through doors.
+
+A :class:`Storey` owns the :class:`~nbs_env.robot.Robot`, the
+:class:`~nbs_env.evaluation.CoverageMeter` (the evaluation's reader of ground truth) and the
+episode log. Its decisions are the method's loop (paper Fig. 2, METHOD §7-8)::
+
+    storey = Storey(scene, config, rng)        # the first scan, then advance()
+    while storey.open:
+        storey.scan_at(storey.plan.best())     # or storey.room_done() when completion="policy"
+
+- :meth:`Storey.scan_at`: the robot drives to an NVP and scans there; then :meth:`Storey.advance`.
+- :meth:`Storey.advance`: while the room is complete (METHOD §7: no NVP predicts enough
+  Occluded-structure→Structure conversions, or the agent declared it done; the scan cap and running
+  out of NVPs end it too), detect its doors, drive to the nearest unvisited door and take the first
+  scan of the next room (METHOD §8); with no door left, the storey is complete.
+
+No gymnasium import: :class:`~nbs_env.env.NBSEnv` puts spaces, reward and observation around it.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import shapely
+from shapely.geometry import Polygon
+
+from nbs_env.errors import ConfigError, InvalidPoseError, UnreachableDoorError
+from nbs_env.evaluation import CoverageMeter
+from nbs_env.observation import BeliefView
+from nbs_env.planning.planner import Plan
+from nbs_env.robot import Robot, RoomModel, StepReport
+from nbs_env.settings import EnvConfig
+from scenes import FloorPlan, Scene, load_scene
+from scenes.generator import generate_plan
+from scenes.geometry import point_is_free
+
+__all__ = ["STAGES", "ScanRecord", "StageTimes", "StepOutcome", "Storey", "resolve_scene"]
+
+#: Stage names of a scan's ``times``, in the order a step runs them.
+STAGES = ("scan", "registration", "roi", "classification", "voxels", "planning")
+
+
+@dataclass(frozen=True)
+class StageTimes:
+    """Seconds each stage of a step took, as ``info["times"]``.
+
+    Timings measure the machine, not the environment's state, so two of them always compare equal:
+    determinism checks (Gymnasium's ``check_env``, same-seed tests) compare everything else.
+    ``times["roi"]`` and ``times.as_dict()`` read them.
+    """
+
+    values: dict[str, float] = field(compare=False, default_factory=dict)
+
+    def __getitem__(self, stage: str) -> float:
+        return self.values[stage]
+
+    def keys(self):
+        return self.values.keys()
+
+    def items(self):
+        return self.values.items()
+
+    def as_dict(self) -> dict[str, float]:
+        return dict(self.values)
+
+
+@dataclass
+class ScanRecord:
+    """One scan of the episode, as the report records it (``true_*`` for evaluation only)."""
+
+    scan: int
+    room: int
+    door: bool
+    true_position: np.ndarray
+    estimated_position: np.ndarray
+    predicted_gain: int
+    path_length: float
+    structure_sensed_pct: float
+    processing_time: float
+    acquisition_time: float
+    points: int
+    structure_points: int
+    registration_error: tuple[float, float]
+    times: dict[str, float]
+
+
+@dataclass(frozen=True)
+class StepOutcome:
+    """What one decision did to the storey.
+
+    Attributes
+    ----------
+    scans : int
+        Scans taken (a door crossing adds one).
+    metres : float
+        Distance driven.
+    coverage_gain : float
+        Increase of the true structural surface sensed, percentage points (evaluation side).
+    conversions : int
+        The robot's realised Occluded-structure→Structure conversions of the scan at the chosen NVP
+        (counted when the session was asked to, else 0).
+    structural_voxels : int
+        Structure + Occluded-structure voxels of the room before the decision (the unit
+        ``conversions`` is read in).
+    """
+
+    scans: int = 0
+    metres: float = 0.0
+    coverage_gain: float = 0.0
+    conversions: int = 0
+    structural_voxels: int = 0
+
+
+def resolve_scene(
+    spec: Any,
+    start: Any,
+    config: EnvConfig,
+    rng: np.random.Generator,
+    cache: dict[str, Scene] | None = None,
+) -> Scene:
+    """The scene an episode runs in, with its start checked against the true building.
+
+    Parameters
+    ----------
+    spec : str, Path, Scene or FloorPlan
+        Anything :func:`scenes.load_scene` takes, a Scene, a FloorPlan, or ``"generated"`` (a fresh
+        storey drawn from ``rng`` with ``config.generator``).
+    start : (2,) or (3,) float, optional
+        Replaces the scene's start.
+    config : EnvConfig
+    rng : numpy.random.Generator
+    cache : dict, optional
+        Scenes loaded by name, reused.
+
+    Raises
+    ------
+    ConfigError
+        ``spec`` is of no known kind.
+    InvalidPoseError
+        The start is not free floor (the caller's mistake, checked as a simulator checks where a
+        robot is put down).
+    """
+    cache = {} if cache is None else cache
+    if isinstance(spec, Scene):
+        scene = spec
+    elif isinstance(spec, FloorPlan):
+        scene = load_scene(spec)
+    elif isinstance(spec, (str, Path)) and str(spec) == "generated":
+        seed = int(rng.integers(0, 2**31 - 1))
+        scene = generate_plan(seed, config.generator).to_scene(source=f"generated:{seed}", validate=False)
+    elif isinstance(spec, (str, Path)):
+        key = str(spec)
+        if key not in cache:
+            cache[key] = load_scene(key, **config.scene_options)
+        scene = cache[key]
+    else:
+        raise ConfigError(f"options['scene'] must be a scene name, path, Scene or FloorPlan, got {type(spec).__name__}")
+    if start is not None:
+        scene = copy.copy(scene)  # the cached scene keeps its own start
+        scene.start = start
+    xy = scene.start[:2]
+    inside = not scene.rooms or any(shapely.contains_xy(Polygon(r.polygon), *xy) for r in scene.rooms)
+    if not inside or not point_is_free(scene, xy, float(scene.start[2]), config.robot.navigation.robot_radius):
+        raise InvalidPoseError(
+            f"{scene.name}: start {np.round(scene.start[:2], 3).tolist()} is not free floor "
+            f"(inside a wall or an object, or outside the building)"
+        )
+    return scene
+
+
+class Storey:
+    """One storey scanned room by room (module docstring).
+
+    Parameters
+    ----------
+    scene : Scene
+        The true building (the simulator's and the meter's; the robot's decisions never read it).
+    config : EnvConfig
+        ``robot``, ``completion``, ``max_scans`` and the evaluation's ``coverage_*`` are read.
+    rng : numpy.random.Generator
+        The only source of randomness.
+    count_conversions : bool
+        Count each scan's realised conversions (:attr:`StepOutcome.conversions`).
+
+    Attributes
+    ----------
+    robot : Robot
+    meter : CoverageMeter
+    scans : list of ScanRecord
+        The episode log, one record per scan.
+    door_events : list of dict
+        ``detected``, ``crossed`` and ``unreachable`` events, in order.
+    paths : list of (p, 2) float
+        The planned paths driven.
+    complete : bool
+        The storey is done: the current room is complete and no detected door is left to reach.
+    """
+
+    def __init__(
+        self, scene: Scene, config: EnvConfig, rng: np.random.Generator, count_conversions: bool = False
+    ) -> None:
+        self.scene = scene
+        self.config = config
+        self.count_conversions = count_conversions
+        self.robot = Robot(scene, config.robot, rng)
+        self.meter = CoverageMeter(scene, config.coverage_spacing, config.coverage_radius)
+        self.scans: list[ScanRecord] = []
+        self.door_events: list[dict[str, Any]] = []
+        self.paths: list[np.ndarray] = []
+        self.complete = False
+        self.new_room = True
+        self.step_scans: list[tuple[np.ndarray, np.ndarray]] = []
+        self._record(self.robot.scan(), door=False)
+        self.advance()
+
+    # ------------------------------------------------------------------ state
+    @property
+    def open(self) -> bool:
+        """The episode goes on: the storey is not complete and the scan budget is not spent."""
+        return not self.complete and len(self.scans) < self.config.max_scans
+
+    @property
+    def plan(self) -> Plan:
+        """The robot's plan for the next decision (NVPs and predicted gains)."""
+        return self.robot.plan()
+
+    @property
+    def room(self) -> int:
+        """The robot's number of the room it is in."""
+        return self.robot.room_index
+
+    @property
+    def rooms_done(self) -> int:
+        """How many rooms were completed."""
+        return len(self.robot.rooms_done)
+
+    @property
+    def path_length(self) -> float:
+        """Metres driven."""
+        return self.robot.path_length
+
+    def coverage_pct(self) -> float:
+        """True structural surface sensed, % of the storey's (evaluation side)."""
+        return self.meter.percent()
+
+    def room_models(self, current: bool = True) -> list[RoomModel]:
+        """The recovered model of every room completed, and of the current one (``current``)."""
+        robot = self.robot
+        models = list(robot.room_models)
+        if current and robot.room_index not in robot.rooms_done:
+            current = robot.room_model()
+            if current is not None:
+                models.append(current)
+        return models
+
+    def view(self) -> BeliefView:
+        """What the robot believes now (see :class:`~nbs_env.observation.BeliefView`); the plan's
+        slots are padding once the episode is over."""
+        robot = self.robot
+        k = robot.config.navigation.max_candidates
+        xy, length, mask = np.zeros((k, 2)), np.zeros(k), np.zeros(k, dtype=bool)
+        gains, share = np.zeros(k, dtype=np.int64), np.zeros(k)
+        if self.open:
+            planned = robot.plan()
+            cands = planned.candidates
+            xy[: cands.count], length, mask = cands.points, cands.path_length.astype(float), cands.mask
+            gains, share = planned.gains.copy(), planned.gain_share()
+        belief = robot.belief
+        return BeliefView(
+            pose=robot.pose,
+            room=robot.room_index,
+            new_room=self.new_room,
+            scans=list(self.step_scans),
+            grid=belief.grid,
+            roi=belief.roi,
+            se=belief.se,
+            candidates_xy=xy,
+            path_length=length,
+            mask=mask,
+            gains=gains,
+            gain_share=share,
+            scanner=robot.config.scanner,
+        )
+
+    # ------------------------------------------------------------------ decisions
+    def begin_step(self) -> None:
+        """Start a decision step: this step's registered scans and the new-room flag start afresh."""
+        self.step_scans = []
+        self.new_room = False
+
+    def scan_at(self, index: int) -> StepOutcome:
+        """Drive to NVP ``index`` of the plan and scan there, then :meth:`advance`.
+
+        Raises
+        ------
+        IndexError
+            ``index`` is not a real NVP.
+        RuntimeError
+            The episode is over.
+        """
+        self._check_open()
+        before = self._before()
+        planned = self.robot.plan()
+        if not (0 <= index < planned.count):
+            raise IndexError(f"candidate {index} is not valid: {planned.count} candidates")
+        self.paths.append(planned.candidates.path(index))
+        report = self.robot.move_to(index, count_conversions=self.count_conversions)
+        self._record(report, door=False)
+        self.advance()
+        return self._outcome(before, report.conversions)
+
+    def room_done(self) -> StepOutcome:
+        """The agent declares the room complete (completion="policy"): :meth:`advance` to the next room."""
+        self._check_open()
+        before = self._before()
+        self.advance(done=True)
+        return self._outcome(before, 0)
+
+    def advance(self, done: bool = False) -> None:
+        """Room completion (METHOD §7) and the door hand-over (METHOD §8), until a room is open.
+
+        ``done``: the agent declared the room complete (completion="policy")."""
+        robot = self.robot
+        while len(self.scans) < self.config.max_scans and self._room_complete(done):
+            done = False  # the declaration was for the room the robot was in
+            before = len(robot.doors)
+            robot.finish_room()
+            for door in robot.doors[before:]:
+                self.door_events.append(
+                    {
+                        "event": "detected",
+                        "scan": len(self.scans),
+                        "room": door.found_in_room,
+                        "centre": door.centre[:2].round(3).tolist(),
+                        "width": round(float(door.width), 3),
+                    }
+                )
+            if not self._enter_next_room():
+                return
+
+    # ------------------------------------------------------------------ inside
+    def _room_complete(self, done: bool) -> bool:
+        """The current room is done: by the gain rule (or the agent's declaration), the room's scan
+        cap, or no NVP left."""
+        robot = self.robot
+        if robot.scans_in_room >= robot.config.max_scans_per_room:
+            return True
+        planned = robot.plan()
+        if planned.count == 0:
+            return True
+        if self.config.completion == "gain":
+            return planned.gain_below(robot.config.completion_fraction)
+        return done
+
+    def _enter_next_room(self) -> bool:
+        """Cross the nearest reachable unvisited door and scan the next room; False when the storey
+        is complete or the budget is spent."""
+        robot = self.robot
+        while True:
+            k = robot.next_door()
+            if k is None:
+                self.complete = True
+                return False
+            if len(self.scans) >= self.config.max_scans:
+                return False
+            door = robot.doors[k]
+            start = robot.pose[:2, 3].copy()
+            try:
+                report = robot.cross_door(k)
+            except UnreachableDoorError:
+                self.door_events.append(
+                    {"event": "unreachable", "scan": len(self.scans), "centre": door.centre[:2].round(3).tolist()}
+                )
+                continue
+            self.paths.append(np.array([start, door.centre[:2]]))
+            self.door_events.append(
+                {
+                    "event": "crossed",
+                    "scan": len(self.scans),
+                    "centre": door.centre[:2].round(3).tolist(),
+                    "into_room": robot.room_index,
+                }
+            )
+            self._record(report, door=True)
+            self.new_room = True
+            return True
+
+    def _record(self, report: StepReport, door: bool) -> None:
+        robot = self.robot
+        self.step_scans.append((report.world_points, report.estimated_pose[:3, 3].copy()))
+        t = time.perf_counter()
+        self.meter.add(report.world_points)
+        evaluation = time.perf_counter() - t
+        # Planning for the next decision belongs to this step: it runs now, not at the next call.
+        planned = robot.plan()
+        times = {**{s: 0.0 for s in STAGES}, **report.times, "planning": planned.seconds, "evaluation": evaluation}
+        processing = sum(times[s] for s in STAGES if s != "scan")
+        self.scans.append(
+            ScanRecord(
+                scan=len(self.scans),
+                room=robot.room_index,
+                door=door,
+                true_position=report.true_pose[:3, 3].copy(),
+                estimated_position=report.estimated_pose[:3, 3].copy(),
+                predicted_gain=int(report.predicted_gain),
+                path_length=robot.path_length,
+                structure_sensed_pct=self.meter.percent(),
+                processing_time=processing,
+                acquisition_time=report.acquisition_time,
+                points=report.points,
+                structure_points=report.belief.structure_points,
+                registration_error=robot.registration_error(),
+                times=times,
+            )
+        )
+
+    def _check_open(self) -> None:
+        if not self.open:
+            raise RuntimeError("the episode is over: the storey is complete or the scan budget is spent")
+
+    def _before(self) -> tuple[int, float, float, int]:
+        return len(self.scans), self.robot.path_length, self.meter.percent(), self.robot.plan().structural_voxels
+
+    def _outcome(self, before: tuple[int, float, float, int], conversions: int) -> StepOutcome:
+        scans, metres, pct, structural = before
+        return StepOutcome(
+            scans=len(self.scans) - scans,
+            metres=self.robot.path_length - metres,
+            coverage_gain=self.meter.percent() - pct,
+            conversions=conversions,
+            structural_voxels=structural,
+        )
