@@ -12,7 +12,7 @@ from typing import Any
 
 from nbs_env.errors import ConfigError
 
-__all__ = ["MAX_RAYS", "OdometryConfig", "RegistrationConfig", "ScannerConfig"]
+__all__ = ["MAX_RAYS", "Config", "OdometryConfig", "RegistrationConfig", "ScannerConfig"]
 
 #: Patterns above this many rays per scan are refused: they would take minutes and gigabytes.
 MAX_RAYS = 50_000_000
@@ -30,8 +30,29 @@ def _finite(**values: float) -> None:
         )
 
 
+def _finite_fields(config: Any, *names: str) -> None:
+    """Each named field of ``config`` is a finite number."""
+    _finite(**{name: getattr(config, name) for name in names})
+
+
+def _integer(config: Any, name: str, least: int) -> None:
+    """Field ``name`` of ``config`` is an integer (not a bool) of at least ``least``."""
+    value = getattr(config, name)
+    _require(
+        isinstance(value, int) and not isinstance(value, bool) and value >= least,
+        f"{name} must be an integer >= {least}, got {value!r}",
+    )
+
+
+class Config:
+    """Base of the frozen configuration dataclasses: ``to_dict()`` gives their JSON-safe fields."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)  # type: ignore[call-overload]
+
+
 @dataclass(frozen=True)
-class ScannerConfig:
+class ScannerConfig(Config):
     """The simulated terrestrial laser scanner (a Riegl VZ-400 on a mobile base), METHOD §1.
 
     Attributes
@@ -103,12 +124,9 @@ class ScannerConfig:
     def n_rays(self) -> int:
         return self.n_rows * self.n_cols
 
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
 
 @dataclass(frozen=True)
-class OdometryConfig:
+class OdometryConfig(Config):
     """How the pose the robot believes in drifts from the true one, METHOD §2.
 
     Attributes
@@ -135,12 +153,9 @@ class OdometryConfig:
         for name, value in asdict(self).items():
             _require(value >= 0, f"{name} must be >= 0, got {value}")
 
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
 
 @dataclass(frozen=True)
-class RegistrationConfig:
+class RegistrationConfig(Config):
     """Point-to-plane ICP of a new scan against the accumulated cloud S(t), METHOD §2.
 
     Attributes
@@ -201,6 +216,3 @@ class RegistrationConfig:
         )
         _require(self.max_iterations >= 1, f"max_iterations must be >= 1, got {self.max_iterations}")
         _require(0 <= self.min_fitness <= 1, f"min_fitness is a share in [0, 1], got {self.min_fitness}")
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)

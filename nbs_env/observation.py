@@ -17,13 +17,12 @@ index it by name (``table[:, CandidateColumn.PATH_LENGTH]``), never by number. N
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from enum import IntEnum
-from typing import Any
 
 import numpy as np
 
-from nbs_env.config import ScannerConfig, _finite, _require
+from nbs_env.config import Config, ScannerConfig, _finite, _require
 from nbs_env.labels import VoxelLabel
 from nbs_env.mapping.voxels import VoxelGrid
 from nbs_env.perception.roi import RoI
@@ -131,7 +130,7 @@ class BeliefView:
 
 
 @dataclass(frozen=True)
-class ObservationConfig:
+class ObservationConfig(Config):
     """The voxel window of the observation.
 
     Attributes
@@ -161,9 +160,6 @@ class ObservationConfig:
     def extent(self) -> np.ndarray:
         """(3,) float: the window's size in metres."""
         return np.asarray(self.shape, dtype=float) * self.cell
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
 
 def pool_labels(labels: np.ndarray, cell_of: tuple[np.ndarray, np.ndarray, np.ndarray], shape) -> np.ndarray:

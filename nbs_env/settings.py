@@ -10,10 +10,10 @@ them (:class:`~nbs_env.config.ScannerConfig`, :class:`~nbs_env.planning.navigati
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
-from nbs_env.config import OdometryConfig, RegistrationConfig, ScannerConfig, _finite, _require
+from nbs_env.config import Config, OdometryConfig, RegistrationConfig, ScannerConfig, _finite, _integer, _require
 from nbs_env.errors import ConfigError
 from nbs_env.observation import ObservationConfig
 from nbs_env.perception.doors import DoorConfig
@@ -27,7 +27,7 @@ __all__ = ["PRESETS", "EnvConfig", "RewardConfig", "RobotConfig", "make_config"]
 
 
 @dataclass(frozen=True)
-class RobotConfig:
+class RobotConfig(Config):
     """Everything the robot is made of (JSON-safe, frozen).
 
     Attributes
@@ -83,10 +83,7 @@ class RobotConfig:
             0.0 <= self.completion_fraction < 1.0,
             f"completion_fraction is a share in [0, 1), got {self.completion_fraction}",
         )
-        _require(
-            isinstance(self.max_scans_per_room, int) and self.max_scans_per_room >= 1,
-            f"max_scans_per_room must be an integer >= 1, got {self.max_scans_per_room!r}",
-        )
+        _integer(self, "max_scans_per_room", 1)
         _require(
             self.gain.model in GAIN_MODELS,
             f"unknown gain model {self.gain.model!r}; registered: {', '.join(sorted(GAIN_MODELS))}",
@@ -97,12 +94,9 @@ class RobotConfig:
         """What the planner reads of this configuration."""
         return PlanningConfig(self.scanner, self.navigation, self.gain, self.predict_gains)
 
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
 
 @dataclass(frozen=True)
-class RewardConfig:
+class RewardConfig(Config):
     """What a step is worth.
 
     Attributes
@@ -136,7 +130,7 @@ class RewardConfig:
 
 
 @dataclass(frozen=True)
-class EnvConfig:
+class EnvConfig(Config):
     """Everything an :class:`NBSEnv` is made of (JSON-safe, frozen).
 
     Attributes
@@ -187,10 +181,7 @@ class EnvConfig:
         _require(
             isinstance(self.scene, str) and self.scene != "", f"scene must be a non-empty string, got {self.scene!r}"
         )
-        _require(
-            isinstance(self.max_scans, int) and self.max_scans >= 1,
-            f"max_scans must be an integer >= 1, got {self.max_scans!r}",
-        )
+        _integer(self, "max_scans", 1)
         _finite(
             coverage_spacing=self.coverage_spacing, coverage_radius=self.coverage_radius, travel_speed=self.travel_speed
         )
@@ -203,9 +194,6 @@ class EnvConfig:
             self.robot.predict_gains or self.completion == "policy",
             "completion='gain' needs robot.predict_gains (the room ends when the predicted gain is small)",
         )
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
 
 def _fast() -> EnvConfig:

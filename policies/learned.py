@@ -23,12 +23,13 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from nbs_env.config import Config
 from nbs_env.errors import ModelFileError
 from nbs_env.observation import CandidateColumn, candidate_table_of
 from policies.base import mask_of
@@ -81,7 +82,7 @@ def _torch():
 
 
 @dataclass(frozen=True)
-class NetworkConfig:
+class NetworkConfig(Config):
     """The shape of a :class:`ScanNet` (JSON-safe).
 
     Attributes
@@ -114,9 +115,6 @@ class NetworkConfig:
     def latent_dim(self) -> int:
         """Length of the features the policy's heads read: g and the flat candidate table."""
         return self.grid_dim + self.candidates * self.features
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
 
 def build_network(config: NetworkConfig):

@@ -16,13 +16,12 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from nbs_env.config import _finite, _require
+from nbs_env.config import Config, _finite, _integer, _require
 from nbs_env.errors import ConfigError
 from policies.learned import NetworkConfig, build_network, save_checkpoint
 from train.arguments import parse_range
@@ -48,8 +47,39 @@ def _require_rl():
 
 
 @dataclass(frozen=True)
-class TrainConfig:
-    """What a training run is (JSON-safe, frozen, checked on construction); see ``nbs train --help``."""
+class TrainConfig(Config):
+    """What a training run is (JSON-safe, frozen, checked on construction); ``nbs train --help``
+    names the same options.
+
+    Attributes
+    ----------
+    timesteps : int
+        Environment steps to train for (every worker's together).
+    envs : int
+        Worker processes, one env each.
+    seed : int
+        Seeds the networks, the workers' storeys and the evaluation.
+    rooms : (int, int)
+        The range of rooms of the generated training storeys.
+    n_steps : int
+        Steps per worker between PPO updates.
+    batch_size : int
+        PPO's minibatch.
+    learning_rate : float
+        PPO's learning rate.
+    eval_every : int
+        Timesteps between evaluations on the validation storeys (0: none).
+    eval_storeys : int
+        Validation storeys per evaluation.
+    checkpoint_every : int
+        Timesteps between checkpoints (0: none).
+    max_episode_steps : int
+        Decisions per episode at the most.
+    bc_steps : int
+        Vector steps of greedy play to behaviour-clone from before PPO (0: none).
+    metre_cost : float
+        Reward subtracted per metre driven.
+    """
 
     timesteps: int = 2048
     envs: int = 2
@@ -67,14 +97,10 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "rooms", tuple(self.rooms))
-        positive = ("timesteps", "envs", "n_steps", "batch_size", "eval_storeys", "max_episode_steps")
-        for name in (*positive, "seed", "eval_every", "checkpoint_every", "bc_steps"):
-            value = getattr(self, name)
-            _require(
-                isinstance(value, int) and not isinstance(value, bool), f"{name} must be an integer, got {value!r}"
-            )
-            least = 1 if name in positive else 0
-            _require(value >= least, f"{name} must be >= {least}, got {value}")
+        for name in ("timesteps", "envs", "n_steps", "batch_size", "eval_storeys", "max_episode_steps"):
+            _integer(self, name, 1)
+        for name in ("seed", "eval_every", "checkpoint_every", "bc_steps"):
+            _integer(self, name, 0)
         _require(
             len(self.rooms) == 2
             and all(isinstance(r, int) for r in self.rooms)
@@ -84,9 +110,6 @@ class TrainConfig:
         _finite(learning_rate=self.learning_rate, metre_cost=self.metre_cost)
         _require(self.learning_rate > 0, f"learning_rate must be > 0, got {self.learning_rate}")
         _require(self.metre_cost >= 0, f"metre_cost must be >= 0, got {self.metre_cost}")
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
 
 def _env_factory(rooms: tuple[int, int], max_episode_steps: int, metre_cost: float = 0.05):

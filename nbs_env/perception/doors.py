@@ -9,12 +9,11 @@ That last test tells a door from the shadow a cabinet casts on the wall behind i
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
-from nbs_env.config import _finite, _require
+from nbs_env.config import Config, _finite_fields, _integer, _require
 from nbs_env.perception.faces import WallFace
 from nbs_env.perception.structure import face_image
 
@@ -22,7 +21,7 @@ __all__ = ["DetectedDoor", "DoorConfig", "detect_doors"]
 
 
 @dataclass(frozen=True)
-class DoorConfig:
+class DoorConfig(Config):
     """Limits of a door opening (METHOD §8).
 
     Attributes
@@ -53,15 +52,7 @@ class DoorConfig:
     pixel: float = 0.05
 
     def __post_init__(self) -> None:
-        _finite(
-            min_width=self.min_width,
-            max_width=self.max_width,
-            min_height=self.min_height,
-            max_height=self.max_height,
-            floor_gap=self.floor_gap,
-            behind=self.behind,
-            pixel=self.pixel,
-        )
+        _finite_fields(self, "min_width", "max_width", "min_height", "max_height", "floor_gap", "behind", "pixel")
         _require(
             0 < self.min_width <= self.max_width,
             f"need 0 < min_width <= max_width, got {self.min_width}, {self.max_width}",
@@ -73,14 +64,7 @@ class DoorConfig:
         _require(self.floor_gap >= 0, f"floor_gap must be >= 0 metres, got {self.floor_gap}")
         _require(self.behind >= 0, f"behind must be >= 0 metres, got {self.behind}")
         _require(self.pixel > 0, f"pixel must be > 0 metres, got {self.pixel}")
-        _require(
-            isinstance(self.min_behind_points, int) and not isinstance(self.min_behind_points, bool)
-            and self.min_behind_points >= 0,
-            f"min_behind_points must be an integer >= 0, got {self.min_behind_points!r}",
-        )  # fmt: skip
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        _integer(self, "min_behind_points", 0)
 
 
 @dataclass(frozen=True)

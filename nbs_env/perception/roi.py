@@ -18,8 +18,7 @@ Paper §3.1 and METHOD §3. After each scan:
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
-from typing import Any
+from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
@@ -27,7 +26,7 @@ from scipy import ndimage
 from shapely.geometry import Polygon
 from shapely.geometry.polygon import orient
 
-from nbs_env.config import _finite, _require
+from nbs_env.config import Config, _finite_fields, _integer, _require
 from nbs_env.errors import NBSError
 from nbs_env.perception.faces import WallFace
 
@@ -39,7 +38,7 @@ class RoIError(NBSError, ValueError):
 
 
 @dataclass(frozen=True)
-class RoIConfig:
+class RoIConfig(Config):
     """Options of the RoI computation.
 
     Attributes
@@ -75,28 +74,14 @@ class RoIConfig:
     collinear_deg: float = 8.0
 
     def __post_init__(self) -> None:
-        _finite(
-            pixel=self.pixel,
-            histogram_bin=self.histogram_bin,
-            band_above_floor=self.band_above_floor,
-            band_below_ceiling=self.band_below_ceiling,
-            max_range=self.max_range,
-            corner_distance=self.corner_distance,
-            collinear_deg=self.collinear_deg,
-        )
-        for name in ("pixel", "histogram_bin", "max_range"):
+        lengths = ("pixel", "histogram_bin", "band_above_floor", "max_range")
+        _finite_fields(self, *lengths, "band_below_ceiling", "corner_distance", "collinear_deg")
+        for name in lengths:
             _require(getattr(self, name) > 0, f"{name} must be > 0 metres, got {getattr(self, name)}")
-        _require(self.band_above_floor > 0, f"band_above_floor must be > 0 metres, got {self.band_above_floor}")
         _require(self.band_below_ceiling >= 0, f"band_below_ceiling must be >= 0, got {self.band_below_ceiling}")
         _require(self.corner_distance >= 0, f"corner_distance must be >= 0, got {self.corner_distance}")
         _require(0 <= self.collinear_deg < 90, f"collinear_deg must be in [0, 90), got {self.collinear_deg}")
-        _require(
-            isinstance(self.azimuth_bins, int) and not isinstance(self.azimuth_bins, bool) and self.azimuth_bins >= 4,
-            f"azimuth_bins must be an integer >= 4, got {self.azimuth_bins!r}",
-        )
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        _integer(self, "azimuth_bins", 4)
 
 
 @dataclass(frozen=True)

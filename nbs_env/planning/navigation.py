@@ -26,9 +26,9 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 from scipy import ndimage
@@ -36,7 +36,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from nbs_env.config import _finite, _require
+from nbs_env.config import Config, _finite, _require
 from nbs_env.labels import VoxelLabel, is_occupied
 
 __all__ = [
@@ -64,7 +64,7 @@ _HALF_NEIGHBOURHOOD = ((1, 0), (0, 1), (1, 1), (1, -1))
 
 
 @dataclass(frozen=True)
-class NavigationConfig:
+class NavigationConfig(Config):
     """The robot's footprint and the NVP candidate list, METHOD §6.
 
     Attributes
@@ -123,9 +123,6 @@ class NavigationConfig:
     def required_clearance(self) -> float:
         """Least distance from a traversable cell to an occupied voxel: radius plus safety distance."""
         return self.robot_radius + self.safety_distance
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
 
 @dataclass(frozen=True, eq=False)

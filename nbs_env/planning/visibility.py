@@ -9,12 +9,11 @@ never the scene.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
-from nbs_env.config import ScannerConfig, _finite, _require
+from nbs_env.config import Config, ScannerConfig, _finite_fields, _integer, _require
 from nbs_env.labels import VoxelLabel, is_occupied
 from scenes._open3d import open3d
 
@@ -22,7 +21,7 @@ __all__ = ["GainConfig", "VisibilityModel", "occupied_surface"]
 
 
 @dataclass(frozen=True)
-class GainConfig:
+class GainConfig(Config):
     """Options of the gain.
 
     Attributes
@@ -58,15 +57,9 @@ class GainConfig:
             isinstance(self.occluded_clutter_blocks, bool),
             f"occluded_clutter_blocks must be true or false, got {self.occluded_clutter_blocks!r}",
         )
-        _finite(tolerance_voxels=self.tolerance_voxels)
+        _finite_fields(self, "tolerance_voxels")
         _require(self.tolerance_voxels >= 0, f"tolerance_voxels must be >= 0, got {self.tolerance_voxels}")
-        _require(
-            isinstance(self.group, int) and not isinstance(self.group, bool) and self.group >= 1,
-            f"group must be an integer >= 1, got {self.group!r}",
-        )
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        _integer(self, "group", 1)
 
 
 def occupied_surface(blocking: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
