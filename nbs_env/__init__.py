@@ -1,4 +1,8 @@
-"""The robot's side of nbs-env: scanner, registration, perception, voxel labels, planning, the env.
+"""The robot's side of nbs-env: scanner, registration, perception, voxel labels, planning, the storey
+session and the env.
+
+One step reads top-down: :mod:`nbs_env.env` → :mod:`nbs_env.storey` → :mod:`nbs_env.robot` →
+sensing and :mod:`nbs_env.belief` (perception, mapping) → :mod:`nbs_env.planning.planner`.
 
 It reads buildings from :mod:`scenes` (the floor below) and never imports :mod:`policies` or
 :mod:`train` (the floors above). Only the simulator and evaluation parts of this package may read a

@@ -109,20 +109,7 @@ STEP_LAYERS = [
 
 def _runtime_nbs_imports(path: Path) -> set[str]:
     """nbs_env modules ``path`` imports at run time (imports under ``if TYPE_CHECKING:`` left out)."""
-    tree = ast.parse(path.read_text())
-    typing_only = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING":
-            typing_only |= {id(n) for n in ast.walk(node)}
-    out = set()
-    for node in ast.walk(tree):
-        if id(node) in typing_only:
-            continue
-        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("nbs_env"):
-            out.add(node.module)
-        elif isinstance(node, ast.Import):
-            out |= {a.name for a in node.names if a.name.startswith("nbs_env")}
-    return out
+    return {m for m in _runtime_imports(path) if m.split(".")[0] == "nbs_env"}
 
 
 def _module_path(module: str) -> str:
@@ -167,3 +154,59 @@ def test_scenes_knows_no_robot_and_the_footprints_agree():
     for path in (ROOT / "scenes").rglob("*.py"):
         text = path.read_text()
         assert "ROBOT_RADIUS" not in text and "SAFETY_DISTANCE" not in text, path
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def test_no_import_cycles_between_modules():
+    """Run-time imports between a package's modules form no cycle (``if TYPE_CHECKING:`` aside; a
+    package importing its own ``__init__`` is not counted)."""
+    files = {_module_name(p): p for floor in FLOORS for p in (ROOT / floor).rglob("*.py")}
+    graph = {}
+    for name, path in files.items():
+        deps = set()
+        for module in _runtime_imports(path):
+            while module and module not in files:
+                module = module.rpartition(".")[0]
+            if module and module != name and "." in module and module.split(".")[0] == name.split(".")[0]:
+                deps.add(module)
+        graph[name] = deps
+    state: dict[str, int] = {}
+    stack: list[str] = []
+    found: list[list[str]] = []
+
+    def visit(u: str) -> None:
+        state[u] = 1
+        stack.append(u)
+        for v in sorted(graph[u]):
+            if state.get(v) == 1:
+                found.append([*stack[stack.index(v) :], v])
+            elif v not in state:
+                visit(v)
+        stack.pop()
+        state[u] = 2
+
+    for name in sorted(graph):
+        if name not in state:
+            visit(name)
+    assert not found, "import cycles: " + "; ".join(" -> ".join(c) for c in found)
+
+
+def _runtime_imports(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text())
+    typing_only = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING":
+            typing_only |= {id(n) for n in ast.walk(node)}
+    out = set()
+    for node in ast.walk(tree):
+        if id(node) in typing_only:
+            continue
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.add(node.module)
+        elif isinstance(node, ast.Import):
+            out |= {a.name for a in node.names}
+    return out

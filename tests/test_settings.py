@@ -1,0 +1,83 @@
+"""The env's configuration: every part checked on construction and reachable from EnvConfig; one palette."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from nbs_env.errors import ConfigError
+from nbs_env.labels import LABEL_COLOURS, VoxelLabel
+from nbs_env.perception.doors import DoorConfig
+from nbs_env.perception.roi import RoIConfig
+from nbs_env.planning.visibility import GainConfig
+from nbs_env.settings import EnvConfig, RobotConfig, make_config
+from nbs_env.storey import Storey
+from scenes import load_scene
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda: DoorConfig(min_width=-0.1), "min_width"),
+        (lambda: DoorConfig(min_width=2.0, max_width=1.0), "min_width <= max_width"),
+        (lambda: DoorConfig(max_height=float("nan")), "max_height must be a finite number"),
+        (lambda: DoorConfig(min_behind_points=-1), "min_behind_points must be an integer >= 0"),
+        (lambda: RoIConfig(pixel=0.0), "pixel must be > 0"),
+        (lambda: RoIConfig(azimuth_bins=2), "azimuth_bins must be an integer >= 4"),
+        (lambda: RoIConfig(collinear_deg=95.0), "collinear_deg"),
+        (lambda: GainConfig(tolerance_voxels=-1.0), "tolerance_voxels"),
+        (lambda: GainConfig(occluded_clutter_blocks="yes"), "occluded_clutter_blocks"),
+        (lambda: RobotConfig(max_scans_per_room=0), "max_scans_per_room must be an integer >= 1"),
+        (lambda: EnvConfig(max_scans=True), "max_scans must be an integer"),
+    ],
+)
+def test_bad_values_are_refused_with_their_name(make, message):
+    with pytest.raises(ConfigError, match=message):
+        make()
+
+
+def test_the_roi_and_door_configs_reach_the_robot(monkeypatch):
+    import nbs_env.robot
+
+    seen = []
+    detect = nbs_env.robot.detect_doors
+
+    def spy(faces, scans, config=None):
+        seen.append(config)
+        return detect(faces, scans, config)
+
+    monkeypatch.setattr(nbs_env.robot, "detect_doors", spy)
+    base = make_config("fast", scene="office")
+    doors = DoorConfig(min_width=0.7, max_width=1.2)
+    roi = RoIConfig(pixel=0.08, azimuth_bins=720)
+    config = replace(base, robot=replace(base.robot, doors=doors, roi=roi), max_scans=14)
+    storey = Storey(load_scene("office"), config, np.random.default_rng(0))
+    assert storey.robot.belief.roi_config.pixel == 0.08
+    # More azimuth bins than the 1° scanner's 360 columns are capped.
+    assert storey.robot.belief.roi_config.azimuth_bins == 360
+    while storey.open:
+        storey.scan_at(storey.plan.best())
+    assert storey.rooms_done == 1 and seen == [doors]
+    assert storey.config.to_dict()["robot"]["doors"]["max_width"] == 1.2
+
+
+def test_one_palette_for_pictures_and_ply(tmp_path):
+    import trimesh
+
+    from nbs_env.mapping.voxels import VoxelGrid
+    from nbs_env.render import LABEL_COLOURS as PICTURE
+
+    np.testing.assert_allclose(PICTURE * 255, LABEL_COLOURS, atol=1e-9)
+    labels = np.zeros((6, 1, 1), dtype=np.uint8)
+    labels[:, 0, 0] = np.arange(6)
+    grid = VoxelGrid(np.zeros(3), 0.1, labels)
+    cloud = trimesh.load(grid.to_ply(tmp_path / "v.ply", include=list(VoxelLabel)))
+    order = np.argsort(cloud.vertices[:, 0])
+    assert np.array_equal(np.asarray(cloud.colors)[order, :3], LABEL_COLOURS)
+    # Occluded-structure is green, Structure blue (the paper's Fig. 4).
+    r, g, b = LABEL_COLOURS[VoxelLabel.OCCLUDED_STRUCTURE]
+    assert g > r and g > b
+    r, g, b = LABEL_COLOURS[VoxelLabel.STRUCTURE]
+    assert b > r and b > g
