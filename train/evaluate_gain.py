@@ -9,7 +9,14 @@ well-spread free position, builds its belief (RoI, SE faces, V(t)), and plans as
 (:func:`nbs_env.planning.planner.plan`: the same blind zone, NVPs and gain). For up to 8 candidates
 spread along the NVP list it takes the predicted Occluded-structure→Structure conversions (the greedy
 gain), then actually scans from each candidate (in a copy of the belief) and counts the voxels that
-were Occluded-structure before and are Structure after. The Spearman rank
+were Occluded-structure before and are Structure after.
+
+Only NVPs where the robot could truly stand are ranked: the robot's map takes the unsensed space
+within the scanner's minimum range of a stop as free (``assume_blind_zone_free``), so some NVPs near
+the first stop lie inside furniture it never measured, and a scan from inside a cabinet says nothing
+about the gain. The evaluation checks each NVP against the true building (a disc of the robot's
+radius) and reports how many it left out (``inside_obstacles``): a measure of the planner's map,
+not of the gain. The Spearman rank
 correlation of predicted and realised counts is averaged over the rooms.
 """
 
@@ -26,11 +33,13 @@ from scipy.stats import spearmanr
 from nbs_env.belief import RoomBelief
 from nbs_env.config import ScannerConfig
 from nbs_env.labels import VoxelLabel
+from nbs_env.planning.navigation import NavigationConfig
 from nbs_env.planning.planner import PlanningConfig, plan, sensor_positions
 from nbs_env.planning.visibility import GainConfig
 from nbs_env.sensing.pose import pose_from_xyz_rpy
 from nbs_env.sensing.scanner import Scanner
 from scenes import load_scene
+from scenes.geometry import point_is_free
 from train.perception_data import spread_positions
 
 EVAL_BASE = 300_000
@@ -56,9 +65,15 @@ def room_correlations(n_rooms: int, gain: GainConfig, seed: int = 0, per_room: i
             belief.add_scan(scanner.scan(pose, rng), pose)
             planned = plan(belief, pose, [pose[:3, 3]], [first[0]], PlanningConfig(scanner=cfg, gain=gain))
             cands = planned.candidates
-            if cands.count < 5:
+            # Evaluation side: which NVPs a robot could truly stand on (ground truth, module docstring).
+            radius = NavigationConfig().robot_radius
+            feasible = np.array(
+                [i for i in range(cands.count) if point_is_free(scene, cands.points[i], room.floor_z, radius)],
+                dtype=int,
+            )
+            if len(feasible) < 5:
                 continue
-            pick = np.unique(np.linspace(0, cands.count - 1, min(per_room, cands.count)).astype(int))
+            pick = feasible[np.unique(np.linspace(0, len(feasible) - 1, min(per_room, len(feasible))).astype(int))]
             sensors = sensor_positions(cands.points[pick], belief.roi.floor_z, cfg)
             predicted = planned.gains[pick]
             before = belief.occluded_structure_centres()
@@ -76,6 +91,7 @@ def room_correlations(n_rooms: int, gain: GainConfig, seed: int = 0, per_room: i
                     "scene": scene.name,
                     "room": room.name,
                     "candidates": int(cands.count),
+                    "inside_obstacles": int(cands.count - len(feasible)),
                     "predicted": predicted.tolist(),
                     "realised": realised,
                     "spearman": float(rho),
@@ -100,6 +116,8 @@ def main(argv: list[str] | None = None) -> int:
         "mean_spearman": float(np.mean(rho)),
         "median_spearman": float(np.median(rho)),
         "min_spearman": float(np.min(rho)),
+        "nvps": sum(r["candidates"] for r in rows),
+        "nvps_inside_obstacles": sum(r["inside_obstacles"] for r in rows),
         "seconds": round(time.perf_counter() - t0, 1),
     }
     print(json.dumps(summary, indent=1))
