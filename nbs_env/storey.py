@@ -29,11 +29,12 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
+from nbs_env.belief import RoomModel
 from nbs_env.errors import ConfigError, InvalidPoseError, UnreachableDoorError
 from nbs_env.evaluation import CoverageMeter
 from nbs_env.observation import BeliefView
 from nbs_env.planning.planner import Plan
-from nbs_env.robot import Robot, RoomModel, StepReport
+from nbs_env.robot import Robot, StepReport
 from nbs_env.settings import EnvConfig
 from scenes import FloorPlan, Scene, load_scene
 from scenes.generator import generate_plan
@@ -253,9 +254,9 @@ class Storey:
         robot = self.robot
         models = list(robot.room_models)
         if current and robot.room_index not in robot.rooms_done:
-            current = robot.room_model()
-            if current is not None:
-                models.append(current)
+            model = robot.room_model()
+            if model is not None:
+                models.append(model)
         return models
 
     def view(self) -> BeliefView:
