@@ -205,14 +205,17 @@ class NBSEnv(gym.Env):
         return self.storey
 
     def _check_action(self, action: Any) -> int:
-        try:
-            a = int(np.asarray(action).reshape(()))
-            ok = float(np.asarray(action).reshape(())) == a
-        except (TypeError, ValueError):
-            ok = False
-        if not ok or not (0 <= a < self.n_actions):
-            raise InvalidActionError(f"action must be an integer in [0, {self.n_actions}), got {action!r}")
-        return a
+        # What Discrete.contains takes: a Python or numpy integer, or a 0-d integer array (not a
+        # bool, not a float that happens to be whole, not a one-element list or array).
+        integer = (isinstance(action, (int, np.integer)) and not isinstance(action, (bool, np.bool_))) or (
+            isinstance(action, np.ndarray) and action.shape == () and np.issubdtype(action.dtype, np.integer)
+        )
+        if not integer or not (0 <= int(action) < self.n_actions):
+            raise InvalidActionError(
+                f"action must be an integer in [0, {self.n_actions}) (int, numpy integer or 0-d integer array), "
+                f"got {action!r} of type {type(action).__name__}"
+            )
+        return int(action)
 
     def action_masks(self) -> np.ndarray:
         """(n_actions,) bool: which actions are real candidates (sb3-contrib's MaskablePPO reads

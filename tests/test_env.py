@@ -147,9 +147,13 @@ def test_masked_action_is_penalised_without_a_scan_and_bad_actions_raise():
     obs2, reward, terminated, truncated, info2 = env.step(masked)
     assert info2["invalid_action"] and info2["scans"] == scans and reward == -1.0
     assert not terminated and not truncated and same(obs, obs2)
-    for bad in (-1, 64, 2.5, "a", None):
+    for bad in (-1, 64, 2.5, "a", None, "3", 1.0, np.array([3]), float("inf"), True, [0], np.float64(2.0)):
         with pytest.raises(InvalidActionError, match="action must be an integer"):
             env.step(bad)
+    # What Discrete.contains takes is taken: numpy integers and 0-d integer arrays.
+    for kind in (np.int64, lambda k: np.array(k, dtype=np.int32)):
+        valid = kind(int(np.flatnonzero(env.unwrapped.action_masks())[0]))
+        assert env.action_space.contains(valid) and not env.step(valid)[4]["invalid_action"]
     with pytest.raises(gym.error.ResetNeeded):
         NBSEnv("fast").step(0)
 
