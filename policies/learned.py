@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from nbs_env.config import Config
-from nbs_env.errors import ModelFileError
+from nbs_env.config import Config, _integer, _require
+from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import CandidateColumn, candidate_table_of
 from policies.base import mask_of
 
@@ -110,6 +110,22 @@ class NetworkConfig(Config):
     channels: tuple[int, int, int] = (8, 16, 32)
     grid_dim: int = 64
     hidden: int = 64
+
+    def __post_init__(self) -> None:
+        for name in ("voxel_shape", "channels"):
+            value = getattr(self, name)
+            _require(
+                isinstance(value, tuple)
+                and len(value) == 3
+                and all(isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in value),
+                f"{name} must be three integers >= 1, got {value!r}",
+            )
+        for name in ("candidates", "features", "actions", "grid_dim", "hidden"):
+            _integer(self, name, 1)
+        _require(
+            self.actions in (self.candidates, self.candidates + 1),
+            f"actions must be candidates ({self.candidates}) or candidates + 1, got {self.actions}",
+        )
 
     @property
     def latent_dim(self) -> int:
@@ -236,7 +252,7 @@ def load_checkpoint(path: str | Path):
         config = NetworkConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in network.items()})
         weights = path.parent / str(document["weights"])
         layout = str(document.get("input_layout", "xyz"))
-    except (KeyError, TypeError) as exc:
+    except (KeyError, TypeError, ConfigError) as exc:
         raise ModelFileError(f"{path}: malformed checkpoint description ({exc})") from None
     if layout not in ("xyz", "zxy"):
         raise ModelFileError(f"{path}: input_layout must be 'xyz' or 'zxy', got {layout!r}")
@@ -248,6 +264,11 @@ def load_checkpoint(path: str | Path):
         state = torch.load(weights, map_location="cpu", weights_only=True)
     except Exception as exc:
         raise ModelFileError(f"{weights}: not a tensors-only weights file ({type(exc).__name__}: {exc})") from None
+    if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
+        raise ModelFileError(f"{weights}: not a dict of tensors")
+    bad = sorted(k for k, v in state.items() if v.is_floating_point() and not bool(torch.isfinite(v).all()))
+    if bad:
+        raise ModelFileError(f"{weights}: non-finite weights in {', '.join(bad[:5])}")
     encoder, scorer = build_network(config)
     try:
         encoder.load_state_dict({k[len("encoder.") :]: v for k, v in state.items() if k.startswith("encoder.")})

@@ -8,8 +8,8 @@ All lengths in metres, angles in degrees, x/y horizontal, the floor at z = 0::
       "format": "nbs-floorplan",          # required, fixed
       "version": 1,                       # required; the only version so far
       "name": "office",                   # optional
-      "ceiling_height": 2.7,              # > 0
-      "wall_thickness": 0.15,             # > 0
+      "ceiling_height": 2.7,              # > 0, at most 30
+      "wall_thickness": 0.15,             # > 0, at most 3
       "rooms": [                          # >= 1 rooms
         {"name": "office", "polygon": [[0, 0], [6, 0], [6, 4], [0, 4]]}
       ],
@@ -39,6 +39,9 @@ All lengths in metres, angles in degrees, x/y horizontal, the floor at z = 0::
   counter-clockwise. Objects that stand against a wall have their back on the local +y side.
 - Only the inner faces of the building are built (no outside faces): nothing outside is ever seen,
   and the structural area must not count surfaces no scanner can reach.
+- **Bounds**: coordinates within ±100 km (:data:`MAX_COORDINATE`), sizes and door or window
+  dimensions at most 100 m (:data:`MAX_LENGTH`), ceilings at most 30 m, walls at most 3 m thick;
+  NaN and infinities are refused with the rest.
 """
 
 from __future__ import annotations
@@ -81,8 +84,13 @@ WALL_STANDING_KINDS = ("cabinet", "shelf", "sofa", "box")
 #: Robot radius plus the paper's 20 cm safety distance: the clearance doors need free of clutter.
 DOOR_CLEARANCE = 0.45
 
-_POINT = {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2}
-_POSITIVE = {"type": "number", "exclusiveMinimum": 0}
+#: Largest coordinate magnitude and largest length a plan may hold, metres: beyond them a plan is a
+#: mistake (a unit slip, an overflow), and the extrusion would build a mesh of no use.
+MAX_COORDINATE = 1e5
+MAX_LENGTH = 100.0
+_COORDINATE = {"type": "number", "minimum": -MAX_COORDINATE, "maximum": MAX_COORDINATE}
+_POINT = {"type": "array", "items": _COORDINATE, "minItems": 2, "maxItems": 2}
+_POSITIVE = {"type": "number", "exclusiveMinimum": 0, "maximum": MAX_LENGTH}
 PLAN_SCHEMA: dict[str, Any] = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
     "title": "nbs-env floor plan, version 1",
@@ -94,8 +102,8 @@ PLAN_SCHEMA: dict[str, Any] = {
         "version": {"const": FORMAT_VERSION},
         "name": {"type": "string"},
         "description": {"type": "string"},
-        "ceiling_height": _POSITIVE,
-        "wall_thickness": _POSITIVE,
+        "ceiling_height": {"type": "number", "exclusiveMinimum": 0, "maximum": 30},
+        "wall_thickness": {"type": "number", "exclusiveMinimum": 0, "maximum": 3},
         "rooms": {
             "type": "array",
             "minItems": 1,
@@ -139,7 +147,7 @@ PLAN_SCHEMA: dict[str, Any] = {
                     "position": _POINT,
                     "width": _POSITIVE,
                     "height": _POSITIVE,
-                    "sill": {"type": "number", "minimum": 0},
+                    "sill": {"type": "number", "minimum": 0, "maximum": MAX_LENGTH},
                 },
             },
         },
@@ -158,7 +166,7 @@ PLAN_SCHEMA: dict[str, Any] = {
                         "minItems": 3,
                         "maxItems": 3,
                     },
-                    "yaw": {"type": "number"},
+                    "yaw": {"type": "number", "minimum": -3600, "maximum": 3600},
                 },
             },
         },

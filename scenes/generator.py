@@ -42,7 +42,11 @@ from scenes.floorplan import (
 from scenes.geometry import STOREY_CLEARANCE as CLEARANCE
 from scenes.validation import validate_plan_scene
 
-__all__ = ["GeneratorConfig", "generate_plan", "generate_scene"]
+__all__ = ["MAX_CLUTTER_DENSITY", "GeneratorConfig", "generate_plan", "generate_scene"]
+
+#: The densest clutter the generator draws (objects per 6 m²): placement is tried per object, so
+#: the work grows with it; at 10 a room is already as full as free space allows.
+MAX_CLUTTER_DENSITY = 10.0
 
 
 @dataclass(frozen=True)
@@ -54,7 +58,8 @@ class GeneratorConfig:
     rooms : int or (int, int)
         Number of rooms, or an inclusive range to draw from (1 to 8).
     clutter_density : float
-        Scales the clutter: about this many objects per 6 m² of floor (0 for none).
+        Scales the clutter: about this many objects per 6 m² of floor (0 for none, at most
+        :data:`MAX_CLUTTER_DENSITY`).
     wall_standing : float
         Share of the clutter placed against walls, where it hides them.
     nonorthogonal : float
@@ -91,8 +96,10 @@ class GeneratorConfig:
         lo, hi = self.room_range
         if not 1 <= lo <= hi <= 8:
             raise ValueError(f"rooms must be within 1..8, got {self.rooms}")
-        if self.clutter_density < 0:
-            raise ValueError(f"clutter_density must be >= 0, got {self.clutter_density}")
+        if not (isinstance(self.clutter_density, (int, float)) and 0 <= self.clutter_density <= MAX_CLUTTER_DENSITY):
+            raise ValueError(
+                f"clutter_density must be a number within 0..{MAX_CLUTTER_DENSITY:g}, got {self.clutter_density}"
+            )
         for name in ("wall_standing", "nonorthogonal", "irregular_outline", "extra_doors", "windows"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} is a probability in [0, 1], got {getattr(self, name)}")

@@ -149,6 +149,22 @@ class _Storey:
         return f"{index}: {self.name!r}{long} at {self.elevation:.2f} m"
 
 
+def _check_complete(source: str, path: Path) -> None:
+    """A STEP file (ISO 10303-21) must end with its end marker: ifcopenshell reads a truncated one
+    without a word and loses whatever the missing part held (ceilings, spaces, whole storeys)."""
+    with open(path, "rb") as fh:
+        head = fh.read(64).lstrip(b"\xef\xbb\xbf \t\r\n")
+        if not head.startswith(b"ISO-10303-21;"):
+            return  # not a STEP text file; ifcopenshell says what it is or is not
+        fh.seek(0, 2)
+        size = fh.tell()
+        fh.seek(max(0, size - 4096))
+        tail = fh.read().rstrip()
+    if not tail.endswith(b"END-ISO-10303-21;"):
+        ending = "the file does not end with END-ISO-10303-21; (an incomplete copy?)"
+        raise IfcError(source, f"cannot read as IFC: truncated, {ending}")
+
+
 def load_ifc_scene(
     path: str | Path,
     *,
@@ -203,6 +219,7 @@ def load_ifc_scene(
         raise MissingDependencyError(source, _INSTALL_HINT) from exc
     if not path.is_file():
         raise SceneFileError(source, "no such file" if not path.exists() else "not a regular file")
+    _check_complete(source, path)
     try:
         model = ifcopenshell.open(str(path))
     except Exception as exc:  # ifcopenshell raises its own error types, or OSError, for bad input

@@ -164,6 +164,11 @@ def test_invalid_json_names_file_and_position(tmp_path):
         (lambda d: d.update(version=7), "version", "unsupported format version 7"),
         (lambda d: d.update(colour="red"), "(top level)", "colour"),
         (lambda d: d["doors"][0].update(rooms=["a", "c"]), "doors[0].rooms[1]", "unknown room 'c'"),
+        # Sizes no storey has: a unit slip or an overflow, refused rather than extruded.
+        (lambda d: d.update(ceiling_height=1e6), "ceiling_height", "greater than the maximum of 30"),
+        (lambda d: d.update(wall_thickness=5), "wall_thickness", "greater than the maximum of 3"),
+        (lambda d: d["clutter"][0].update(size=[1, 1, 1e4]), "clutter[0].size[2]", "greater than the maximum"),
+        (lambda d: d["rooms"][0]["polygon"][0].__setitem__(0, 1e9), "rooms[0].polygon[0][0]", "greater than"),
     ],
 )
 def test_schema_violations_name_the_field(plan_dict, write_json, mutate, field, message):

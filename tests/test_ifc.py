@@ -376,3 +376,16 @@ def test_interior_only_structure_leaves_out_hidden_faces(ground):
     samples = scene.structure_samples(0.1, interior_only=True)
     assert np.all(samples.rooms >= 0)
     assert len(samples) == pytest.approx(inner / 0.01, abs=1)
+
+
+def test_a_truncated_file_is_refused(tmp_path):
+    """ifcopenshell reads a cut-off STEP file without a word and loses what the rest held."""
+    cut = tmp_path / "cut.ifc"
+    data = FZK.read_bytes()
+    cut.write_bytes(data[: len(data) // 2])
+    with pytest.raises(IfcError, match=r"cut\.ifc: cannot read as IFC: truncated, .*END-ISO-10303-21"):
+        load_ifc_scene(cut, storey="Erdgeschoss")
+    # The whole file, with trailing blank lines, loads.
+    whole = tmp_path / "whole.ifc"
+    whole.write_bytes(data + b"\r\n\r\n")
+    assert len(load_ifc_scene(whole, storey="Erdgeschoss").rooms) == 6

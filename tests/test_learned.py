@@ -110,6 +110,25 @@ def test_bad_checkpoints_raise_clear_errors(tmp_path):
     other.write_text(json.dumps(document))
     with pytest.raises(ModelFileError, match="do not fit"):
         LearnedPolicy(other)
+    # Fields out of range are refused on load, before any network is built.
+    for field, value, message in (
+        ("hidden", -1, "hidden must be an integer >= 1"),
+        ("voxel_shape", [0, 0, 0], "voxel_shape must be three integers >= 1"),
+        ("actions", 3, "actions must be candidates"),
+        ("channels", [8, 16], "channels must be three integers"),
+    ):
+        bad = {**document, "network": {**document["network"], "hidden": 64, field: value}}
+        other.write_text(json.dumps(bad))
+        with pytest.raises(ModelFileError, match=message):
+            LearnedPolicy(other)
+    # NaN weights are refused.
+    torch = pytest.importorskip("torch")
+    nan_state = {k: v.clone() for k, v in state.items()}
+    first = next(k for k, v in nan_state.items() if v.is_floating_point())
+    nan_state[first][...] = float("nan")
+    with pytest.raises(ModelFileError, match="non-finite weights"):
+        LearnedPolicy(save_checkpoint(tmp_path / "nan", config, nan_state))
+    assert torch.isfinite(state[first]).all()
     other.write_text("{not json")
     with pytest.raises(ModelFileError, match="not a JSON"):
         LearnedPolicy(other)

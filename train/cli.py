@@ -32,14 +32,39 @@ def _rooms(text: str) -> int | tuple[int, int]:
     return lo if "-" not in text else (lo, hi)
 
 
-def _non_negative(text: str) -> float:
+def _clutter_density(text: str) -> float:
+    from scenes.generator import MAX_CLUTTER_DENSITY
+
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not value >= 0:
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}")
+    if not 0 <= value <= MAX_CLUTTER_DENSITY:
+        raise argparse.ArgumentTypeError(f"expected a number within 0..{MAX_CLUTTER_DENSITY:g}, got {text!r}")
     return value
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a seed is an integer >= 0, got {text!r}")
+    return value
+
+
+#: What matplotlib's savefig writes, by file suffix.
+PICTURE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".eps", ".ps", ".tif", ".tiff", ".webp")
+
+
+def _picture(text: str) -> Path:
+    path = Path(text)
+    if path.suffix.lower() not in PICTURE_SUFFIXES:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: a picture file ends in one of {', '.join(PICTURE_SUFFIXES)} (e.g. top.png)"
+        )
+    return path
 
 
 def _storey(text: str) -> str | int:
@@ -92,17 +117,19 @@ def build_parser() -> argparse.ArgumentParser:
 
     show = ssub.add_parser("show", help="draw a top-down picture of a scene")
     scene_args(show)
-    show.add_argument("--out", required=True, type=Path, help="PNG file to write")
+    show.add_argument("--out", required=True, type=_picture, help="picture to write (.png, .pdf, .svg, ...)")
 
     info = ssub.add_parser("info", help="print a scene's class areas, rooms and doors as JSON")
     scene_args(info)
 
     gen = ssub.add_parser("generate", help="generate a storey and write its floor plan as JSON")
-    gen.add_argument("--seed", type=int, required=True)
+    gen.add_argument("--seed", type=_seed, required=True)
     gen.add_argument("--rooms", type=_rooms, default=None, help="number of rooms R, or a range LO-HI (1..8)")
-    gen.add_argument("--clutter-density", type=_non_negative, default=None, help="objects per 6 m² (default 1)")
+    gen.add_argument(
+        "--clutter-density", type=_clutter_density, default=None, help="objects per 6 m², 0..10 (default 1)"
+    )
     gen.add_argument("--out", type=Path, required=True, help="floor-plan JSON to write")
-    gen.add_argument("--show", type=Path, default=None, help="also draw the storey to this PNG")
+    gen.add_argument("--show", type=_picture, default=None, help="also draw the storey to this picture (.png, ...)")
 
     scan = sub.add_parser(
         "scan",
@@ -114,7 +141,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--scene", required=True, help="bundled name, .json/.obj/.glb/.gltf/.ply/.ifc path, or generated:SEED"
     )
     scan.add_argument("--policy", default="greedy", help="who chooses the next scan (default: greedy)")
-    scan.add_argument("--seed", type=int, default=0, help="seed of the episode (default 0)")
+    scan.add_argument("--seed", type=_seed, default=0, help="seed of the episode, >= 0 (default 0)")
     scan.add_argument("--out", type=Path, default=None, help="report folder (default: ./scan-<scene>)")
     scan.add_argument("--max-scans", type=_positive_int, default=80, help="scan budget (default 80)")
     scan.add_argument("--resolution", type=_number, default=None, help="scanner angular step in degrees (default 0.5)")
@@ -163,21 +190,33 @@ def run_train(argv: Sequence[str]) -> int:
 
 def run_compare(args: argparse.Namespace) -> int:
     """``nbs compare``: the grid, its table and plots."""
-    from train.compare import CompareError, grid, load_finished, run_grid, write_outputs
+    from train.compare import CompareError, check_out_dir, grid, load_finished, run_grid, write_outputs, write_record
 
     try:
         specs = grid(args.scenes, args.policies, args.seeds, args.preset, args.max_scans)
-        finished = load_finished(args.out, specs) if args.resume else None
+        out = check_out_dir(args.out)  # before anything runs
+        finished = load_finished(out, specs) if args.resume else None
         if finished and not args.quiet:
             runs, oracles = len(finished["runs"]), len(finished["oracles"])
-            print(f"resuming: {runs} runs and {oracles} oracles already in {args.out}")
+            print(f"resuming: {runs} runs and {oracles} oracles already in {out}")
+        # Each run is written as it finishes: a grid that fails later keeps what it computed.
         results, oracles = run_grid(
-            specs, args.jobs, args.backend, args.address, progress=not args.quiet, finished=finished
+            specs,
+            args.jobs,
+            args.backend,
+            args.address,
+            progress=not args.quiet,
+            finished=finished,
+            on_done=lambda kind, record: write_record(out, kind, record),
         )
     except CompareError as exc:
         print(f"nbs compare: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    write_outputs(results, oracles, args.out)
+    try:
+        write_outputs(results, oracles, out)
+    except (CompareError, OSError) as exc:
+        print(f"nbs compare: error: {exc}", file=sys.stderr)
+        return EXIT_SCENE_ERROR
     failed = [r for r in results if not r["ok"]]
     print((args.out / "table.md").read_text())
     print(f"{len(results) - len(failed)} of {len(results)} runs ok; wrote {args.out}/")
@@ -185,6 +224,20 @@ def run_compare(args: argparse.Namespace) -> int:
         spec = r["spec"]
         print(f"failed: {spec['scene']} {spec['policy']} seed {spec['seed']}: {r['error']}", file=sys.stderr)
     return 0 if not failed else 1
+
+
+#: Scene files by kind, for the options that apply to one kind only.
+MESH_SUFFIXES = (".obj", ".glb", ".gltf", ".ply")
+
+
+def scene_option_error(scene: str, storey: object, y_up: bool) -> str | None:
+    """Why ``--storey`` or ``--y-up`` does not apply to ``scene`` (None when they do)."""
+    suffix = Path(scene).suffix.lower()
+    if storey is not None and suffix != ".ifc":
+        return f"--storey applies to .ifc files only, not to scene {scene!r}"
+    if y_up and suffix not in MESH_SUFFIXES:
+        return f"--y-up applies to labelled meshes ({', '.join(MESH_SUFFIXES)}) only, not to scene {scene!r}"
+    return None
 
 
 def _load(args: argparse.Namespace):
@@ -225,6 +278,11 @@ def run(args: argparse.Namespace) -> int:
             floor = sum(r.area for r in scene.rooms)
             print(f"{name:12s} {len(scene.rooms)} rooms, {len(scene.doors)} doors, {floor:6.1f} m² of floor")
         return 0
+    if args.action in ("show", "info"):
+        problem = scene_option_error(args.scene, args.storey, args.y_up)
+        if problem is not None:
+            print(f"nbs scenes {args.action}: error: {problem}", file=sys.stderr)
+            return EXIT_USAGE
     if args.action == "show":
         from scenes.render import save_scene_png
 
@@ -359,12 +417,29 @@ def scan_summary(metrics: dict, out: Path, files: Sequence[str]) -> str:
     return "\n".join(lines)
 
 
+def unwritable_folder(path: Path) -> str | None:
+    """Why a folder could not be made or written at ``path`` (None when it can), without making it."""
+    import os
+
+    if path.exists():
+        if not path.is_dir():
+            return "exists and is not a folder"
+        return None if os.access(path, os.W_OK | os.X_OK) else "the folder is not writable"
+    parent = path.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        return f"{parent} is not a folder"
+    return None if os.access(parent, os.W_OK | os.X_OK) else f"cannot create it: {parent} is not writable"
+
+
 def run_scan(args: argparse.Namespace) -> int:
     """``nbs scan``: run one episode with a policy and write its report."""
     from scenes.errors import SceneError
 
-    if args.storey is not None and Path(args.scene).suffix.lower() != ".ifc":
-        return _scan_error(f"--storey applies to .ifc files only, not to scene {args.scene!r}", EXIT_USAGE)
+    problem = scene_option_error(args.scene, args.storey, False)
+    if problem is not None:
+        return _scan_error(problem, EXIT_USAGE)
     from nbs_env.errors import ConfigError, ModelFileError, NBSError
     from policies import POLICIES, UnknownPolicyError, make_policy
 
@@ -376,6 +451,9 @@ def run_scan(args: argparse.Namespace) -> int:
     except ModelFileError as exc:
         return _scan_error(exc, EXIT_SCENE_ERROR)
     out = args.out if args.out is not None else _default_out(args.scene)
+    problem = unwritable_folder(out)
+    if problem is not None:
+        return _scan_error(f"--out {out}: {problem}", EXIT_USAGE)
     try:
         return _scan(args, policy, out)
     except ConfigError as exc:
@@ -400,18 +478,20 @@ def _scan(args: argparse.Namespace, policy, out: Path) -> int:
     cfg = config_for(_scan_config(args), policy)
     env = NBSEnv(cfg, render_mode="rgb_array")
     options = {} if args.start is None else {"start": args.start}
-    out.mkdir(parents=True, exist_ok=True)
     steps_dir = out / "steps"
-    if not args.no_steps:
-        steps_dir.mkdir(exist_ok=True)
-        for old in steps_dir.glob("step_*.png"):
-            old.unlink()
     bar = tqdm(total=cfg.max_scans, unit="scan", disable=args.quiet, file=sys.stderr, dynamic_ncols=True)
     k = -1
 
     def on_step(info: dict) -> None:
         nonlocal k
         k += 1
+        if k == 0:
+            # The scene loaded and the first scan is taken: now the report has somewhere to go.
+            out.mkdir(parents=True, exist_ok=True)
+            if not args.no_steps:
+                steps_dir.mkdir(exist_ok=True)
+                for old in steps_dir.glob("step_*.png"):
+                    old.unlink()
         if not args.no_steps:
             plt.imsave(steps_dir / f"step_{k:03d}.png", env.render())
         # The robot's room number (1, 2, ... in the order it entered them) and the true SE sensed.

@@ -23,7 +23,7 @@ import math
 import multiprocessing
 import time
 import traceback
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -136,6 +136,7 @@ def run_grid(
     address: str | None = None,
     progress: bool = True,
     finished: dict[str, Any] | None = None,
+    on_done: Callable[[str, dict[str, Any]], None] | None = None,
 ) -> tuple[list[dict[str, Any]], dict[str, dict[str, Any]]]:
     """Run every spec, and the oracle of every scene.
 
@@ -150,6 +151,9 @@ def run_grid(
     finished : dict, optional
         :func:`load_finished`'s records (``"runs"``: RunSpec key → record, ``"oracles"``: scene →
         plan): these are reused, not run again.
+    on_done : callable, optional
+        ``on_done(kind, record)`` as each run (``"run"``) or oracle (``"oracle"``) finishes, e.g.
+        :func:`write_record`, so that a grid that fails later keeps what it computed.
 
     Returns
     -------
@@ -176,13 +180,19 @@ def run_grid(
             done[k] = old_oracles[arg]
     todo = [(k, task) for k, task in enumerate(tasks) if k not in done]
     bar = tqdm(total=len(todo), unit="run", disable=not progress, dynamic_ncols=True)
+
+    def finish(k: int, record: dict[str, Any]) -> None:
+        done[k] = record
+        if on_done is not None:
+            on_done(tasks[k][0], record)
+        bar.update()
+
     if not todo:
         pass
     elif backend == "local":
         if jobs <= 1:
             for k, (kind, arg) in todo:
-                done[k] = run_one(arg) if kind == "run" else _oracle(arg, preset)
-                bar.update()
+                finish(k, run_one(arg) if kind == "run" else _oracle(arg, preset))
         else:
             # spawn: forked children would inherit open3d's and OpenBLAS's threads mid-state.
             context = multiprocessing.get_context("spawn")
@@ -192,8 +202,7 @@ def run_grid(
                     for k, (kind, arg) in todo
                 }
                 for future in as_completed(futures):
-                    done[futures[future]] = future.result()
-                    bar.update()
+                    finish(futures[future], future.result())
     elif backend == "ray":
         try:
             import ray
@@ -217,8 +226,7 @@ def run_grid(
             while pending:
                 ready, pending = ray.wait(pending, num_returns=1)
                 for ref in ready:
-                    done[index[ref]] = ray.get(ref)
-                    bar.update()
+                    finish(index[ref], ray.get(ref))
         finally:
             if started_here:
                 ray.shutdown()
@@ -255,7 +263,8 @@ def _run_quantities(m: dict[str, Any], oracle: dict[str, Any]) -> dict[str, floa
         "processed_points": float(m["processed_points"]),
         "path_length_m": float(m["path_length_m"]),
     }
-    if oracle.get("ok"):
+    # An oracle that senses nothing (a scene with no structural samples counted) is no yardstick.
+    if oracle.get("ok") and oracle.get("max_coverage_pct", 0) > 0 and len(oracle.get("coverage_pct", ())):
         q["of_oracle_pct"] = 100.0 * m["structure_sensed_pct"] / oracle["max_coverage_pct"]
         curve = np.asarray(oracle["coverage_pct"])
         # Above the oracle's best (noise can do it), against the oracle's scans to its best.
@@ -432,23 +441,73 @@ def _plots(results: list[dict[str, Any]], oracles: dict[str, dict[str, Any]], ou
 def write_outputs(
     results: list[dict[str, Any]], oracles: dict[str, dict[str, Any]], out: str | Path
 ) -> list[dict[str, Any]]:
-    """Write the runs' metrics, ``table.csv``, ``table.md`` and the two plots; returns the rows."""
+    """Write the runs' metrics, ``table.csv``, ``table.md`` and the two plots; returns the rows.
+
+    The runs and the oracles are written first. Should the summary or the plots fail, what they
+    could not write is replaced by ``summary_error.txt`` and :class:`CompareError` says so: the runs
+    stay, and ``--resume`` reuses them.
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     for r in results:
-        folder = _run_folder(out, r["spec"])
-        folder.mkdir(parents=True, exist_ok=True)
-        (folder / "run.json").write_text(json.dumps({k: v for k, v in r.items() if k != "metrics"}, indent=1))
-        if r["ok"]:
-            (folder / "metrics.json").write_text(json.dumps(r["metrics"], indent=1))
-        else:
-            (folder / "error.txt").write_text(r["error"] + "\n\n" + r.get("traceback", ""))
+        write_record(out, "run", r)
     (out / "oracle.json").write_text(json.dumps(oracles, indent=1))
-    rows = summarise(results, oracles)
-    _csv(rows, out / "table.csv")
-    (out / "table.md").write_text(_markdown(rows))
-    _plots(results, oracles, out)
+    try:
+        rows = summarise(results, oracles)
+        _csv(rows, out / "table.csv")
+        (out / "table.md").write_text(_markdown(rows))
+        _plots(results, oracles, out)
+    except Exception as exc:  # the runs are on disk; say what failed and where they are
+        (out / "summary_error.txt").write_text(f"{type(exc).__name__}: {exc}\n\n{traceback.format_exc()}")
+        raise CompareError(
+            f"the runs are in {out}/runs, but the summary failed ({type(exc).__name__}: {exc}); "
+            f"see {out / 'summary_error.txt'}; rerun with --resume to reuse the runs"
+        ) from exc
+    (out / "summary_error.txt").unlink(missing_ok=True)
     return rows
+
+
+def check_out_dir(out: str | Path) -> Path:
+    """``out`` as a folder this process can write into (created if missing), before any run starts.
+
+    Raises
+    ------
+    CompareError
+        ``out`` is a file, or cannot be created or written.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise CompareError(f"--out {out}: exists and is not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".nbs-write-check"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise CompareError(f"--out {out}: cannot write there ({exc.strerror or exc})") from None
+    return out
+
+
+def write_record(out: str | Path, kind: str, record: dict[str, Any]) -> None:
+    """Write one finished run (its ``run.json`` and ``metrics.json`` or ``error.txt``) or fold one
+    oracle into ``oracle.json``, as :func:`run_grid` reports them."""
+    out = Path(out)
+    if kind == "oracle":
+        path = out / "oracle.json"
+        try:
+            stored = json.loads(path.read_text())
+        except (OSError, ValueError):
+            stored = {}
+        stored[record["scene"]] = record
+        path.write_text(json.dumps(stored, indent=1))
+        return
+    folder = _run_folder(out, record["spec"])
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "run.json").write_text(json.dumps({k: v for k, v in record.items() if k != "metrics"}, indent=1))
+    if record["ok"]:
+        (folder / "metrics.json").write_text(json.dumps(record["metrics"], indent=1))
+    else:
+        (folder / "error.txt").write_text(record["error"] + "\n\n" + record.get("traceback", ""))
 
 
 def _run_folder(out: Path, spec: dict[str, Any]) -> Path:
@@ -506,6 +565,8 @@ def grid(scenes: str, policies: str, seeds: str, preset: str = "default", max_sc
         raise CompareError(f"seeds must be comma-separated integers, got {seeds!r}") from None
     if not seed_list:
         raise CompareError("no seeds given")
+    if min(seed_list) < 0:
+        raise CompareError(f"seeds are integers >= 0, got {seeds!r}")
     return [
         replace(RunSpec(scene, policy, seed), preset=preset, max_scans=max_scans)
         for scene in scene_list
