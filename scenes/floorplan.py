@@ -358,7 +358,9 @@ def load_plan(path: str | Path) -> FloorPlan:
     """
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise FloorPlanError(str(path), f"invalid JSON: not UTF-8 text (byte {exc.start})") from None
     except FileNotFoundError:
         raise SceneFileError(str(path), "no such file") from None
     except OSError as exc:

@@ -1,0 +1,226 @@
+"""Property-based tests of the three loaders: any input loads into a valid Scene or raises a SceneError.
+
+Nothing else may escape (no KeyError, TypeError, IndexError, numpy or trimesh error from inside), and
+nothing may hang: every example has a time bound. The examples are drawn deterministically
+(``derandomize``), few enough for the default suite.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import signal
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+hypothesis = pytest.importorskip("hypothesis")
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from scenes import Scene, SceneError, load_scene  # noqa: E402
+
+DATA = Path(__file__).parent / "data"
+FZK = DATA / "AC20-FZK-Haus.ifc"
+
+PLAN = {
+    "format": "nbs-floorplan",
+    "version": 1,
+    "name": "two_rooms",
+    "ceiling_height": 2.6,
+    "wall_thickness": 0.2,
+    "rooms": [
+        {"name": "a", "polygon": [[0, 0], [5, 0], [5, 4], [0, 4]]},
+        {"name": "b", "polygon": [[5, 0], [9, 0], [9, 4], [5, 4]]},
+    ],
+    "doors": [{"rooms": ["a", "b"], "position": [5, 2], "width": 0.9, "height": 2.0}],
+    "windows": [{"room": "a", "position": [0, 2], "width": 1.2, "height": 1.2, "sill": 0.9}],
+    "clutter": [{"kind": "cabinet", "position": [1.0, 3.6], "size": [1.2, 0.5, 1.9], "yaw": 0}],
+    "start": [2.0, 1.5],
+}
+
+#: Bounded work: a loader that takes longer than this on a small input counts as a hang.
+SECONDS = 30
+SETTINGS = settings(
+    max_examples=40,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
+
+
+@contextmanager
+def time_limit(seconds: int):
+    def expire(*_):
+        raise TimeoutError(f"the loader took more than {seconds} s")
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def loads_or_refuses(path: Path, **options) -> Scene | None:
+    """The property: a valid Scene, or a SceneError; nothing else, and within the time bound."""
+    try:
+        with time_limit(SECONDS):
+            scene = load_scene(str(path), **options)
+            start = scene.start  # chosen lazily when the file gives none; it may find no free floor
+    except SceneError as exc:
+        hypothesis.event(f"refused: {type(exc).__name__}")
+        return None
+    hypothesis.event("loaded")
+    assert isinstance(scene, Scene)
+    assert len(scene.face_labels) == len(scene.mesh.faces) == len(scene.face_rooms) > 0
+    assert np.all(np.isfinite(scene.mesh.vertices))
+    assert np.all(np.isfinite(start))
+    return scene
+
+
+# ---------------------------------------------------------------------- floor-plan JSON
+VALUES = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(-(10**12), 10**12),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=6),
+    st.lists(st.floats(-20, 20), max_size=4),
+    st.lists(st.lists(st.floats(-20, 20, allow_nan=False), min_size=2, max_size=2), max_size=5),
+    st.dictionaries(st.text(max_size=4), st.integers(), max_size=2),
+)
+
+
+def _paths(node, prefix=()):
+    """Every place in a JSON document a value could be replaced."""
+    yield prefix
+    if isinstance(node, dict):
+        for key, value in node.items():
+            yield from _paths(value, (*prefix, key))
+    elif isinstance(node, list):
+        for i, value in enumerate(node):
+            yield from _paths(value, (*prefix, i))
+
+
+PLACES = [p for p in _paths(PLAN) if p]
+
+
+@st.composite
+def broken_plans(draw):
+    """The valid plan with one to three of its values replaced or removed: by anything JSON holds
+    (type errors, NaN, huge values), or by a number near the one it replaces (geometric edge cases:
+    overlapping rooms, doors off their wall, clutter in a doorway)."""
+    plan = copy.deepcopy(PLAN)
+    for _ in range(draw(st.integers(1, 3))):
+        place = draw(st.sampled_from(PLACES))
+        parent = plan
+        try:
+            for key in place[:-1]:
+                parent = parent[key]
+            old = parent[place[-1]]
+            if isinstance(old, (int, float)) and not isinstance(old, bool) and draw(st.booleans()):
+                parent[place[-1]] = old * draw(st.floats(-1.0, 3.0)) + draw(st.floats(-1.0, 1.0))
+            elif draw(st.integers(0, 3)) == 0 and isinstance(parent, dict):
+                parent.pop(place[-1], None)
+            else:
+                parent[place[-1]] = draw(VALUES)
+        except (KeyError, IndexError, TypeError):
+            continue  # an earlier change removed the place
+    return plan
+
+
+@SETTINGS
+@given(plan=broken_plans())
+def test_any_floor_plan_loads_or_raises_a_scene_error(plan):
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "plan.json"
+        path.write_text(json.dumps(plan))  # NaN and Infinity as Python's json writes them
+        loads_or_refuses(path)
+
+
+# ---------------------------------------------------------------------- labelled meshes
+NAMES = st.sampled_from(["wall_a", "floor", "ceiling_1", "clutter_desk", "door_x", "window", "thing", "w", "room"])
+
+
+def _box_room(size: tuple[float, float, float]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """A room as separate labelled parts, faces towards the inside."""
+    x, y, z = size
+    quad = np.array([[0, 1, 2], [0, 2, 3]])
+    corners = {
+        "floor_0": [[0, 0, 0], [x, 0, 0], [x, y, 0], [0, y, 0]],
+        "ceiling_0": [[0, 0, z], [0, y, z], [x, y, z], [x, 0, z]],
+        "wall_south": [[0, 0, 0], [0, 0, z], [x, 0, z], [x, 0, 0]],
+        "wall_east": [[x, 0, 0], [x, 0, z], [x, y, z], [x, y, 0]],
+        "wall_north": [[x, y, 0], [x, y, z], [0, y, z], [0, y, 0]],
+        "wall_west": [[0, y, 0], [0, y, z], [0, 0, z], [0, 0, 0]],
+    }
+    return {name: (np.asarray(c, dtype=float), quad) for name, c in corners.items()}
+
+
+@st.composite
+def meshes(draw):
+    """A box room whose parts may be dropped, jittered or renamed, with random extra parts."""
+    import trimesh
+
+    size = (draw(st.floats(0.5, 12)), draw(st.floats(0.5, 12)), draw(st.floats(0.3, 5)))
+    parts = _box_room(size)
+    scene = trimesh.Scene()
+    for name, (vertices, faces) in parts.items():
+        if draw(st.integers(0, 5)) == 0:
+            continue  # a part left out (no floor, a wall missing: a room open to the outside)
+        vertices = vertices + np.asarray(draw(st.lists(st.floats(-0.3, 0.3), min_size=12, max_size=12))).reshape(4, 3)
+        if draw(st.integers(0, 5)) == 0:
+            name = f"{draw(NAMES)}_{name}"
+        scene.add_geometry(trimesh.Trimesh(vertices, faces, process=False), geom_name=name, node_name=name)
+    for k in range(draw(st.integers(0, 3))):
+        n = draw(st.integers(3, 8))
+        vertices = np.array(draw(st.lists(st.tuples(*[st.floats(-1, 13)] * 3), min_size=n, max_size=n)))
+        faces = np.array(draw(st.lists(st.tuples(*[st.integers(0, n - 1)] * 3), min_size=1, max_size=6)))
+        name = f"{draw(NAMES)}_extra{k}"
+        scene.add_geometry(trimesh.Trimesh(vertices, faces, process=False), geom_name=name, node_name=name)
+    return scene, draw(st.sampled_from([".obj", ".ply", ".glb"]))
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")  # parts without a class prefix are announced
+@SETTINGS
+@given(case=meshes())
+def test_any_labelled_mesh_loads_or_raises_a_scene_error(case):
+    scene, suffix = case
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / f"mesh{suffix}"
+        data = scene.export(file_type=suffix[1:]) if scene.geometry else b""  # trimesh exports no empty scene
+        path.write_bytes(data if isinstance(data, bytes) else data.encode())
+        loads_or_refuses(path)
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+@SETTINGS
+@given(data=st.binary(max_size=400), suffix=st.sampled_from([".obj", ".ply", ".glb", ".gltf", ".json"]))
+def test_any_bytes_with_a_scene_suffix_load_or_raise_a_scene_error(data, suffix):
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / f"scene{suffix}"
+        path.write_bytes(data)
+        loads_or_refuses(path)
+
+
+# ---------------------------------------------------------------------- IFC
+@settings(SETTINGS, max_examples=6)
+@given(cut=st.floats(0.0, 0.999), flip=st.integers(0, 10**9))
+def test_any_damaged_ifc_loads_or_raises_a_scene_error(cut, flip):
+    pytest.importorskip("ifcopenshell")
+    data = bytearray(FZK.read_bytes())
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "damaged.ifc"
+        # A truncated copy, then one with a byte changed inside (the end marker kept).
+        path.write_bytes(bytes(data[: int(cut * len(data))]))
+        assert loads_or_refuses(path, storey="Erdgeschoss") is None
+        k = 200 + flip % (len(data) - 400)
+        data[k] = (data[k] + 1 + flip % 200) % 256
+        path.write_bytes(bytes(data))
+        loads_or_refuses(path)
