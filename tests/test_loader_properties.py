@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 hypothesis = pytest.importorskip("hypothesis")
+from helpers import two_room_plan  # noqa: E402
 from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
@@ -26,20 +27,10 @@ from scenes import Scene, SceneError, load_scene  # noqa: E402
 DATA = Path(__file__).parent / "data"
 FZK = DATA / "AC20-FZK-Haus.ifc"
 
+#: The valid two-room plan, with a window too.
 PLAN = {
-    "format": "nbs-floorplan",
-    "version": 1,
-    "name": "two_rooms",
-    "ceiling_height": 2.6,
-    "wall_thickness": 0.2,
-    "rooms": [
-        {"name": "a", "polygon": [[0, 0], [5, 0], [5, 4], [0, 4]]},
-        {"name": "b", "polygon": [[5, 0], [9, 0], [9, 4], [5, 4]]},
-    ],
-    "doors": [{"rooms": ["a", "b"], "position": [5, 2], "width": 0.9, "height": 2.0}],
+    **two_room_plan(),
     "windows": [{"room": "a", "position": [0, 2], "width": 1.2, "height": 1.2, "sill": 0.9}],
-    "clutter": [{"kind": "cabinet", "position": [1.0, 3.6], "size": [1.2, 0.5, 1.9], "yaw": 0}],
-    "start": [2.0, 1.5],
 }
 
 #: Bounded work: a loader that takes longer than this on a small input counts as a hang.

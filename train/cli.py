@@ -44,14 +44,23 @@ def _clutter_density(text: str) -> float:
     return value
 
 
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"a seed is an integer >= 0, got {text!r}")
-    return value
+def _integer_from(least: int, what: str = "expected an integer"):
+    """An argparse type: an integer of at least ``least``; ``what`` begins the message."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < least:
+            raise argparse.ArgumentTypeError(f"{what} >= {least}, got {text!r}")
+        return value
+
+    return parse
+
+
+_seed = _integer_from(0, "a seed is an integer")
+_positive_int = _integer_from(1)
 
 
 #: What matplotlib's savefig writes, by file suffix.
@@ -82,16 +91,6 @@ def _start(text: str) -> tuple[float, float]:
     if not (math.isfinite(x) and math.isfinite(y)):
         raise argparse.ArgumentTypeError(f"expected finite X,Y, got {text!r}")
     return x, y
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
-    return value
 
 
 def _number(text: str) -> float:
