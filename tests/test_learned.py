@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -122,7 +123,6 @@ def test_bad_checkpoints_raise_clear_errors(tmp_path):
         with pytest.raises(ModelFileError, match=message):
             LearnedPolicy(other)
     # NaN weights are refused.
-    torch = pytest.importorskip("torch")
     nan_state = {k: v.clone() for k, v in state.items()}
     first = next(k for k, v in nan_state.items() if v.is_floating_point())
     nan_state[first][...] = float("nan")
@@ -176,3 +176,20 @@ def test_the_bundled_reference_policy_reproduces_its_learning_curve():
     assert replay["scans"] == pytest.approx(recorded["scans"], abs=1.0)
     assert replay["structure_sensed_pct"] == pytest.approx(recorded["structure_sensed_pct"], abs=2.0)
     assert replay["path_length_m"] == pytest.approx(recorded["path_length_m"], rel=0.1)
+
+
+def test_the_bundled_reference_policy_gives_its_stored_logits():
+    """The shipped policy checked on stored observations, which holds on any CPU: its logits agree
+    within float tolerance, and so does its choice wherever the best two are not a near-tie.
+    ``python tests/data/make_ppo_observations.py`` writes the observations."""
+    data = np.load(Path(__file__).parent / "data" / "ppo_reference_observations.npz")
+    policy = make_policy("ppo:reference")
+    assert len(data["logits"]) >= 10
+    for k in range(len(data["logits"])):
+        obs = {key: data[key][k] for key in ("voxels", "candidates", "pose")}
+        logits = policy.logits(obs)
+        np.testing.assert_allclose(logits, data["logits"][k], rtol=1e-4, atol=1e-4)
+        masked = np.where(data["mask"][k], data["logits"][k], -np.inf)
+        top = np.sort(masked[np.isfinite(masked)])[::-1]
+        if len(top) < 2 or top[0] - top[1] > 1e-3:
+            assert policy.act(obs, {"action_mask": data["mask"][k]}) == int(np.argmax(masked))

@@ -1,0 +1,47 @@
+"""Write ``ppo_reference_observations.npz``: observations of ``NBS-Fast-v0`` and the shipped policy's
+logits on them, for a test that checks the policy without replaying episodes (an episode forks at
+near-ties on other CPUs; a forward pass does not).
+
+Usage::
+
+    python tests/data/make_ppo_observations.py
+
+Greedy episodes on the first two validation storeys (``generated:20000000`` and ``20000001``, seed
+0); every second observation is kept, with its action mask.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+import nbs_env  # noqa: F401  (registers the ids)
+from nbs_env.env import NBSEnv
+from policies import GreedyPolicy, make_policy
+
+OUT = Path(__file__).with_name("ppo_reference_observations.npz")
+
+
+def main() -> None:
+    policy = make_policy("ppo:reference")
+    greedy = GreedyPolicy()
+    keep: dict[str, list[np.ndarray]] = {"voxels": [], "candidates": [], "pose": [], "mask": [], "logits": []}
+    for storey in (20_000_000, 20_000_001):
+        env = NBSEnv("fast", scene=f"generated:{storey}")
+        obs, info = env.reset(seed=0)
+        for step in range(40):
+            if step % 2 == 0:
+                for key in ("voxels", "candidates", "pose"):
+                    keep[key].append(obs[key])
+                keep["mask"].append(info["action_mask"])
+                keep["logits"].append(policy.logits(obs).astype(np.float32))
+            obs, _, terminated, truncated, info = env.step(greedy.act(obs, info))
+            if terminated or truncated:
+                break
+    np.savez_compressed(OUT, **{k: np.stack(v) for k, v in keep.items()})
+    print(f"wrote {OUT}: {len(keep['logits'])} observations")
+
+
+if __name__ == "__main__":
+    main()
