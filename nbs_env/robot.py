@@ -38,12 +38,14 @@ from nbs_env.sensing.scanner import Scan, Scanner
 from nbs_env.settings import RobotConfig
 from scenes import Scene
 
-__all__ = ["DOOR_APPROACH", "SAME_DOOR", "KnownDoor", "Robot", "StepReport"]
+__all__ = ["BEYOND_DOOR", "DOOR_APPROACH", "SAME_DOOR", "KnownDoor", "Robot", "StepReport"]
 
 #: How far in front of a door frame the robot stops to approach it, metres.
 DOOR_APPROACH = 0.5
 #: Doors detected closer than this (metres) are one door seen from both sides.
 SAME_DOOR = 0.6
+#: A door leads into a scanned room when the point this far (metres) beyond its frame lies in it.
+BEYOND_DOOR = 0.6
 
 
 @dataclass
@@ -63,6 +65,7 @@ class KnownDoor:
 class StepReport:
     """What one scan cycle did (``true_*`` fields are the simulator's, for evaluation only).
 
+    ``path``: the planned (p, 2) polyline :meth:`Robot.move_to` drove (empty for other scans).
     ``conversions``: the voxels that were Occluded-structure before the move and are Structure
     after its scan (counted when :meth:`Robot.move_to` is asked to; 0 otherwise).
     """
@@ -78,6 +81,7 @@ class StepReport:
     acquisition_time: float
     times: dict[str, float]
     world_points: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 3)))
+    path: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 2)))
     conversions: int = 0
 
 
@@ -189,10 +193,10 @@ class Robot:
         heading = path[-1] - path[-2] if len(path) >= 2 else np.array([1.0, 0.0])
         self._drive(cands.points[index], float(np.arctan2(heading[1], heading[0])), float(cands.path_length[index]))
         report = self.scan(float(cands.path_length[index]), int(planned.gains[index]))
+        converted = 0
         if watched is not None and len(watched):
             converted = int(np.count_nonzero(self.belief.labels_at(watched) == VoxelLabel.STRUCTURE))
-            report = replace(report, conversions=converted)
-        return report
+        return replace(report, path=path, conversions=converted)
 
     def _drive(self, target_xy: np.ndarray, yaw: float, distance: float) -> None:
         """Execute a planned motion: the true robot moves by the planned displacement from where it
@@ -225,7 +229,7 @@ class Robot:
         for known in self.doors:
             if known.visited:
                 continue
-            beyond = Point(*(known.centre[:2] + SAME_DOOR * known.outward))
+            beyond = Point(*(known.centre[:2] + BEYOND_DOOR * known.outward))
             for room, poly in self.room_polygons.items():
                 if room != known.found_in_room and poly.contains(beyond):
                     known.visited, known.entered_room = True, room

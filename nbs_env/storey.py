@@ -306,11 +306,8 @@ class Storey:
         """
         self._check_open()
         before = self._before()
-        planned = self.robot.plan()
-        if not (0 <= index < planned.count):
-            raise IndexError(f"candidate {index} is not valid: {planned.count} candidates")
-        self.paths.append(planned.candidates.path(index))
         report = self.robot.move_to(index, count_conversions=self.count_conversions)
+        self.paths.append(report.path)
         self._record(report, door=False)
         self.advance()
         return self._outcome(before, report.conversions)

@@ -60,6 +60,7 @@ from shapely.geometry import LineString, Point, Polygon
 from shapely.geometry.polygon import orient
 
 from scenes.errors import FloorPlanError, PlanGeometryError, SceneFileError
+from scenes.geometry import STOREY_CLEARANCE
 from scenes.model import Door, Room, Scene, SurfaceClass
 
 __all__ = [
@@ -81,8 +82,8 @@ FORMAT_VERSION = 1
 CLUTTER_KINDS = ("box", "cabinet", "shelf", "table", "chair", "column", "sofa")
 #: Kinds that the generator stands with their back against a wall.
 WALL_STANDING_KINDS = ("cabinet", "shelf", "sofa", "box")
-#: Robot radius plus the paper's 20 cm safety distance: the clearance doors need free of clutter.
-DOOR_CLEARANCE = 0.45
+#: The clear floor kept free of clutter on both sides of a door: the storey's clearance.
+DOOR_CLEARANCE = STOREY_CLEARANCE
 
 #: Largest coordinate magnitude and largest length a plan may hold, metres: beyond them a plan is a
 #: mistake (a unit slip, an overflow), and the extrusion would build a mesh of no use.

@@ -39,7 +39,7 @@ from scenes.floorplan import (
     WindowPlan,
     _rectangle,
 )
-from scenes.geometry import STOREY_CLEARANCE as CLEARANCE
+from scenes.geometry import STOREY_CLEARANCE
 from scenes.validation import validate_plan_scene
 
 __all__ = ["MAX_CLUTTER_DENSITY", "GeneratorConfig", "generate_plan", "generate_scene"]
@@ -389,7 +389,7 @@ def _approach_point(door: DoorPlan, t: float, clear: Polygon) -> Point | None:
     n = np.linalg.norm(v)
     if n < 1e-9:
         return None
-    q = p + v / n * (t / 2 + CLEARANCE + 0.05)
+    q = p + v / n * (t / 2 + STOREY_CLEARANCE + 0.05)
     return Point(q)
 
 
@@ -419,7 +419,7 @@ def _place_clutter(
         count = max(1, count)
     placed: list[ClutterPlan] = []
     feet: list[Polygon] = []
-    base_free = room.buffer(-CLEARANCE, join_style="mitre")
+    base_free = room.buffer(-STOREY_CLEARANCE, join_style="mitre")
     coords = np.asarray(room.exterior.coords)
     edges = [(coords[k], coords[k + 1]) for k in range(len(coords) - 1)]
     for _ in range(count):
@@ -459,7 +459,7 @@ def _place_clutter(
                 continue
             if any(foot.distance(f) < 0.05 for f in feet) or any(z.intersects(foot) for z in door_zones):
                 continue
-            free = base_free.difference(shapely.union_all([*feet, foot]).buffer(CLEARANCE))
+            free = base_free.difference(shapely.union_all([*feet, foot]).buffer(STOREY_CLEARANCE))
             parts = [g for g in getattr(free, "geoms", [free]) if not g.is_empty]
             if not parts:
                 continue

@@ -20,7 +20,7 @@ from shapely.geometry import Point, Polygon
 
 from scenes._open3d import open3d
 from scenes.errors import StoreyValidationError
-from scenes.geometry import STOREY_CLEARANCE as CLEARANCE
+from scenes.geometry import STOREY_CLEARANCE
 from scenes.model import Scene
 
 if TYPE_CHECKING:
@@ -68,7 +68,7 @@ def count_escaping_rays(scene: Scene, origins: np.ndarray, n_directions: int = 4
     return (~np.isfinite(t_hit)).reshape(len(origins), len(dirs)).sum(axis=1)
 
 
-def room_free_space(plan: FloorPlan, scene: Scene, room: int, clearance: float = CLEARANCE) -> Polygon:
+def room_free_space(plan: FloorPlan, scene: Scene, room: int, clearance: float = STOREY_CLEARANCE) -> Polygon:
     """Where the robot's centre may stand in ``room`` (shapely Polygon or MultiPolygon)."""
     clear = Polygon(scene.rooms[room].polygon)
     free = clear.buffer(-clearance, join_style="mitre")
@@ -87,7 +87,7 @@ def validate_plan_scene(plan: FloorPlan, scene: Scene) -> None:
         parts.append([g for g in getattr(free, "geoms", [free]) if not g.is_empty])
         if not parts[-1]:
             raise StoreyValidationError(
-                name, f"room {scene.rooms[i].name!r} has no space where the robot keeps {CLEARANCE} m clearance"
+                name, f"room {scene.rooms[i].name!r} has no space where the robot keeps {STOREY_CLEARANCE} m clearance"
             )
 
     def node_of(room: int, p: np.ndarray) -> tuple[int, int] | None:
@@ -98,7 +98,7 @@ def validate_plan_scene(plan: FloorPlan, scene: Scene) -> None:
         return None
 
     adjacency: dict[tuple[int, int], set[tuple[int, int]]] = {}
-    reach = plan.wall_thickness / 2 + CLEARANCE + 0.05
+    reach = plan.wall_thickness / 2 + STOREY_CLEARANCE + 0.05
     for j, door in enumerate(scene.doors):
         a, b = door.rooms
         if door.width < MIN_DOOR_WIDTH:
@@ -124,7 +124,7 @@ def validate_plan_scene(plan: FloorPlan, scene: Scene) -> None:
             break
     if first is None:
         raise StoreyValidationError(
-            name, f"the start {tuple(np.round(start[:2], 3))} is not {CLEARANCE} m clear of walls and clutter"
+            name, f"the start {tuple(np.round(start[:2], 3))} is not {STOREY_CLEARANCE} m clear of walls and clutter"
         )
     seen = {first}
     todo = [first]

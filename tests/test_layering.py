@@ -74,9 +74,19 @@ def test_the_oracle_is_imported_only_by_the_comparison():
             assert "oracle" not in {a for a in _imported_modules(path)}, f"{path} imports the oracle"
 
 
-def _full_modules(path: Path) -> set[str]:
+def _full_modules(path: Path, runtime_only: bool = False) -> set[str]:
+    """The modules ``path`` imports by absolute name; ``runtime_only`` leaves out those under
+    ``if TYPE_CHECKING:``."""
+    tree = ast.parse(path.read_text())
+    typing_only = set()
+    if runtime_only:
+        for node in ast.walk(tree):
+            if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING":
+                typing_only |= {id(n) for n in ast.walk(node)}
     out = set()
-    for node in ast.walk(ast.parse(path.read_text())):
+    for node in ast.walk(tree):
+        if id(node) in typing_only:
+            continue
         if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             out.add(node.module)
         elif isinstance(node, ast.Import):
@@ -109,7 +119,7 @@ STEP_LAYERS = [
 
 def _runtime_nbs_imports(path: Path) -> set[str]:
     """nbs_env modules ``path`` imports at run time (imports under ``if TYPE_CHECKING:`` left out)."""
-    return {m for m in _runtime_imports(path) if m.split(".")[0] == "nbs_env"}
+    return {m for m in _full_modules(path, runtime_only=True) if m.split(".")[0] == "nbs_env"}
 
 
 def _module_path(module: str) -> str:
@@ -168,7 +178,7 @@ def test_no_import_cycles_between_modules():
     graph = {}
     for name, path in files.items():
         deps = set()
-        for module in _runtime_imports(path):
+        for module in _full_modules(path, runtime_only=True):
             while module and module not in files:
                 module = module.rpartition(".")[0]
             if module and module != name and "." in module and module.split(".")[0] == name.split(".")[0]:
@@ -193,20 +203,3 @@ def test_no_import_cycles_between_modules():
         if name not in state:
             visit(name)
     assert not found, "import cycles: " + "; ".join(" -> ".join(c) for c in found)
-
-
-def _runtime_imports(path: Path) -> set[str]:
-    tree = ast.parse(path.read_text())
-    typing_only = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING":
-            typing_only |= {id(n) for n in ast.walk(node)}
-    out = set()
-    for node in ast.walk(tree):
-        if id(node) in typing_only:
-            continue
-        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            out.add(node.module)
-        elif isinstance(node, ast.Import):
-            out |= {a.name for a in node.names}
-    return out

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-__all__ = ["parse_range"]
+import tempfile
+from pathlib import Path
+
+__all__ = ["output_folder_problem", "parse_range"]
 
 
 def parse_range(text: str) -> tuple[int, int]:
@@ -22,3 +25,24 @@ def parse_range(text: str) -> tuple[int, int]:
     if a < 0 or b < a:
         raise ValueError(f"expected N or A-B with integers 0 <= A <= B, got {text!r}")
     return a, b
+
+
+def output_folder_problem(path: str | Path) -> str | None:
+    """Why no report could be written into the folder ``path`` (None when it can), found before any
+    work starts and without creating it: it exists and is no folder, or the nearest folder that
+    exists (itself, or the one it would be made in) takes no file. A file is really written there and
+    removed: permission bits say nothing for root or on read-only mounts."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        return "exists and is not a folder"
+    here = path
+    while not here.exists():
+        here = here.parent
+    if not here.is_dir():
+        return f"cannot create it: {here} is not a folder"
+    try:
+        with tempfile.TemporaryFile(dir=here):
+            pass
+    except OSError as exc:
+        return f"cannot write in {here} ({exc.strerror or exc})"
+    return None

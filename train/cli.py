@@ -416,22 +416,6 @@ def scan_summary(metrics: dict, out: Path, files: Sequence[str]) -> str:
     return "\n".join(lines)
 
 
-def unwritable_folder(path: Path) -> str | None:
-    """Why a folder could not be made or written at ``path`` (None when it can), without making it."""
-    import os
-
-    if path.exists():
-        if not path.is_dir():
-            return "exists and is not a folder"
-        return None if os.access(path, os.W_OK | os.X_OK) else "the folder is not writable"
-    parent = path.parent
-    while not parent.exists():
-        parent = parent.parent
-    if not parent.is_dir():
-        return f"{parent} is not a folder"
-    return None if os.access(parent, os.W_OK | os.X_OK) else f"cannot create it: {parent} is not writable"
-
-
 def run_scan(args: argparse.Namespace) -> int:
     """``nbs scan``: run one episode with a policy and write its report."""
     from scenes.errors import SceneError
@@ -450,7 +434,9 @@ def run_scan(args: argparse.Namespace) -> int:
     except ModelFileError as exc:
         return _scan_error(exc, EXIT_SCENE_ERROR)
     out = args.out if args.out is not None else _default_out(args.scene)
-    problem = unwritable_folder(out)
+    from train.arguments import output_folder_problem
+
+    problem = output_folder_problem(out)
     if problem is not None:
         return _scan_error(f"--out {out}: {problem}", EXIT_USAGE)
     try:

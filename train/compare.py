@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from train.arguments import parse_range
+from train.arguments import output_folder_problem, parse_range
 
 __all__ = ["RunSpec", "expand_scenes", "run_grid", "run_one", "summarise", "write_outputs"]
 
@@ -473,18 +473,17 @@ def check_out_dir(out: str | Path) -> Path:
     Raises
     ------
     CompareError
-        ``out`` is a file, or cannot be created or written.
+        ``out`` is a file, or cannot be created or written (:func:`train.arguments.output_folder_problem`).
     """
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise CompareError(f"--out {out}: exists and is not a folder")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / ".nbs-write-check"
-        probe.write_text("")
-        probe.unlink()
-    except OSError as exc:
-        raise CompareError(f"--out {out}: cannot write there ({exc.strerror or exc})") from None
+    problem = output_folder_problem(out)
+    if problem is None:
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            problem = f"cannot create it ({exc.strerror or exc})"
+    if problem is not None:
+        raise CompareError(f"--out {out}: {problem}")
     return out
 
 
