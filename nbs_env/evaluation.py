@@ -56,7 +56,10 @@ scene's ground truth (true positions, true rooms), which the robot never sees.
         door                bool    a scan taken in a door frame on entering a room
         times               {stage: seconds}: scan, registration, roi, classification, voxels,
                             planning, evaluation
-    door_events             list of the env's door events (detected, crossed, unreachable)
+    door_events             list of the env's door events: detected (with exterior, covered),
+                            crossed, abandoned (with reason)
+    room_ends               list, one per room the robot completed: {room (the robot's number),
+                            scans, reason: "gain" | "declared" | "cap" | "no NVP"}
     config                  the env's EnvConfig as a dict (tuples as lists)
 
 A scan belongs to the true room whose floor polygon (clear floor inside the walls) contains its
@@ -83,6 +86,7 @@ from scipy.spatial import cKDTree
 from shapely.geometry import Point, Polygon
 
 from scenes import Scene, SurfaceClass
+from scenes.interior import interior_samples
 
 if TYPE_CHECKING:
     from nbs_env.storey import Storey
@@ -111,11 +115,13 @@ class CoverageMeter:
     radius : float
         Sensing radius in metres.
     interior_only : bool
-        Count only SE faces that face into a room (see :meth:`scenes.Scene.structural_mask`).
+        Count only the SE surface that faces the building's interior, decided by geometry
+        (:func:`scenes.interior.interior_samples`): never the far sides of walls or the undersides
+        of slabs, and the same whether or not the file names its rooms.
     """
 
     def __init__(self, scene: Scene, spacing: float = 0.05, radius: float = 0.05, interior_only: bool = True) -> None:
-        self.samples = scene.structure_samples(spacing, interior_only=interior_only)
+        self.samples = interior_samples(scene, spacing) if interior_only else scene.structure_samples(spacing)
         self.radius = radius
         self.sensed = np.zeros(len(self.samples), dtype=bool)
         self.room_ids = sorted({int(r) for r in self.samples.rooms})
@@ -316,6 +322,7 @@ def metrics_dict(
         "rooms": rooms,
         "steps": step_rows,
         "door_events": storey.door_events,
+        "room_ends": storey.room_ends,
         "config": storey.config.to_dict(),
     }
     return json_safe(metrics)

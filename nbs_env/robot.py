@@ -38,10 +38,11 @@ from nbs_env.sensing.scanner import Scan, Scanner
 from nbs_env.settings import RobotConfig
 from scenes import Scene
 
-__all__ = ["BEYOND_DOOR", "DOOR_APPROACH", "SAME_DOOR", "KnownDoor", "Robot", "StepReport"]
+__all__ = ["APPROACH_DEPTH", "BEYOND_DOOR", "SAME_DOOR", "KnownDoor", "Robot", "StepReport"]
 
-#: How far in front of a door frame the robot stops to approach it, metres.
-DOOR_APPROACH = 0.5
+#: How far in front of the frame (metres) an approach is searched for when the preferred point is
+#: not free: any free cell on the robot's side from which it can drive straight through the opening.
+APPROACH_DEPTH = 1.5
 #: Doors detected closer than this (metres) are one door seen from both sides.
 SAME_DOOR = 0.6
 #: A door leads into a scanned room when the point this far (metres) beyond its frame lies in it.
@@ -59,6 +60,9 @@ class KnownDoor:
     visited: bool = False
     failed: bool = False
     entered_room: int | None = None
+    exterior: bool = False
+    covered: float = float("nan")
+    reason: str | None = None
 
 
 @dataclass(frozen=True)
@@ -216,7 +220,13 @@ class Robot:
     def finish_room(self) -> list[KnownDoor]:
         """Detect the doors of the room just completed and add the new ones to the storey's list."""
         belief = self.belief
-        found = detect_doors(belief.se_faces, [(s.points, s.origin) for s in belief.scans], self.config.doors)
+        found = detect_doors(
+            belief.se_faces,
+            [(s.points, s.origin) for s in belief.scans],
+            self.config.doors,
+            no_return=[s.near_directions for s in belief.scans],
+            min_range=self.config.scanner.min_range,
+        )
         polygon = Polygon(belief.roi.polygon) if belief.roi is not None else None
         if polygon is not None:
             self.room_polygons[self.room_index] = polygon
@@ -224,7 +234,16 @@ class Robot:
             known = next((d for d in self.doors if np.linalg.norm(d.centre[:2] - door.centre[:2]) < SAME_DOOR), None)
             if known is not None:
                 continue  # a door seen from both sides is one door
-            self.doors.append(KnownDoor(door.centre, door.outward, door.width, self.room_index))
+            self.doors.append(
+                KnownDoor(
+                    door.centre,
+                    door.outward,
+                    door.width,
+                    self.room_index,
+                    exterior=door.exterior,
+                    covered=door.covered,
+                )
+            )
         # A door into a room already scanned needs no crossing: its far side is known.
         for known in self.doors:
             if known.visited:
@@ -244,15 +263,30 @@ class Robot:
         return self.belief.model(self.room_index)
 
     def next_door(self) -> int | None:
-        """The nearest unvisited door the robot can reach, by its estimated travel, or None."""
+        """The nearest unvisited door the robot can reach, by its estimated travel, or None.
+
+        Exterior doors are left (unless ``config.doors.cross_exterior``); a door that cannot be
+        reached keeps the reason in :attr:`KnownDoor.reason` (see :meth:`abandon_unreachable`)."""
         best, best_length = None, np.inf
         for k, door in enumerate(self.doors):
-            if door.visited or door.failed:
+            if door.visited or door.failed or (door.exterior and not self.config.doors.cross_exterior):
                 continue
-            length = self._route_length(door)
+            length, reason = self._route_length(door)
+            door.reason = reason
             if length is not None and length < best_length:
                 best, best_length = k, length
         return best
+
+    def abandon_unreachable(self) -> list[KnownDoor]:
+        """Mark every door still open that no route reaches as failed; returns them (with reasons)."""
+        left = []
+        for door in self.doors:
+            if door.visited or door.failed or (door.exterior and not self.config.doors.cross_exterior):
+                continue
+            door.failed = True
+            door.reason = door.reason or "no route"
+            left.append(door)
+        return left
 
     def _room_route(self, target_room: int) -> list[KnownDoor] | None:
         """Doors already crossed that lead from the current room to ``target_room`` (breadth first)."""
@@ -270,21 +304,54 @@ class Robot:
                         queue.append((b, [*route, d]))
         return None
 
-    def _route_length(self, door: KnownDoor) -> float | None:
-        """Travel to stand under ``door``: the geodesic in this room, else through rooms already
-        scanned (straight legs between the doors on the way, an estimate)."""
+    def _route_length(self, door: KnownDoor) -> tuple[float | None, str | None]:
+        """Travel to stand under ``door`` and why there is none: the geodesic to its approach in this
+        room, else through rooms already scanned (straight legs between the doors on the way, an
+        estimate)."""
         if door.found_in_room == self.room_index:
-            return self._approach_length(door)
+            found = self._approach(door)
+            return (found[1], None) if found[0] is not None else (None, found[2])
         route = self._room_route(door.found_in_room)
         if route is None:
-            return None
+            return None, "no route through the rooms crossed to the room it was found in"
         legs = [self.pose[:2, 3], *[d.centre[:2] for d in route], door.centre[:2]]
-        return float(sum(np.linalg.norm(b - a) for a, b in itertools.pairwise(legs)))
+        return float(sum(np.linalg.norm(b - a) for a, b in itertools.pairwise(legs))), None
 
-    def _approach(self, door: KnownDoor) -> np.ndarray:
-        """The point :data:`DOOR_APPROACH` in front of a door, on this side of it."""
+    def _approach(self, door: KnownDoor) -> tuple[np.ndarray | None, float | None, str]:
+        """Where the robot starts its drive through ``door``, the travel to stand under the frame from
+        here, and, when there is no approach, why.
+
+        The approach is the free cell on the robot's side of the frame, within :data:`APPROACH_DEPTH`
+        of it and in front of the opening (so that the last leg runs straight through it), that
+        minimises the geodesic to it plus that last leg."""
+        if self.belief.grid is None or self.belief.roi is None:
+            return None, None, "no map of the room"
+        tmap, route = self._door_routes()
         side = 1.0 if np.dot(self.pose[:2, 3] - door.centre[:2], door.outward) > 0 else -1.0
-        return door.centre[:2] + side * DOOR_APPROACH * door.outward
+        normal = side * np.asarray(door.outward, dtype=float)
+        along = np.array([-normal[1], normal[0]])
+        step = tmap.voxel_size
+        depth = np.arange(step, APPROACH_DEPTH + 1e-9, step)
+        half = max(0.0, door.width / 2 - tmap.robot_radius)
+        lateral = np.arange(-half, half + 1e-9, step) if half > 0 else np.zeros(1)
+        dd, ll = np.meshgrid(depth, lateral, indexing="ij")
+        points = door.centre[:2] + dd.reshape(-1, 1) * normal + ll.reshape(-1, 1) * along
+        inside = tmap.contains(points)
+        if not inside.any():
+            return None, None, "the floor in front of it lies outside the room's map"
+        points = points[inside]
+        cells = tmap.cell_of(points, "door approach")
+        free = tmap.free[cells[:, 0], cells[:, 1]]
+        if not free.any():
+            return None, None, f"no free floor within {APPROACH_DEPTH} m in front of the frame"
+        distance = route.distances[cells[:, 0], cells[:, 1]]
+        ok = free & np.isfinite(distance)
+        if not ok.any():
+            return None, None, "the free floor in front of the frame is cut off from the robot"
+        last_leg = np.linalg.norm(points - door.centre[:2], axis=1)
+        cost = np.where(ok, distance + last_leg, np.inf)
+        k = int(np.argmin(cost))
+        return points[k], float(cost[k]), ""
 
     def _door_routes(self) -> tuple[TraversabilityMap, Geodesic]:
         """Routes from here in the current room, kept until the next scan (one per room, not per door)."""
@@ -299,24 +366,13 @@ class Robot:
             self._door_map = (tmap, geodesic(tmap, self.pose[:2, 3]))
         return self._door_map
 
-    def _approach_length(self, door: KnownDoor) -> float | None:
-        if self.belief.grid is None or self.belief.roi is None:
-            return None
-        tmap, route = self._door_routes()
-        target = self._approach(door)
-        if not tmap.contains(np.asarray(target).reshape(1, 2))[0]:
-            return None
-        i, j = tmap.cell_of(target, "door approach")[0]
-        length = float(route.distances[i, j])
-        return length + DOOR_APPROACH if np.isfinite(length) else None
-
     def cross_door(self, k: int) -> StepReport:
         """Drive to door ``k``, stand under its frame, and take the first scan of the next room."""
         door = self.doors[k]
-        length = self._route_length(door)
+        length, reason = self._route_length(door)
         if length is None:
-            door.failed = True
-            raise UnreachableDoorError(f"door {k} at {door.centre[:2].round(2).tolist()} cannot be reached")
+            door.failed, door.reason = True, reason
+            raise UnreachableDoorError(f"door {k} at {door.centre[:2].round(2).tolist()} cannot be reached: {reason}")
         # The door leads out of the room it was found in: the robot enters the room beyond.
         into = door.outward
         self._drive(door.centre[:2], float(np.arctan2(into[1], into[0])), length)

@@ -34,7 +34,7 @@ from nbs_env.errors import ConfigError, InvalidPoseError, UnreachableDoorError
 from nbs_env.evaluation import CoverageMeter
 from nbs_env.observation import BeliefView
 from nbs_env.planning.planner import Plan
-from nbs_env.robot import Robot, StepReport
+from nbs_env.robot import KnownDoor, Robot, StepReport
 from nbs_env.settings import EnvConfig
 from scenes import FloorPlan, Scene, load_scene
 from scenes.generator import generate_plan
@@ -195,7 +195,11 @@ class Storey:
     scans : list of ScanRecord
         The episode log, one record per scan.
     door_events : list of dict
-        ``detected``, ``crossed`` and ``unreachable`` events, in order.
+        ``detected`` (with ``exterior``: it opens onto the outside, and is not crossed by default),
+        ``crossed`` and ``abandoned`` (with its ``reason``) events, in order.
+    room_ends : list of dict
+        One per room completed, in order: the robot's ``room`` number, its ``scans`` and the
+        ``reason`` it ended (``"gain"``, ``"declared"``, ``"cap"`` or ``"no NVP"``).
     paths : list of (p, 2) float
         The planned paths driven.
     complete : bool
@@ -212,6 +216,7 @@ class Storey:
         self.meter = CoverageMeter(scene, config.coverage_spacing, config.coverage_radius)
         self.scans: list[ScanRecord] = []
         self.door_events: list[dict[str, Any]] = []
+        self.room_ends: list[dict[str, Any]] = []
         self.paths: list[np.ndarray] = []
         self.complete = False
         self.new_room = True
@@ -324,8 +329,9 @@ class Storey:
 
         ``done``: the agent declared the room complete (completion="policy")."""
         robot = self.robot
-        while len(self.scans) < self.config.max_scans and self._room_complete(done):
+        while len(self.scans) < self.config.max_scans and (reason := self._room_complete(done)) is not None:
             done = False  # the declaration was for the room the robot was in
+            self.room_ends.append({"room": robot.room_index, "scans": robot.scans_in_room, "reason": reason})
             before = len(robot.doors)
             robot.finish_room()
             for door in robot.doors[before:]:
@@ -336,24 +342,26 @@ class Storey:
                         "room": door.found_in_room,
                         "centre": door.centre[:2].round(3).tolist(),
                         "width": round(float(door.width), 3),
+                        "exterior": bool(door.exterior),
+                        "covered": None if np.isnan(door.covered) else round(float(door.covered), 3),
                     }
                 )
             if not self._enter_next_room():
                 return
 
     # ------------------------------------------------------------------ inside
-    def _room_complete(self, done: bool) -> bool:
-        """The current room is done: by the gain rule (or the agent's declaration), the room's scan
-        cap, or no NVP left."""
+    def _room_complete(self, done: bool) -> str | None:
+        """Why the current room is done, or None: ``"gain"`` (the gain rule), ``"declared"`` (the
+        agent's declaration), ``"cap"`` (the room's scan cap) or ``"no NVP"``."""
         robot = self.robot
         if robot.scans_in_room >= robot.config.max_scans_per_room:
-            return True
+            return "cap"
         planned = robot.plan()
         if planned.count == 0:
-            return True
+            return "no NVP"
         if self.config.completion == "gain":
-            return planned.gain_below(robot.config.completion_fraction)
-        return done
+            return "gain" if planned.gain_below(robot.config.completion_fraction) else None
+        return "declared" if done else None
 
     def _enter_next_room(self) -> bool:
         """Cross the nearest reachable unvisited door and scan the next room; False when the storey
@@ -362,6 +370,8 @@ class Storey:
         while True:
             k = robot.next_door()
             if k is None:
+                for door in robot.abandon_unreachable():
+                    self._abandoned(door)
                 self.complete = True
                 return False
             if len(self.scans) >= self.config.max_scans:
@@ -371,9 +381,7 @@ class Storey:
             try:
                 report = robot.cross_door(k)
             except UnreachableDoorError:
-                self.door_events.append(
-                    {"event": "unreachable", "scan": len(self.scans), "centre": door.centre[:2].round(3).tolist()}
-                )
+                self._abandoned(door)
                 continue
             self.paths.append(np.array([start, door.centre[:2]]))
             self.door_events.append(
@@ -387,6 +395,17 @@ class Storey:
             self._record(report, door=True)
             self.new_room = True
             return True
+
+    def _abandoned(self, door: KnownDoor) -> None:
+        self.door_events.append(
+            {
+                "event": "abandoned",
+                "scan": len(self.scans),
+                "room": door.found_in_room,
+                "centre": door.centre[:2].round(3).tolist(),
+                "reason": door.reason or "no route",
+            }
+        )
 
     def _record(self, report: StepReport, door: bool) -> None:
         robot = self.robot

@@ -1,7 +1,8 @@
 """The oracle: the yardstick of the comparison, and the ONE policy that reads ground truth.
 
 It is not a competitor. With the true building it lists the scan positions a robot could stand at
-(a lattice keeping the 0.45 m clearance from walls and furniture in every room), takes a noise-free
+(a lattice over the indoor free floor, found by geometry as :mod:`scenes.interior` finds it,
+keeping the 0.45 m clearance from walls and furniture), takes a noise-free
 scan of the true building from each with the same scanner as the robot, finds which samples of the
 true structural surface each scan senses by the evaluation's own rule (a point within the
 meter's radius, :class:`nbs_env.evaluation.CoverageMeter`), and picks positions by greedy set cover.
@@ -18,7 +19,7 @@ coverage through registration error and noise, and exceed it slightly only by no
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
@@ -28,6 +29,7 @@ from nbs_env.config import ScannerConfig
 from nbs_env.planning.navigation import NavigationConfig
 from scenes import Scene
 from scenes.geometry import free_region
+from scenes.interior import indoor_floor, interior_samples
 
 __all__ = ["OraclePlan", "oracle_plan"]
 
@@ -48,6 +50,9 @@ class OraclePlan:
         How many candidate positions there were.
     samples : int
         How many structural samples.
+    room_max_pct : dict of int to float
+        Per true room (the scene's rooms, from the file or derived), the share of its samples seen
+        from all candidate positions together, in %.
     """
 
     positions: np.ndarray
@@ -55,6 +60,7 @@ class OraclePlan:
     max_coverage_pct: float
     candidates: int
     samples: int
+    room_max_pct: dict[int, float] = field(default_factory=dict)
 
     def scans_to_reach(self, pct: float) -> int | None:
         """The fewest scans of the plan that see at least ``pct`` % (None if it never does)."""
@@ -68,13 +74,19 @@ class OraclePlan:
             "max_coverage_pct": float(self.max_coverage_pct),
             "candidates": int(self.candidates),
             "samples": int(self.samples),
+            "room_max_pct": {str(k): float(v) for k, v in self.room_max_pct.items()},
         }
 
 
 def _positions(scene: Scene, lattice: float, clearance: float) -> np.ndarray:
+    """Lattice points of the indoor free floor (by geometry: the same with or without room
+    annotations) that keep ``clearance`` from every obstacle."""
+    floor, floor_z = indoor_floor(scene)
     out = []
-    for room in scene.rooms:
-        free = free_region(scene, Polygon(room.polygon), room.floor_z, clearance)
+    for part in getattr(floor, "geoms", [floor]):
+        if not isinstance(part, Polygon) or part.is_empty:
+            continue
+        free = free_region(scene, part, floor_z, clearance)
         if free.is_empty:
             continue
         lo, hi = np.floor(np.asarray(free.bounds[:2]) / lattice), np.ceil(np.asarray(free.bounds[2:]) / lattice)
@@ -82,7 +94,7 @@ def _positions(scene: Scene, lattice: float, clearance: float) -> np.ndarray:
         pts = np.column_stack([gx.ravel(), gy.ravel()])
         inside = shapely.contains_xy(free, pts[:, 0], pts[:, 1])
         for p in pts[inside]:
-            out.append([p[0], p[1], room.floor_z])
+            out.append([p[0], p[1], floor_z])
     return np.asarray(out, dtype=float).reshape(-1, 3)
 
 
@@ -120,7 +132,8 @@ def oracle_plan(
     from nbs_env.sensing.scanner import Scanner
 
     scanner = replace(scanner or ScannerConfig(), range_noise=0.0)
-    samples = scene.structure_samples(spacing, interior_only=True).points
+    structure = interior_samples(scene, spacing)
+    samples = structure.points
     if clearance is None:
         clearance = NavigationConfig().required_clearance
     positions = _positions(scene, lattice, clearance)
@@ -150,4 +163,9 @@ def oracle_plan(
         max_coverage_pct=100.0 * reachable.sum() / max(1, len(samples)),
         candidates=len(positions),
         samples=len(samples),
+        room_max_pct={
+            int(room.id): 100.0 * float(reachable[structure.rooms == room.id].mean())
+            for room in scene.rooms
+            if np.any(structure.rooms == room.id)
+        },
     )

@@ -6,7 +6,8 @@
 - a floor-plan JSON path (see :mod:`scenes.floorplan` for the format);
 - a labelled mesh path: ``.obj``, ``.glb``/``.gltf``, ``.ply`` (see :mod:`scenes.importers`);
 - an ``.ifc`` path (needs the ``ifc`` extra; see :mod:`scenes.ifc`);
-- ``"generated:SEED"``: a storey from the seeded generator (see :mod:`scenes.generator`).
+- ``"generated:SEED"``: a storey from the seeded generator (see :mod:`scenes.generator`);
+- ``"corpus:NAME"``: a storey of the evaluation corpus (see :mod:`scenes.corpus`).
 
 Everything a :class:`Scene` holds is ground truth: only the simulator and evaluation may read it.
 """
@@ -70,6 +71,7 @@ __all__ = [
 MESH_EXTENSIONS = (".obj", ".glb", ".gltf", ".ply")
 SUPPORTED_EXTENSIONS = (".json", *MESH_EXTENSIONS, ".ifc")
 _GENERATED = "generated:"
+_CORPUS = "corpus:"
 
 
 def list_scenes() -> list[str]:
@@ -105,7 +107,8 @@ def load_scene(spec: str | Path | FloorPlan, **options: Any) -> Scene:
         - ``validate=True``: validate plan-based storeys (reachability, free start, closed);
         - for ``generated:SEED``: any :class:`GeneratorConfig` field, e.g. ``rooms=5``;
         - for meshes: ``y_up=True`` converts y-up coordinates (glTF convention) to z-up;
-        - for IFC: ``storey`` (name or index), ``class_map`` (IFC class → SurfaceClass overrides).
+        - for IFC: ``storey`` (name or index), ``class_map`` (IFC class → SurfaceClass overrides),
+          ``doors`` (``"open"``, the default: frames only; ``"closed"``: doors as drawn).
 
     Returns
     -------
@@ -141,6 +144,10 @@ def _load(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene:
     if not isinstance(spec, (str, Path)):
         raise TypeError(f"scene spec must be a str, Path or FloorPlan, got {type(spec).__name__}")
     text = str(spec)
+    if text.startswith(_CORPUS):
+        from scenes.corpus import load_corpus_scene
+
+        return load_corpus_scene(text[len(_CORPUS) :], **options)
     if text.startswith(_GENERATED):
         seed_text = text[len(_GENERATED) :]
         try:
@@ -181,4 +188,4 @@ def _load(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene:
         return load_mesh_scene(path, **_take(options, ("y_up", "name"), "mesh file"))
     from scenes.ifc import load_ifc_scene
 
-    return load_ifc_scene(path, **_take(options, ("storey", "class_map", "name"), "IFC file"))
+    return load_ifc_scene(path, **_take(options, ("storey", "class_map", "name", "doors"), "IFC file"))

@@ -15,7 +15,14 @@ from scenes.labels import SurfaceClass
 if TYPE_CHECKING:
     from scenes.model import Scene
 
-__all__ = ["STOREY_CLEARANCE", "auto_start", "free_region", "obstacle_footprint", "point_is_free"]
+__all__ = [
+    "STOREY_CLEARANCE",
+    "auto_start",
+    "free_region",
+    "obstacle_footprint",
+    "point_is_free",
+    "split_long_faces",
+]
 
 #: The clear floor (m, from any obstacle) that a storey promises: automatic starts keep it, and
 #: generated storeys are validated for it (every room reachable by a disc of this radius). It is a
@@ -49,23 +56,57 @@ def obstacle_footprint(
     -------
     shapely geometry
         Union of the projected outlines of every non-floor, non-ceiling face whose z-range meets
-        the robot's body height.
+        the robot's body height, each clipped to that height first.
     """
     keep = ~np.isin(scene.face_labels, [SurfaceClass.FLOOR, SurfaceClass.CEILING])
     tri = scene.mesh.vertices[scene.mesh.faces[keep]]
+    lo_z, hi_z = floor_z + _BODY_Z[0], floor_z + _BODY_Z[1]
     z = tri[..., 2]
-    keep_z = (z.max(axis=1) > floor_z + _BODY_Z[0]) & (z.min(axis=1) < floor_z + _BODY_Z[1])
-    tri = tri[keep_z][..., :2]
+    tri = tri[(z.max(axis=1) > lo_z) & (z.min(axis=1) < hi_z)]
     if region is not None and len(tri):
         x0, y0, x1, y1 = region.buffer(margin).bounds if margin > 0 else region.bounds
-        lo, hi = tri.min(axis=1), tri.max(axis=1)
+        lo, hi = tri[..., :2].min(axis=1), tri[..., :2].max(axis=1)
         tri = tri[(hi[:, 0] >= x0) & (lo[:, 0] <= x1) & (hi[:, 1] >= y0) & (lo[:, 1] <= y1)]
     if len(tri) == 0:
         return Polygon()
-    # Vertical faces project to slivers of zero area; their closed outlines (as lines) keep them.
-    rings = shapely.linestrings(np.concatenate([tri, tri[:, :1]], axis=1))
-    solid = shapely.polygons(tri)
-    return shapely.union_all(np.concatenate([shapely.buffer(rings, 1e-3), solid[shapely.area(solid) > 1e-8]]))
+    # A face that only dips into the body's height band (a rafter's side, a stair's string) is an
+    # obstacle only where it does: what is projected is the face clipped to the band, which is the
+    # convex hull of its corners inside the band and its edges' crossings of the band's two planes.
+    z = tri[..., 2]
+    partial = (z.min(axis=1) < lo_z) | (z.max(axis=1) > hi_z)
+    flat = tri[~partial][..., :2]
+    parts = []
+    if len(flat):
+        # Vertical faces project to slivers of zero area; their closed outlines (as lines) keep them.
+        rings = shapely.linestrings(np.concatenate([flat, flat[:, :1]], axis=1))
+        solid = shapely.polygons(flat)
+        parts += [shapely.buffer(rings, 1e-3), solid[shapely.area(solid) > 1e-8]]
+    if partial.any():
+        parts.append(shapely.buffer(_clipped_hulls(tri[partial], lo_z, hi_z), 1e-3))
+    return shapely.union_all(np.concatenate(parts)) if parts else Polygon()
+
+
+def _clipped_hulls(tri: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """Plan projections (shapely geometries) of the (n, 3, 3) triangles clipped to lo <= z <= hi."""
+    candidates, owners = [], []
+    index = np.arange(len(tri))
+    inside = (tri[..., 2] >= lo) & (tri[..., 2] <= hi)
+    for k in range(3):
+        candidates.append(tri[inside[:, k], k, :2])
+        owners.append(index[inside[:, k]])
+        a, b = tri[:, k], tri[:, (k + 1) % 3]
+        dz = b[:, 2] - a[:, 2]
+        for level in (lo, hi):
+            safe = np.where(dz != 0, dz, 1.0)
+            t = np.where(dz != 0, (level - a[:, 2]) / safe, -1.0)
+            crossing = (t > 0) & (t < 1)
+            candidates.append((a + t[:, None] * (b - a))[crossing, :2])
+            owners.append(index[crossing])
+    points = np.concatenate(candidates)
+    owner = np.concatenate(owners)
+    order = np.argsort(owner, kind="stable")
+    groups = shapely.multipoints(points[order], indices=owner[order])
+    return shapely.convex_hull(groups)
 
 
 def free_region(scene: Scene, region: Polygon, floor_z: float, clearance: float) -> Polygon | MultiPolygon:
@@ -126,3 +167,39 @@ def point_is_free(scene: Scene, xy: np.ndarray, floor_z: float, clearance: float
     """Whether a disc of radius ``clearance`` (m) centred at ``xy`` touches no obstacle."""
     probe = Point(float(xy[0]), float(xy[1])).buffer(clearance)
     return not obstacle_footprint(scene, floor_z, probe).intersects(probe)
+
+
+def split_long_faces(
+    vertices: np.ndarray, faces: np.ndarray, max_edge: float, mask: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bisect the longest edge of every face (of those in ``mask``) longer than ``max_edge``.
+
+    Returns the new vertices (V', 3), faces (F', 3) and, per new face, the index of the face it came
+    from (F',); the first F faces keep their indices. Bisecting only the longest edge splits a long
+    thin face into about ``length / max_edge`` pieces, where splitting into four would make slivers
+    by the thousand.
+    """
+    vertices = np.asarray(vertices, dtype=float)
+    faces = np.array(faces, dtype=np.int64)
+    origin = np.arange(len(faces))
+    eligible = np.ones(len(faces), bool) if mask is None else np.asarray(mask, bool).copy()
+    for _ in range(64):
+        tri = vertices[faces]
+        lengths = np.linalg.norm(tri[:, [1, 2, 0]] - tri, axis=2)  # edge k runs from corner k to k+1
+        longest = lengths.argmax(axis=1)
+        split = eligible & (lengths[np.arange(len(faces)), longest] > max_edge)
+        if not split.any():
+            break
+        idx = np.flatnonzero(split)
+        k = longest[idx]
+        a = faces[idx, k]
+        b = faces[idx, (k + 1) % 3]
+        c = faces[idx, (k + 2) % 3]
+        mid = np.arange(len(vertices), len(vertices) + len(idx))
+        vertices = np.concatenate([vertices, 0.5 * (vertices[a] + vertices[b])])
+        # (a, m, c) and (m, b, c) keep the winding of (a, b, c).
+        faces[idx] = np.column_stack([a, mid, c])
+        faces = np.concatenate([faces, np.column_stack([mid, b, c])])
+        origin = np.concatenate([origin, origin[idx]])
+        eligible = np.concatenate([eligible, np.ones(len(idx), bool)])
+    return vertices, faces, origin

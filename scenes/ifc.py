@@ -44,8 +44,12 @@ plan -/+ 0.6 m along the normal (-1 = outside), listed room before outside, else
 with the normal pointing from the first to the second; ``position`` is that centre at the door's
 lowest z.
 
-Doors are meshed as the model draws them, usually closed: a ray (or robot) cannot pass a closed door
-leaf. Pass ``class_map={"IfcDoor": None}`` for open doorways; the ``Door`` ground truth is kept.
+*Doors.* Models draw doors closed, and a ray (or robot) cannot pass a closed leaf, so by default
+(``doors="open"``) a door keeps only its frame: the triangles of the ``IfcDoor`` element that lie
+within :data:`DOOR_FRAME` of the element's sides or top (along its width and height); the leaf, the
+panels and the handle between them are left out, and the opening is free. ``doors="closed"`` meshes
+the door as drawn. Either way the ``Door`` ground truth is kept; ``class_map={"IfcDoor": None}``
+leaves the whole element out.
 """
 
 from __future__ import annotations
@@ -62,7 +66,9 @@ import shapely
 import trimesh
 
 from scenes.errors import IfcError, MissingDependencyError, MissingStructureError, SceneFileError
+from scenes.geometry import split_long_faces
 from scenes.importers import footprint_polygon
+from scenes.interior import derive_rooms, rooms_by_probe
 from scenes.model import Door, Room, Scene, SurfaceClass
 
 __all__ = [
@@ -128,6 +134,11 @@ MAX_FACE_EDGE = 1.0
 #: distance, so that a face lying on the room's floor or ceiling plane but facing away from the room
 #: (the top of a beam against the slab) stays out of it.
 ROOM_Z_TOLERANCE = 0.05
+#: With ``doors="open"``, door triangles within this distance (m) of the door's sides or top are its
+#: frame (a lining is 5-10 cm); the rest is the leaf.
+DOOR_FRAME = 0.1
+#: What ``load_ifc_scene(doors=...)`` takes.
+DOOR_MODES = ("open", "closed")
 #: Distance (m) in front of a face at which its room is tested.
 _FACE_PROBE = 0.1
 #: Distance (m) either side of a door's centre at which its two rooms are looked up.
@@ -171,6 +182,7 @@ def load_ifc_scene(
     storey: str | int | None = None,
     class_map: Mapping[str, SurfaceClass | None] | None = None,
     name: str | None = None,
+    doors: str = "open",
 ) -> Scene:
     """Load one storey of an IFC file as a labelled scene with rooms and doors.
 
@@ -186,6 +198,8 @@ def load_ifc_scene(
         SurfaceClass, or None to leave such elements out).
     name : str, optional
         Name of the scene; default ``"<path>#<storey name>"``.
+    doors : {"open", "closed"}
+        ``"open"`` keeps only each door's frame (module docstring), ``"closed"`` meshes doors as drawn.
 
     Returns
     -------
@@ -209,6 +223,8 @@ def load_ifc_scene(
     """
     path = Path(path)
     source = str(path)
+    if doors not in DOOR_MODES:
+        raise IfcError(source, f"doors must be one of {', '.join(DOOR_MODES)}, got {doors!r}")
     try:
         import ifcopenshell
         import ifcopenshell.geom
@@ -247,9 +263,9 @@ def load_ifc_scene(
         if e.id() not in on_storey and _is_bounding_kind(e) and _element_class(e, mapping, model) in horizontal
     ]
     spaces = [e for e in on_storey.values() if e.is_a("IfcSpace")]
-    doors = [e for e in on_storey.values() if e.is_a("IfcDoor")]
+    door_elements = [e for e in on_storey.values() if e.is_a("IfcDoor")]
     # Doors are meshed even when left out of the scene: their geometry gives the Door ground truth.
-    wanted = {e.id(): e for e in [*(on_storey[i] for i in classes), *others, *spaces, *doors]}
+    wanted = {e.id(): e for e in [*(on_storey[i] for i in classes), *others, *spaces, *door_elements]}
     shapes = _triangulate(source, ifcopenshell, model, wanted.values())
 
     wall_ids = [i for i, c in classes.items() if c == SurfaceClass.WALL and i in shapes]
@@ -267,19 +283,30 @@ def load_ifc_scene(
     _place_slabs(classes, on_storey, shapes, elevation, top)
     classes.update(_bounding_elements(others, shapes, plan, elevation, top))
 
-    vertices, faces, labels = _assemble(shapes, classes)
+    meshed = dict(shapes)
+    if doors == "open":
+        for door in door_elements:
+            if door.id() in meshed and door.id() in classes:
+                meshed[door.id()] = _door_frame(door, *shapes[door.id()])
+    vertices, faces, labels = _assemble(meshed, classes)
     if not np.any(labels == SurfaceClass.FLOOR):
         raise MissingStructureError(
             source, f"storey {chosen.name!r} has no floor faces (no slab at its elevation {elevation:.2f} m)"
         )
     structural = np.isin(labels, [c.value for c in SurfaceClass if c.is_structural])
-    vertices, faces, origin = _split_long_faces(vertices, faces, MAX_FACE_EDGE, structural)
+    vertices, faces, origin = split_long_faces(vertices, faces, MAX_FACE_EDGE, structural)
     labels = labels[origin]
     mesh = trimesh.Trimesh(vertices, faces, process=False, validate=False)
 
     rooms = _rooms(spaces, shapes)
-    face_rooms = _face_rooms(mesh, rooms)
-    door_list = _doors(doors, shapes, rooms, scale)
+    spaces_used = bool(rooms)
+    if not rooms:
+        # Files that name no spaces get rooms from the floor's free space, and their doors those.
+        rooms = derive_rooms(Scene(mesh, labels, name=source))
+    face_rooms = (
+        _face_rooms(mesh, rooms) if spaces_used else rooms_by_probe(rooms, mesh.triangles_center, mesh.face_normals)
+    )
+    door_list = _doors(door_elements, shapes, rooms, scale)
     return Scene(
         mesh,
         labels,
@@ -295,6 +322,7 @@ def load_ifc_scene(
             "storey_index": index,
             "elevation": elevation,
             "height": top - elevation,
+            "rooms": "file" if spaces_used else "derived" if rooms else "none",
         },
     )
 
@@ -495,42 +523,6 @@ def _overlaps_in_plan(verts: np.ndarray, plan: shapely.Geometry) -> bool:
     return hull.intersection(plan).area >= 0.25 * min(hull.area, plan.area)
 
 
-def _split_long_faces(
-    vertices: np.ndarray, faces: np.ndarray, max_edge: float, mask: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Bisect the longest edge of every face (of those in ``mask``) longer than ``max_edge``.
-
-    Returns the new vertices (V', 3), faces (F', 3) and, per new face, the index of the face it came
-    from (F',); the first F faces keep their indices. Bisecting only the longest edge splits a long
-    thin face into about ``length / max_edge`` pieces, where splitting into four would make slivers
-    by the thousand.
-    """
-    vertices = np.asarray(vertices, dtype=float)
-    faces = np.array(faces, dtype=np.int64)
-    origin = np.arange(len(faces))
-    eligible = np.ones(len(faces), bool) if mask is None else np.asarray(mask, bool).copy()
-    for _ in range(64):
-        tri = vertices[faces]
-        lengths = np.linalg.norm(tri[:, [1, 2, 0]] - tri, axis=2)  # edge k runs from corner k to k+1
-        longest = lengths.argmax(axis=1)
-        split = eligible & (lengths[np.arange(len(faces)), longest] > max_edge)
-        if not split.any():
-            break
-        idx = np.flatnonzero(split)
-        k = longest[idx]
-        a = faces[idx, k]
-        b = faces[idx, (k + 1) % 3]
-        c = faces[idx, (k + 2) % 3]
-        mid = np.arange(len(vertices), len(vertices) + len(idx))
-        vertices = np.concatenate([vertices, 0.5 * (vertices[a] + vertices[b])])
-        # (a, m, c) and (m, b, c) keep the winding of (a, b, c).
-        faces[idx] = np.column_stack([a, mid, c])
-        faces = np.concatenate([faces, np.column_stack([mid, b, c])])
-        origin = np.concatenate([origin, origin[idx]])
-        eligible = np.concatenate([eligible, np.ones(len(idx), bool)])
-    return vertices, faces, origin
-
-
 # ------------------------------------------------------------------------------- ground truth
 def _rooms(spaces: list[Any], shapes: Mapping[int, tuple[np.ndarray, np.ndarray]]) -> list[Room]:
     rooms: list[Room] = []
@@ -584,6 +576,21 @@ def _door_axes(door: Any, verts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         edge = np.array([1.0, 0.0])
     u = edge / np.linalg.norm(edge)
     return u, np.array([-u[1], u[0]])
+
+
+def _door_frame(door: Any, verts: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The frame of a door element: its triangles within :data:`DOOR_FRAME` of its sides or top."""
+    u, _ = _door_axes(door, verts)
+    pu = verts[:, :2] @ u
+    normal_extent = np.ptp(verts[:, :2] @ np.array([-u[1], u[0]]))
+    if np.ptp(pu) < normal_extent:  # the placement's x axis runs across the wall: width is the other
+        u = np.array([-u[1], u[0]])
+        pu = verts[:, :2] @ u
+    tri_u, tri_z = pu[faces], verts[faces][..., 2]
+    lo, hi, top = pu.min(), pu.max(), verts[:, 2].max()
+    side = (tri_u.max(axis=1) <= lo + DOOR_FRAME) | (tri_u.min(axis=1) >= hi - DOOR_FRAME)
+    keep = side | (tri_z.min(axis=1) >= top - DOOR_FRAME)
+    return verts, faces[keep]
 
 
 def _doors(

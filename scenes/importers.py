@@ -69,6 +69,7 @@ import shapely
 import trimesh
 
 from scenes.errors import InvalidMeshError, MissingStructureError, SceneFileError, UnsupportedFormatError
+from scenes.interior import with_derived_rooms
 from scenes.model import Room, Scene, SurfaceClass
 
 __all__ = [
@@ -235,14 +236,15 @@ def load_mesh_scene(path: str | Path, *, y_up: bool = False, name: str | None = 
     labels = labels.astype(np.uint8)
     _require_structure(source, labels, hint=_STRUCTURE_HINT[ext])
     face_rooms, room_list = _rooms_from_faces(source, mesh, labels, rooms)
-    return Scene(
+    scene = Scene(
         mesh,
         labels,
         face_rooms,
         rooms=room_list,
         name=name if name is not None else source,
-        metadata={"source": source, "format": ext[1:]},
+        metadata={"source": source, "format": ext[1:], "rooms": "file" if room_list else "none"},
     )
+    return with_derived_rooms(scene)
 
 
 _STRUCTURE_HINT = {

@@ -233,40 +233,42 @@ class Scene:
         sums = np.bincount(self.face_labels, weights=self.face_areas, minlength=len(SurfaceClass))
         return {c: float(sums[c.value]) for c in SurfaceClass}
 
-    def structural_mask(self, interior_only: bool = False) -> np.ndarray:
-        """(F,) bool: faces that are FLOOR, CEILING or WALL.
+    def structural_mask(self) -> np.ndarray:
+        """(F,) bool: faces that are FLOOR, CEILING or WALL (which of them face the interior:
+        :func:`scenes.interior.interior_samples`)."""
+        return np.isin(self.face_labels, [c.value for c in STRUCTURAL_CLASSES])
 
-        With ``interior_only``, only those that belong to a room (``face_rooms >= 0``). Solids from
-        IFC have structural faces nobody can see from inside (slab undersides, outer wall faces);
-        a coverage metric should not count them. Plan-built scenes have none of those.
-        """
-        mask = np.isin(self.face_labels, [c.value for c in STRUCTURAL_CLASSES])
-        return mask & (self.face_rooms >= 0) if interior_only else mask
+    def structural_area(self) -> float:
+        """Area in m² of the structural elements: floor + ceiling + wall faces."""
+        return float(self.face_areas[self.structural_mask()].sum())
 
-    def structural_area(self, interior_only: bool = False) -> float:
-        """Area in m² of the structural elements: floor + ceiling + wall faces (see :meth:`structural_mask`)."""
-        return float(self.face_areas[self.structural_mask(interior_only)].sum())
-
-    def structure_samples(self, spacing: float = 0.05, *, interior_only: bool = False) -> StructureSamples:
-        """Deterministic points spread uniformly over the SE faces.
+    def structure_samples(self, spacing: float = 0.05) -> StructureSamples:
+        """Deterministic points spread uniformly over the SE faces (those facing the interior:
+        :func:`scenes.interior.interior_samples`).
 
         Parameters
         ----------
         spacing : float
             Nominal distance between samples in metres; one sample per ``spacing**2`` of area
             (0.05 m gives one per 25 cm²).
-        interior_only : bool
-            Sample only the SE faces that belong to a room (see :meth:`structural_mask`).
 
         Returns
         -------
         StructureSamples
             ``round(structural_area / spacing**2)`` samples; faces get counts in proportion to their
-            area (running rounding, so small faces are not all dropped).
+            area (running rounding, so small faces are not all dropped). Computed once per spacing
+            and kept.
         """
         if not (np.isfinite(spacing) and spacing > 0):
             raise ValueError(f"spacing must be a positive number of metres, got {spacing}")
-        faces = np.flatnonzero(self.structural_mask(interior_only))
+        cache = self.__dict__.setdefault("_samples", {})
+        key = ("all", float(spacing))
+        if key not in cache:
+            cache[key] = self._samples_of(spacing)
+        return cache[key]
+
+    def _samples_of(self, spacing: float) -> StructureSamples:
+        faces = np.flatnonzero(self.structural_mask())
         areas = self.face_areas[faces]
         # Running rounding keeps the total exact and gives tiny faces their share over many faces.
         cum = np.floor(np.cumsum(areas) / spacing**2 + 0.5).astype(np.int64)

@@ -43,3 +43,58 @@ def box_ranges(origin: np.ndarray, directions: np.ndarray, size: tuple[float, fl
     with np.errstate(divide="ignore", invalid="ignore"):
         t = np.where(directions > 0, (hi - origin) / directions, np.where(directions < 0, -origin / directions, np.inf))
     return t.min(axis=1)
+
+
+def _wall_boxes(p0, p1, thickness: float, height: float, openings=()) -> list:
+    """Boxes of a straight wall from ``p0`` to ``p1`` (centre line), with (start, end, top) openings
+    measured along it from ``p0``: full-height pieces between them and a lintel over each."""
+    import trimesh
+
+    p0, p1 = np.asarray(p0, dtype=float), np.asarray(p1, dtype=float)
+    length = float(np.linalg.norm(p1 - p0))
+    u = (p1 - p0) / length
+    yaw = float(np.arctan2(u[1], u[0]))
+
+    def box(a: float, b: float, z0: float, z1: float):
+        centre = p0 + u * (a + b) / 2
+        transform = trimesh.transformations.rotation_matrix(yaw, [0, 0, 1])
+        transform[:3, 3] = [centre[0], centre[1], (z0 + z1) / 2]
+        return trimesh.creation.box(extents=(b - a, thickness, z1 - z0), transform=transform)
+
+    pieces, at = [], -thickness / 2
+    for start, end, top in sorted(openings):
+        if start > at:
+            pieces.append(box(at, start, 0.0, height))
+        pieces.append(box(start, end, top, height))
+        at = end
+    if length + thickness / 2 > at:
+        pieces.append(box(at, length + thickness / 2, 0.0, height))
+    return pieces
+
+
+def boxed_storey(walls, floors, ceilings, clutter=(), start=(1.5, 2.0), name="boxed") -> Scene:
+    """A storey built directly with trimesh boxes, not by our floor-plan extruder.
+
+    walls : [(p0, p1, openings)] centre lines 0.2 m thick, 2.6 m high; floors and ceilings:
+    [(x0, y0, x1, y1)] slabs 0.2 m thick under z=0 and over z=2.6; clutter: [(x0, y0, x1, y1, h)].
+    """
+    import trimesh
+
+    from scenes import SurfaceClass
+
+    parts: list[tuple[object, SurfaceClass]] = []
+    for p0, p1, openings in walls:
+        parts += [(b, SurfaceClass.WALL) for b in _wall_boxes(p0, p1, 0.2, 2.6, openings)]
+    for (x0, y0, x1, y1), z, cls in [(f, -0.1, SurfaceClass.FLOOR) for f in floors] + [
+        (c, 2.7, SurfaceClass.CEILING) for c in ceilings
+    ]:
+        slab = trimesh.creation.box(extents=(x1 - x0, y1 - y0, 0.2))
+        slab.apply_translation([(x0 + x1) / 2, (y0 + y1) / 2, z])
+        parts.append((slab, cls))
+    for x0, y0, x1, y1, h in clutter:
+        item = trimesh.creation.box(extents=(x1 - x0, y1 - y0, h))
+        item.apply_translation([(x0 + x1) / 2, (y0 + y1) / 2, h / 2])
+        parts.append((item, SurfaceClass.CLUTTER))
+    mesh = trimesh.util.concatenate([m for m, _ in parts])
+    labels = np.concatenate([np.full(len(m.faces), c.value) for m, c in parts])
+    return Scene(mesh, labels, start=start, name=name)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import pickle
 import warnings
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -17,6 +16,7 @@ from nbs_env.labels import VoxelLabel
 from nbs_env.observation import CandidateColumn, ObservationConfig, candidate_table_of, pool_labels
 from nbs_env.settings import make_config
 from policies import GreedyPolicy, RandomPolicy
+from scenes.corpus import corpus_entry
 
 ENV_IDS = sorted(nbs_env.ENV_IDS)
 #: A small scene keeps the per-id tests fast; the registered scene is exercised elsewhere.
@@ -269,7 +269,7 @@ def test_greedy_scans_five_rooms_to_the_target():
     assert len(info_scans) <= 22 and meter.percent() >= 90.0
 
 
-FZK = str(Path(__file__).parent / "data" / "AC20-FZK-Haus.ifc")
+FZK = str(corpus_entry("fzk_haus_eg").path())
 
 
 def greedy_episode(env: NBSEnv, seed: int = 0):

@@ -131,7 +131,8 @@ def test_obj_reads_objects_and_groups(tmp_path):
     assert len(scene.mesh.faces) == 6 * 2 + 12
     assert scene.name == str(p)
     assert scene.metadata["format"] == "obj"
-    assert np.all(scene.face_rooms == -1) and scene.rooms == ()
+    # No room tags: one room derived from the floor's free space.
+    assert scene.metadata["rooms"] == "derived" and len(scene.rooms) == 1
 
 
 def test_obj_group_beats_object_and_object_ends_group(tmp_path):
@@ -210,8 +211,7 @@ def test_room_without_floor_falls_back_to_no_room(tmp_path):
     parts["wall_room5"] = _quad((0, 1, 0), (1, 1, 0), (1, 1, 1), (0, 1, 1))
     with pytest.warns(UserWarning, match="room5"):
         scene = load_mesh_scene(write(tmp_path, "orphan.obj", obj_text(parts)))
-    assert scene.rooms == ()
-    assert np.all(scene.face_rooms == -1)
+    assert scene.metadata["rooms"] == "derived"  # no room left with an outline: rooms from geometry
 
 
 def test_room_ceiling_defaults_to_floor_plus_2_7(tmp_path):

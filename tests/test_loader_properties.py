@@ -23,9 +23,10 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 from scenes import Scene, SceneError, load_scene  # noqa: E402
+from scenes.corpus import corpus_entry  # noqa: E402
 
 DATA = Path(__file__).parent / "data"
-FZK = DATA / "AC20-FZK-Haus.ifc"
+FZK = corpus_entry("fzk_haus_eg").path()
 
 #: The valid two-room plan, with a window too.
 PLAN = {

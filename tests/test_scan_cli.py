@@ -88,6 +88,7 @@ TOP_LEVEL = {
     "rooms": list,
     "steps": list,
     "door_events": list,
+    "room_ends": list,
     "config": dict,
 }
 ROOM_KEYS = {
@@ -389,7 +390,13 @@ def test_door_frame_scans_belong_to_the_room_entered():
     config = SimpleNamespace(travel_speed=0.5, to_dict=lambda: {"max_scans": 10, "shape": (1, 2)})
     meter = SimpleNamespace(percent=lambda room=None: {None: 40.0, 0: 60.0, 1: 30.0, 2: 0.0}[room])
     storey = SimpleNamespace(
-        scans=steps, scene=SimpleNamespace(rooms=rooms), meter=meter, config=config, complete=True, door_events=[]
+        scans=steps,
+        scene=SimpleNamespace(rooms=rooms),
+        meter=meter,
+        config=config,
+        complete=True,
+        door_events=[],
+        room_ends=[],
     )
     m = metrics_dict(storey, "fake", "stachniss_burgard", 0, structure_aware=False)
     json.dumps(m)  # plain JSON types only

@@ -44,9 +44,9 @@ def test_the_roi_and_door_configs_reach_the_robot(monkeypatch):
     seen = []
     detect = nbs_env.robot.detect_doors
 
-    def spy(faces, scans, config=None):
+    def spy(faces, scans, config=None, **kwargs):
         seen.append(config)
-        return detect(faces, scans, config)
+        return detect(faces, scans, config, **kwargs)
 
     monkeypatch.setattr(nbs_env.robot, "detect_doors", spy)
     base = make_config("fast", scene="office")

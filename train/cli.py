@@ -76,6 +76,9 @@ def _picture(text: str) -> Path:
     return path
 
 
+IFC_DOORS_HELP = "IFC doors open (frames only, the default) or closed (as drawn); IFC files only"
+
+
 def _storey(text: str) -> str | int:
     return int(text) if text.lstrip("-").isdigit() else text
 
@@ -112,6 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
     def scene_args(p: argparse.ArgumentParser) -> None:
         p.add_argument("scene", help="bundled name, .json/.obj/.glb/.gltf/.ply/.ifc path, or generated:SEED")
         p.add_argument("--storey", type=_storey, help="IFC storey name or index")
+        p.add_argument("--ifc-doors", choices=("open", "closed"), default=None, help=IFC_DOORS_HELP)
         p.add_argument("--y-up", action="store_true", help="mesh coordinates are y-up (glTF convention)")
 
     show = ssub.add_parser("show", help="draw a top-down picture of a scene")
@@ -146,6 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
     scan.add_argument("--resolution", type=_number, default=None, help="scanner angular step in degrees (default 0.5)")
     scan.add_argument("--voxel", type=_number, default=None, help="voxel size of V(t) in metres (default 0.05)")
     scan.add_argument("--storey", type=_storey, default=None, help="IFC storey name or index (IFC files only)")
+    scan.add_argument("--ifc-doors", choices=("open", "closed"), default=None, help=IFC_DOORS_HELP)
     scan.add_argument(
         "--start",
         type=_start,
@@ -164,7 +169,11 @@ def build_parser() -> argparse.ArgumentParser:
         description="Run every (scene, policy, seed) and write table.csv, table.md, coverage_vs_scans.png, "
         "path_time.png and each run's metrics.json into --out.",
     )
-    compare.add_argument("--scenes", required=True, help="comma-separated scenes; generated:A-B is a range of seeds")
+    compare.add_argument(
+        "--scenes",
+        required=True,
+        help="comma-separated scenes; generated:A-B is a range of seeds, suite:unseen the evaluation corpus",
+    )
     compare.add_argument("--policies", required=True, help="comma-separated policies (see `nbs compare --help`)")
     compare.add_argument("--seeds", default="0", help="comma-separated seeds (default 0)")
     compare.add_argument("--out", type=Path, required=True, help="output folder")
@@ -229,14 +238,33 @@ def run_compare(args: argparse.Namespace) -> int:
 MESH_SUFFIXES = (".obj", ".glb", ".gltf", ".ply")
 
 
-def scene_option_error(scene: str, storey: object, y_up: bool) -> str | None:
-    """Why ``--storey`` or ``--y-up`` does not apply to ``scene`` (None when they do)."""
+def scene_option_error(scene: str, storey: object, y_up: bool, ifc_doors: object = None) -> str | None:
+    """Why ``--storey``, ``--ifc-doors`` or ``--y-up`` does not apply to ``scene`` (None when they do).
+
+    A corpus entry (``corpus:NAME``) carries its own options; only IFC's apply to it."""
     suffix = Path(scene).suffix.lower()
-    if storey is not None and suffix != ".ifc":
+    ifc = suffix == ".ifc" or _corpus_suffix(scene) == ".ifc"
+    if storey is not None and not ifc:
         return f"--storey applies to .ifc files only, not to scene {scene!r}"
+    if ifc_doors is not None and not ifc:
+        return f"--ifc-doors applies to .ifc files only, not to scene {scene!r}"
     if y_up and suffix not in MESH_SUFFIXES:
         return f"--y-up applies to labelled meshes ({', '.join(MESH_SUFFIXES)}) only, not to scene {scene!r}"
     return None
+
+
+def _corpus_suffix(scene: str) -> str | None:
+    """The file suffix of corpus entry ``scene`` (None when it is no corpus entry or has no file)."""
+    if not str(scene).startswith("corpus:"):
+        return None
+    from scenes import SceneError
+    from scenes.corpus import corpus_entry
+
+    try:
+        entry = corpus_entry(str(scene)[len("corpus:") :])
+    except SceneError:
+        return None
+    return Path(entry.file).suffix.lower() if entry.file else None
 
 
 def _load(args: argparse.Namespace):
@@ -245,6 +273,8 @@ def _load(args: argparse.Namespace):
     opts: dict = {}
     if args.storey is not None:
         opts["storey"] = args.storey
+    if args.ifc_doors is not None:
+        opts["doors"] = args.ifc_doors
     if args.y_up:
         opts["y_up"] = True
     return load_scene(args.scene, **opts)
@@ -278,7 +308,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"{name:12s} {len(scene.rooms)} rooms, {len(scene.doors)} doors, {floor:6.1f} m² of floor")
         return 0
     if args.action in ("show", "info"):
-        problem = scene_option_error(args.scene, args.storey, args.y_up)
+        problem = scene_option_error(args.scene, args.storey, args.y_up, args.ifc_doors)
         if problem is not None:
             print(f"nbs scenes {args.action}: error: {problem}", file=sys.stderr)
             return EXIT_USAGE
@@ -337,8 +367,9 @@ def _scan_config(args: argparse.Namespace):
     from nbs_env.settings import make_config
 
     overrides: dict = {"scene": args.scene, "max_scans": args.max_scans}
-    if args.storey is not None:
-        overrides["scene_options"] = {"storey": args.storey}
+    options = {"storey": args.storey, "doors": args.ifc_doors}
+    if any(v is not None for v in options.values()):
+        overrides["scene_options"] = {k: v for k, v in options.items() if v is not None}
     cfg = make_config("default", **overrides)
     robot = cfg.robot
     if args.resolution is not None:
@@ -420,7 +451,7 @@ def run_scan(args: argparse.Namespace) -> int:
     """``nbs scan``: run one episode with a policy and write its report."""
     from scenes.errors import SceneError
 
-    problem = scene_option_error(args.scene, args.storey, False)
+    problem = scene_option_error(args.scene, args.storey, False, args.ifc_doors)
     if problem is not None:
         return _scan_error(problem, EXIT_USAGE)
     from nbs_env.errors import ConfigError, ModelFileError, NBSError

@@ -10,6 +10,10 @@ Each run plays one policy on one scene with one seed (:func:`run_one`) and retur
   the paper's five quantities (scans, time, % structural surface sensed, processed points, path
   length), and two against the oracle: coverage as a share of the largest any plan reaches, and the
   scans taken over the oracle's scans to the same coverage;
+- ``storeys.md``: per scene and policy, what a storey is judged by: scans, coverage, its share of the
+  oracle's and the oracle's scans to it, the rooms the oracle covers (at least
+  :data:`COVERABLE_ROOM_PCT` % of their surface) that the robot never scanned, the rooms ended by the
+  per-room cap, the doors abandoned (and why) and found exterior, path, registration error;
 - ``coverage_vs_scans.png`` (one curve per policy, a band over runs) and ``path_time.png``.
 
 Runs are deterministic: the same seeds give the same table, times aside.
@@ -21,6 +25,7 @@ import csv
 import json
 import math
 import multiprocessing
+import sys
 import time
 import traceback
 from collections.abc import Callable, Iterable, Sequence
@@ -64,13 +69,27 @@ class RunSpec:
         return f"{self.scene}|{self.policy}|{self.seed}"
 
 
-def expand_scenes(text: str) -> list[str]:
-    """``"five_rooms,generated:0-9"`` → the scene specs; ``generated:A-B`` is a range of seeds."""
+def expand_scenes(text: str, skipped: list[str] | None = None) -> list[str]:
+    """``"five_rooms,generated:0-9,suite:unseen"`` → the scene specs; ``generated:A-B`` is a range of
+    seeds, ``suite:NAME`` the corpus entries of a suite (:mod:`scenes.corpus`) that can run here.
+
+    ``skipped``: a list that receives the suite entries left out (local-only files absent)."""
     out: list[str] = []
     for part in (p.strip() for p in str(text).split(",")):
         if not part:
             continue
-        if part.startswith("generated:") and "-" in part[len("generated:") :]:
+        if part.startswith("suite:"):
+            from scenes import SceneError
+            from scenes.corpus import suite
+
+            try:
+                present, absent = suite(part[len("suite:") :])
+            except SceneError as exc:
+                raise CompareError(str(exc)) from None
+            out.extend(present)
+            if skipped is not None:
+                skipped.extend(absent)
+        elif part.startswith("generated:") and "-" in part[len("generated:") :]:
             try:
                 a, b = parse_range(part[len("generated:") :])
             except ValueError as exc:
@@ -251,18 +270,33 @@ def _total_time(m: dict[str, Any]) -> float:
 
 
 TOTAL_KEYS = ("scans", "time_s", "structure_sensed_pct", "processed_points", "path_length_m",
-              "of_oracle_pct", "vs_oracle_scans")  # fmt: skip
+              "of_oracle_pct", "vs_oracle_scans", "unscanned_rooms", "cap_ended", "abandoned",
+              "exterior_doors", "reg_mean_cm", "reg_max_cm")  # fmt: skip
+#: A room counts as one the oracle covers when it sees at least this share (%) of its surface.
+COVERABLE_ROOM_PCT = 10.0
 
 
 def _run_quantities(m: dict[str, Any], oracle: dict[str, Any]) -> dict[str, float]:
     """One run's storey totals, and its standing against the scene's oracle when there is one."""
+    events = m.get("door_events", [])
     q = {
         "scans": float(m["scans"]),
         "time_s": _total_time(m),
         "structure_sensed_pct": float(m["structure_sensed_pct"]),
         "processed_points": float(m["processed_points"]),
         "path_length_m": float(m["path_length_m"]),
+        "cap_ended": float(sum(1 for e in m.get("room_ends", []) if e["reason"] == "cap")),
+        "abandoned": float(sum(1 for e in events if e["event"] == "abandoned")),
+        "exterior_doors": float(sum(1 for e in events if e["event"] == "detected" and e.get("exterior"))),
     }
+    if "registration_error" in m:
+        q["reg_mean_cm"] = 100.0 * float(m["registration_error"]["mean_m"])
+        q["reg_max_cm"] = 100.0 * float(m["registration_error"]["max_m"])
+    if oracle.get("ok") and "room_max_pct" in oracle:
+        room_max = oracle["room_max_pct"]
+        q["unscanned_rooms"] = float(
+            sum(1 for r in m["rooms"] if r["scans"] == 0 and room_max.get(str(r["id"]), 0.0) >= COVERABLE_ROOM_PCT)
+        )
     # An oracle that senses nothing (a scene with no structural samples counted) is no yardstick.
     if oracle.get("ok") and oracle.get("max_coverage_pct", 0) > 0 and len(oracle.get("coverage_pct", ())):
         q["of_oracle_pct"] = 100.0 * m["structure_sensed_pct"] / oracle["max_coverage_pct"]
@@ -311,6 +345,9 @@ def summarise(results: Sequence[dict[str, Any]], oracles: dict[str, dict[str, An
                     row[key] = _mean_std(values)
                 rows.append(row)
             row = {**base, "room": "total"}
+            row["abandon_reasons"] = sorted(
+                {e["reason"] for m in ok for e in m.get("door_events", []) if e["event"] == "abandoned"}
+            )
             row["complete"] = sum(1 for m in ok if m["complete"])
             row["not_scanned"] = sum(sum(1 for p in m["rooms"] if p["scans"] == 0) for m in ok)
             per_run = [quantities[i] for i in index if quantities[i] is not None]
@@ -365,6 +402,36 @@ def _markdown(rows: list[dict[str, Any]]) -> str:
         cells = [r["scene"], r["policy"], r["room"]]
         cells += [_cell(r.get(key), fmt) for key, _, fmt in QUANTITIES]
         cells += [_cell(r.get("of_oracle_pct"), "{:.1f}"), _cell(r.get("vs_oracle_scans"), "{:.2f}")]
+        cells.append("; ".join(notes))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _storeys_markdown(rows: list[dict[str, Any]]) -> str:
+    """One line per scene and policy: the figures the corpus is judged by (mean ± std over seeds)."""
+    head = ["scene", "policy", "scans", "SE sensed (%)", "% of oracle max", "scans ÷ oracle's",
+            "rooms unscanned", "rooms ended by cap", "doors abandoned", "exterior doors", "path (m)",
+            "reg. error mean / max (cm)", "notes"]  # fmt: skip
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        if r["room"] != "total" or r["scene"] == "all scenes":
+            continue
+        notes = []
+        if r.get("failed"):
+            notes.append(f"{r['failed']} of {r['runs']} runs failed: {'; '.join(r.get('errors', []))}")
+        if r.get("abandon_reasons"):
+            notes.append("abandoned: " + "; ".join(r["abandon_reasons"]))
+        reg = r.get("reg_mean_cm"), r.get("reg_max_cm")
+        cells = [
+            r["scene"],
+            r["policy"],
+            _cell(r.get("scans"), "{:.1f}"),
+            _cell(r.get("structure_sensed_pct"), "{:.1f}"),
+        ]
+        cells += [_cell(r.get("of_oracle_pct"), "{:.1f}"), _cell(r.get("vs_oracle_scans"), "{:.2f}")]
+        cells += [_cell(r.get(k), "{:.1f}") for k in ("unscanned_rooms", "cap_ended", "abandoned", "exterior_doors")]
+        cells.append(_cell(r.get("path_length_m"), "{:.1f}"))
+        cells.append(" / ".join(_cell(v, "{:.1f}") for v in reg))
         cells.append("; ".join(notes))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
@@ -456,6 +523,7 @@ def write_outputs(
         rows = summarise(results, oracles)
         _csv(rows, out / "table.csv")
         (out / "table.md").write_text(_markdown(rows))
+        (out / "storeys.md").write_text(_storeys_markdown(rows))
         _plots(results, oracles, out)
     except Exception as exc:  # the runs are on disk; say what failed and where they are
         (out / "summary_error.txt").write_text(f"{type(exc).__name__}: {exc}\n\n{traceback.format_exc()}")
@@ -547,7 +615,10 @@ def grid(scenes: str, policies: str, seeds: str, preset: str = "default", max_sc
     """The RunSpecs of comma-separated scenes, policies and seeds (checked: bad names raise)."""
     from policies import UnknownPolicyError, make_policy
 
-    scene_list = expand_scenes(scenes)
+    skipped: list[str] = []
+    scene_list = expand_scenes(scenes, skipped)
+    if skipped:
+        print(f"nbs compare: skipped (local-only files absent): {', '.join(skipped)}", file=sys.stderr)
     policy_list = [p.strip() for p in str(policies).split(",") if p.strip()]
     if not policy_list:
         raise CompareError("no policies given")

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python -m train.evaluate_perception --rooms 30 [--fzk tests/data/AC20-FZK-Haus.ifc] [--json out.json]
+    python -m train.evaluate_perception --rooms 30 [--fzk scenes/data/corpus/AC20-FZK-Haus.ifc] [--json out.json]
 
 Rooms come from generated storeys that neither the classifier's training nor its held-out report
 used (seeds from 200000 on), picked so that at least a third are L, T, U or irregular and at least
@@ -131,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="Measure perception against ground truth.")
     parser.add_argument("--rooms", type=int, default=30)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--fzk", type=Path, default=Path("tests/data/AC20-FZK-Haus.ifc"))
+    parser.add_argument("--fzk", type=Path, default=Path("scenes/data/corpus/AC20-FZK-Haus.ifc"))
     parser.add_argument("--json", type=Path, default=None, help="write the per-room rows and summaries here")
     args = parser.parse_args(argv)
     t0 = time.perf_counter()

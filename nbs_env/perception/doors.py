@@ -4,6 +4,12 @@ An opening is an empty rectangle of a wall face's image (points within ±10 cm o
 pixels) that stands on the floor, is 0.6-4.0 m wide and 1.8-2.3 m high (a lintel was seen above it),
 and through which the scanner saw: registered points lie behind the face plane within the opening.
 That last test tells a door from the shadow a cabinet casts on the wall behind it.
+
+An opening onto the outside (METHOD §8) has no ceiling beyond it: the scanner's upward rays through
+it return nothing. Of the rising rays of the room's scans that cross the opening farther than the
+scanner's minimum range, those that returned a point beyond the face are counted against those that
+returned nothing (the scan's no-return directions, which the robot knows from its own pattern);
+when fewer than ``covered_share`` of them returned, the door is ``exterior``.
 """
 
 from __future__ import annotations
@@ -40,6 +46,13 @@ class DoorConfig(Config):
         Least number of such points.
     pixel : float
         Pixel size of the face image, metres.
+    covered_share : float
+        Least share of the rising rays through an opening that must return a point beyond it for
+        the opening to lead indoors (module docstring).
+    min_rising_rays : int
+        Fewer rising rays through an opening than this decide nothing: the door counts as interior.
+    cross_exterior : bool
+        Cross exterior doors as if they led into rooms (off by default: the robot stays inside).
     """
 
     min_width: float = 0.6
@@ -50,9 +63,14 @@ class DoorConfig(Config):
     behind: float = 0.3
     min_behind_points: int = 50
     pixel: float = 0.05
+    covered_share: float = 0.5
+    min_rising_rays: int = 20
+    cross_exterior: bool = False
 
     def __post_init__(self) -> None:
-        _finite_fields(self, "min_width", "max_width", "min_height", "max_height", "floor_gap", "behind", "pixel")
+        _finite_fields(
+            self, "min_width", "max_width", "min_height", "max_height", "floor_gap", "behind", "pixel", "covered_share"
+        )
         _require(
             0 < self.min_width <= self.max_width,
             f"need 0 < min_width <= max_width, got {self.min_width}, {self.max_width}",
@@ -65,6 +83,9 @@ class DoorConfig(Config):
         _require(self.behind >= 0, f"behind must be >= 0 metres, got {self.behind}")
         _require(self.pixel > 0, f"pixel must be > 0 metres, got {self.pixel}")
         _integer(self, "min_behind_points", 0)
+        _integer(self, "min_rising_rays", 1)
+        _require(0 <= self.covered_share <= 1, f"covered_share must be in [0, 1], got {self.covered_share}")
+        _require(isinstance(self.cross_exterior, bool), f"cross_exterior must be a bool, got {self.cross_exterior!r}")
 
 
 @dataclass(frozen=True)
@@ -83,6 +104,10 @@ class DetectedDoor:
         Horizontal unit normal pointing out of the room, through the door.
     behind_points : int
         Points seen through it.
+    covered : float
+        Share of the rising rays through it that returned a point beyond it (nan: too few rays).
+    exterior : bool
+        It opens onto the outside: ``covered`` below the config's ``covered_share``.
     """
 
     face: int
@@ -91,6 +116,8 @@ class DetectedDoor:
     height: float
     outward: np.ndarray
     behind_points: int
+    covered: float = float("nan")
+    exterior: bool = False
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -124,10 +151,48 @@ def _seen_through(
     return count
 
 
+def _rising_rays(
+    face: WallFace,
+    scans: Sequence[tuple[np.ndarray, np.ndarray]],
+    no_return: Sequence[np.ndarray],
+    u0: float,
+    u1: float,
+    height: float,
+    min_range: float,
+) -> tuple[int, int]:
+    """(returned, empty): the rising rays through [u0, u1] x [0, height] that crossed farther than
+    ``min_range`` from their scanner, by whether they returned a point beyond the face."""
+    returned = empty = 0
+    for (points, origin), directions in zip(scans, no_return, strict=True):
+        o = face.local(np.asarray(origin, dtype=float).reshape(1, 3))[0]
+        if o[2] <= 0:
+            continue
+        local = face.local(np.asarray(points, dtype=float))
+        far = local[(local[:, 2] < 0) & (local[:, 1] > o[1])]
+        if len(far):
+            t = o[2] / (o[2] - far[:, 2])
+            u, v = o[0] + t * (far[:, 0] - o[0]), o[1] + t * (far[:, 1] - o[1])
+            reach = t * np.linalg.norm(far - o, axis=1)
+            returned += int(np.count_nonzero((u > u0) & (u < u1) & (v > 0) & (v < height) & (reach >= min_range)))
+        d = np.asarray(directions, dtype=float).reshape(-1, 3)
+        if not len(d):
+            continue
+        # Directions in the face frame: (along, up, into the room).
+        dl = np.column_stack([d[:, :2] @ face.direction, d[:, 2], d[:, :2] @ face.normal])
+        out = (dl[:, 2] < -1e-9) & (dl[:, 1] > 0)
+        dl = dl[out]
+        t = o[2] / -dl[:, 2]
+        u, v = o[0] + t * dl[:, 0], o[1] + t * dl[:, 1]
+        empty += int(np.count_nonzero((u > u0) & (u < u1) & (v > 0) & (v < height) & (t >= min_range)))
+    return returned, empty
+
+
 def detect_doors(
     faces: Sequence[WallFace],
     scans: Sequence[tuple[np.ndarray, np.ndarray]],
     config: DoorConfig | None = None,
+    no_return: Sequence[np.ndarray] | None = None,
+    min_range: float = 0.0,
 ) -> list[DetectedDoor]:
     """Find door openings in the given (SE) wall faces.
 
@@ -140,6 +205,12 @@ def detect_doors(
         robot's estimates. A point counts as seen through an opening when the ray from its scan's
         origin crosses the face plane inside the opening.
     config : DoorConfig
+    no_return : sequence of (m, 3) float, optional
+        Per scan, the world directions of its rising rays that returned nothing; with them each
+        door is told interior or exterior (module docstring), without them every door is interior.
+    min_range : float
+        The scanner's minimum range, metres: a ray that returned nothing nearer than this may have
+        hit something there.
 
     Returns
     -------
@@ -168,6 +239,11 @@ def detect_doors(
             behind = _seen_through(face, scans, u0, u1, height, cfg.behind)
             if behind < cfg.min_behind_points:
                 continue
+            covered = float("nan")
+            if no_return is not None:
+                hits, misses = _rising_rays(face, scans, no_return, u0, u1, height, min_range)
+                if hits + misses >= cfg.min_rising_rays:
+                    covered = hits / (hits + misses)
             width = width + px  # the run counts whole pixels; the opening's edges fall inside its end pixels
             mid = (u0 + u1) / 2
             xy = np.asarray(face.p0, dtype=float) + mid * face.direction
@@ -179,6 +255,8 @@ def detect_doors(
                     height=height,
                     outward=-face.normal,
                     behind_points=behind,
+                    covered=covered,
+                    exterior=bool(covered < cfg.covered_share),
                 )
             )
     return doors

@@ -1,0 +1,377 @@
+"""Inside from outside, by geometry: which structural surface faces the building's interior, and rooms
+from the floor's free space for files that name none (METHOD §8-9).
+
+Users' meshes and IFC files rarely carry room annotations, and their solids have faces nobody can see
+from inside (the far sides of exterior walls, the undersides of slabs, the tops of walls under a
+slab). The evaluation must count the same surface whether or not a file names its rooms, so nothing
+here reads ``Scene.rooms`` or ``Scene.face_rooms``: only the mesh and its surface classes.
+
+*Interior side.* A point ``p`` on a structural face with unit normal ``n`` faces the interior when,
+on one of its two sides, the probe ``q = p ± INTERIOR_PROBE · n``
+
+- stands above a floor: straight down from ``q`` the first structural surface is a FLOOR face;
+- stands under cover: straight up from ``q`` the first structural surface is not a FLOOR face (the
+  storey's own slab seen from below or from inside), and there is one, unless the storey has no
+  ceiling faces at all (a model cut open at the top), where the sky is allowed;
+- is not enclosed in a wall: along none of four horizontal directions do the first structural faces
+  met either way lie on two parallel planes less than :data:`MIN_SPAN` apart (inside a wall solid,
+  a ray either way meets the wall's own two faces; in a room's corner they are two walls at an
+  angle).
+
+Both sides are tried because files do not agree on normals: a single-quad wall has one normal for
+two visible sides, and a solid's faces point out of the solid.
+
+*Derived rooms.* The indoor floor (FLOOR faces within :data:`FLOOR_BAND` of the storey's floor level,
+the height holding most upward-facing floor area, under a CEILING face when the storey has any) minus the plan
+footprint of walls, doors and windows (furniture does not split a room) is the free space. Eroded
+by :data:`ROOM_NECK`, it falls apart at door openings narrower than twice that; each piece of at
+least :data:`MIN_ROOM_AREA` seeds a room, which takes back the free space within ``ROOM_NECK`` of
+it; what is left (door passages, niches) joins the room it borders most. Rooms are numbered by
+decreasing area and named ``space 1``, ``space 2``, ...
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import shapely
+from shapely.geometry import MultiPolygon, Polygon
+from shapely.geometry.polygon import orient
+
+from scenes.labels import STRUCTURAL_CLASSES, SurfaceClass
+
+if TYPE_CHECKING:
+    from scenes.model import Room, Scene, StructureSamples
+
+__all__ = [
+    "INTERIOR_PROBE",
+    "MIN_ROOM_AREA",
+    "MIN_SPAN",
+    "ROOM_NECK",
+    "derive_rooms",
+    "indoor_floor",
+    "interior_area",
+    "interior_mask",
+    "interior_samples",
+    "rooms_by_probe",
+    "with_derived_rooms",
+]
+
+#: How far (m) in front of a surface point the interior tests are made.
+INTERIOR_PROBE = 0.1
+#: Free span (m) a probe needs across every horizontal direction; inside a wall it is the wall's
+#: thickness (walls up to half a metre thick are told from space this way).
+MIN_SPAN = 0.55
+#: Erosion radius (m) that separates rooms at their doors: openings narrower than twice this close.
+ROOM_NECK = 0.5
+#: Least eroded area (m²) that makes a room of its own rather than a niche of its neighbour.
+MIN_ROOM_AREA = 1.0
+#: Floor faces within this height (m) of the storey's floor level belong to its floor.
+FLOOR_BAND = 0.35
+#: How far (m) a probe looks down for its floor.
+MAX_DROP = 8.0
+
+_HORIZONTAL = np.array([[np.cos(a), np.sin(a), 0.0] for a in np.deg2rad([0.0, 45.0, 90.0, 135.0])])
+
+
+class _Caster:
+    """First structural hits of rays (open3d Embree), with the surface class of the face hit."""
+
+    def __init__(self, scene: Scene) -> None:
+        from scenes._open3d import open3d
+
+        o3d = open3d()
+        self._o3d = o3d
+        vertices = o3d.core.Tensor.from_numpy(np.ascontiguousarray(scene.mesh.vertices, dtype=np.float32))
+
+        def raycaster(faces: np.ndarray):
+            caster = o3d.t.geometry.RaycastingScene()
+            tri = np.ascontiguousarray(scene.mesh.faces[faces], dtype=np.uint32)
+            caster.add_triangles(vertices, o3d.core.Tensor.from_numpy(tri))
+            return caster
+
+        faces = np.flatnonzero(np.isin(scene.face_labels, [c.value for c in STRUCTURAL_CLASSES]))
+        self.labels = scene.face_labels[faces]
+        self._scene = raycaster(faces)
+        # Floors alone: a wall standing on a slab ties with the slab's top, and either may win.
+        self._floors = raycaster(np.flatnonzero(scene.face_labels == SurfaceClass.FLOOR))
+        self.has_ceiling = bool(np.any(self.labels == SurfaceClass.CEILING))
+
+    def cast(
+        self, origins: np.ndarray, direction: np.ndarray, floors_only: bool = False
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per ray from each origin: distance to the first hit (inf: none), its class (255: none) and
+        the unit normal of the face hit."""
+        n = len(origins)
+        rays = np.empty((n, 6), dtype=np.float32)
+        rays[:, :3] = origins
+        rays[:, 3:] = direction
+        out = (self._floors if floors_only else self._scene).cast_rays(self._o3d.core.Tensor.from_numpy(rays))
+        t = out["t_hit"].numpy().astype(float)
+        ids = out["primitive_ids"].numpy()
+        hit = np.isfinite(t)
+        labels = np.full(n, 255, dtype=np.uint8)
+        labels[hit] = SurfaceClass.FLOOR if floors_only else self.labels[ids[hit]]
+        return t, labels, out["primitive_normals"].numpy().astype(float)
+
+
+def _probe_is_inside(caster: _Caster, q: np.ndarray) -> np.ndarray:
+    t_down, below, _ = caster.cast(q, np.array([0.0, 0.0, -1.0]))
+    ok = (below == SurfaceClass.FLOOR) & (t_down <= MAX_DROP)
+    up = np.array([0.0, 0.0, 1.0])
+    t_up, _, _ = caster.cast(q, up)
+    t_floor, _, _ = caster.cast(q, up, floors_only=True)
+    under_floor = np.isfinite(t_floor) & (t_floor <= t_up + 1e-3)  # inside or under the storey's own slab
+    ok &= ~under_floor & (np.isfinite(t_up) if caster.has_ceiling else True)
+    todo = np.flatnonzero(ok)
+    for d in _HORIZONTAL:
+        if not len(todo):
+            break
+        t_f, _, n_f = caster.cast(q[todo], d)
+        t_b, _, n_b = caster.cast(q[todo], -d)
+        # Inside a wall, both rays meet the wall's own two faces: parallel planes, close together.
+        # In a room's corner the two faces met are different walls at an angle, which is no wall.
+        both = np.isfinite(t_f) & np.isfinite(t_b)
+        upright = (np.abs(n_f[:, 2]) < 0.3) & (np.abs(n_b[:, 2]) < 0.3)
+        parallel = np.abs(np.einsum("ij,ij->i", n_f, n_b)) > 0.95
+        span = np.where(both, t_f + t_b, 0.0)
+        gap = np.where(both, np.abs(span * (n_f[:, :2] @ d[:2])), np.inf)
+        enclosed = both & upright & parallel & (gap < MIN_SPAN)
+        ok[todo[enclosed]] = False
+        todo = todo[~enclosed]
+    return ok
+
+
+def interior_mask(scene: Scene, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Which surface points face the building's interior (module docstring).
+
+    Parameters
+    ----------
+    scene : Scene
+        The true building (its mesh and surface classes only).
+    points : (n, 3) float
+        Points on structural faces.
+    normals : (n, 3) float
+        The unit normals of their faces (either orientation).
+
+    Returns
+    -------
+    (n,) bool
+    """
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    normals = np.asarray(normals, dtype=float).reshape(-1, 3)
+    if len(points) != len(normals):
+        raise ValueError(f"{len(points)} points but {len(normals)} normals")
+    if not len(points):
+        return np.zeros(0, dtype=bool)
+    caster = _Caster(scene)
+    inside = _probe_is_inside(caster, points + INTERIOR_PROBE * normals)
+    rest = np.flatnonzero(~inside)
+    if len(rest):
+        inside[rest] = _probe_is_inside(caster, points[rest] - INTERIOR_PROBE * normals[rest])
+    return inside
+
+
+def interior_samples(scene: Scene, spacing: float = 0.05) -> StructureSamples:
+    """The samples of :meth:`Scene.structure_samples` that face the building's interior
+    (:func:`interior_mask`): what the evaluation counts, the same whether or not the file names its
+    rooms. Computed once per scene and spacing.
+
+    With rooms derived from geometry (``metadata["rooms"] == "derived"``) each sample takes the room
+    of its own probe (:func:`rooms_by_probe`), as one large triangle of a file may lie under several.
+    """
+    from scenes.model import StructureSamples
+
+    cache = scene.__dict__.setdefault("_samples", {})
+    key = ("interior", float(spacing))
+    if key not in cache:
+        every = scene.structure_samples(spacing)
+        normals = scene.mesh.face_normals[every.faces]
+        keep = interior_mask(scene, every.points, normals)
+        rooms = every.rooms[keep]
+        if scene.metadata.get("rooms") == "derived":
+            rooms = rooms_by_probe(list(scene.rooms), every.points[keep], normals[keep])
+        cache[key] = StructureSamples(every.points[keep], every.labels[keep], rooms, every.faces[keep])
+    return cache[key]
+
+
+def interior_area(scene: Scene) -> float:
+    """Area (m²) of the structural surface facing the interior, from the 5 cm samples."""
+    return len(interior_samples(scene, 0.05)) * 0.05**2
+
+
+def _union_xy(triangles: np.ndarray) -> Polygon | MultiPolygon:
+    polys = shapely.polygons(np.asarray(triangles)[..., :2])
+    polys = polys[shapely.area(polys) > 1e-10]
+    if not len(polys):
+        return Polygon()
+    # A hair of growth closes the cracks between triangles that share an edge only up to rounding.
+    return shapely.union_all(shapely.buffer(polys, 1e-4)).buffer(-1e-4)
+
+
+def _parts(geom) -> list[Polygon]:
+    return [g for g in getattr(geom, "geoms", [geom]) if isinstance(g, Polygon) and not g.is_empty]
+
+
+def _separating_footprint(scene: Scene, floor_z: float):
+    """Plan footprint of the walls, doors and windows the robot's body meets on this floor."""
+    keep = np.isin(scene.face_labels, [SurfaceClass.WALL, SurfaceClass.DOOR, SurfaceClass.WINDOW])
+    tri = scene.mesh.vertices[scene.mesh.faces[keep]]
+    z = tri[..., 2]
+    tri = tri[(z.max(axis=1) > floor_z + 0.05) & (z.min(axis=1) < floor_z + 1.8)][..., :2]
+    if not len(tri):
+        return Polygon()
+    rings = shapely.linestrings(np.concatenate([tri, tri[:, :1]], axis=1))
+    solid = shapely.polygons(tri)
+    return shapely.union_all(np.concatenate([shapely.buffer(rings, 0.01), solid[shapely.area(solid) > 1e-8]]))
+
+
+def floor_level(floor_triangles: np.ndarray) -> float:
+    """The storey's floor height: the 5 cm band of z holding the most upward-facing floor area (m).
+
+    A slab's underside has the area of its top; only where no floor face faces up (a file with
+    flipped normals) does every face count."""
+    tri = np.asarray(floor_triangles, dtype=float)
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area = 0.5 * np.linalg.norm(cross, axis=1)
+    up = cross[:, 2] > 0.5 * np.linalg.norm(cross, axis=1)
+    weight = np.where(up, area, 0.0) if np.any(up & (area > 0)) else area
+    z = tri[..., 2].mean(axis=1)
+    bins = np.round(z / 0.05).astype(np.int64)
+    _, inverse = np.unique(bins, return_inverse=True)
+    best = int(np.argmax(np.bincount(inverse, weights=weight)))
+    members = np.flatnonzero(inverse == best)
+    order = members[np.argsort(z[members])]
+    cumulative = np.cumsum(weight[order])
+    return float(z[order[np.searchsorted(cumulative, 0.5 * cumulative[-1])]])  # the band's median
+
+
+def indoor_floor(scene: Scene) -> tuple[Polygon | MultiPolygon, float]:
+    """The storey's indoor free floor and its height (module docstring): FLOOR faces of the floor
+    level, under a CEILING face when the storey has any, minus the footprint of walls, doors and
+    windows (furniture stays in).
+
+    Returns
+    -------
+    free : shapely geometry
+        Empty when the storey has no floor.
+    floor_z : float
+    """
+    vertices, faces, labels = scene.mesh.vertices, scene.mesh.faces, scene.face_labels
+    floor_tri = vertices[faces[labels == SurfaceClass.FLOOR]]
+    if not len(floor_tri):
+        return Polygon(), 0.0
+    floor_z = floor_level(floor_tri)
+    z = floor_tri[..., 2]
+    level = (z.min(axis=1) > floor_z - FLOOR_BAND) & (z.max(axis=1) < floor_z + FLOOR_BAND)
+    floor = _union_xy(floor_tri[level])
+    ceiling_tri = vertices[faces[labels == SurfaceClass.CEILING]]
+    if len(ceiling_tri):
+        floor = floor.intersection(_union_xy(ceiling_tri))
+    walls = _separating_footprint(scene, floor_z)
+    return (floor.difference(walls) if not walls.is_empty else floor), floor_z
+
+
+def derive_rooms(scene: Scene) -> list[Room]:
+    """Rooms from the free space of the storey's floor (module docstring); [] when there is none.
+
+    Returns
+    -------
+    list of Room
+        Ids 0..k-1 by decreasing area; polygons counter-clockwise, not closed; ``ceiling_z`` the
+        highest CEILING vertex over the room (``floor_z + 2.7`` without one).
+    """
+    from scenes.model import Room
+
+    free, floor_z = indoor_floor(scene)
+    if free.is_empty:
+        return []
+    ceiling_tri = scene.mesh.vertices[scene.mesh.faces[scene.face_labels == SurfaceClass.CEILING]]
+    seeds = [p for p in _parts(free.buffer(-ROOM_NECK)) if p.area >= MIN_ROOM_AREA]
+    if not seeds:
+        seeds = [p for p in _parts(free) if p.area >= MIN_ROOM_AREA]
+        grown = seeds
+    else:
+        grown = []
+        taken = Polygon()
+        for seed in sorted(seeds, key=lambda p: -p.area):
+            region = seed.buffer(ROOM_NECK + 0.02).intersection(free).difference(taken)
+            region = max(_parts(region), key=lambda p: p.area, default=Polygon())
+            if region.is_empty:
+                continue
+            grown.append(region)
+            taken = taken.union(region)
+        # Door passages and niches the seeds did not reach join the room they border most.
+        for piece in _parts(free.difference(taken)):
+            if piece.area < 1e-4:
+                continue
+            touching = [piece.buffer(0.02).intersection(g).area for g in grown]
+            if touching and max(touching) > 0:
+                k = int(np.argmax(touching))
+                grown[k] = max(_parts(grown[k].union(piece.buffer(0.01)).intersection(free)), key=lambda p: p.area)
+    rooms = []
+    for k, region in enumerate(sorted(grown, key=lambda p: -p.area)):
+        outline = orient(Polygon(region.exterior), sign=1.0)
+        coords = np.asarray(outline.exterior.coords)[:-1]
+        ceiling_z = floor_z + 2.7
+        if len(ceiling_tri):
+            centre = ceiling_tri.mean(axis=1)
+            over = shapely.contains_xy(outline, centre[:, 0], centre[:, 1])
+            if over.any():
+                ceiling_z = float(ceiling_tri[over][..., 2].max())
+        rooms.append(Room(k, f"space {k + 1}", coords, floor_z, ceiling_z))
+    return rooms
+
+
+def rooms_by_probe(rooms: list[Room], points: np.ndarray, normals: np.ndarray, tolerance: float = 0.05) -> np.ndarray:
+    """(n,) int32: the room of each surface point, whose prism holds the point :data:`INTERIOR_PROBE`
+    in front of it (behind it, when the front lies in none), else -1.
+
+    Parameters
+    ----------
+    rooms : list of Room
+    points, normals : (n, 3) float
+        Points on faces and their faces' unit normals.
+    """
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    normals = np.asarray(normals, dtype=float).reshape(-1, 3)
+    result = np.full(len(points), -1, dtype=np.int32)
+    polygons = [Polygon(room.polygon) for room in rooms]
+    for side in (1.0, -1.0):
+        probe = points + side * INTERIOR_PROBE * normals
+        for room, polygon in zip(rooms, polygons, strict=True):
+            todo = np.flatnonzero(result < 0)
+            if not len(todo):
+                return result
+            p = probe[todo]
+            inside = (p[:, 2] >= room.floor_z - tolerance) & (p[:, 2] <= room.ceiling_z + tolerance)
+            inside[inside] = shapely.contains_xy(polygon, p[inside, 0], p[inside, 1])
+            result[todo[inside]] = room.id
+    return result
+
+
+def with_derived_rooms(scene: Scene) -> Scene:
+    """``scene`` itself when it has rooms, else a copy with rooms derived from its floor's free space
+    (:func:`derive_rooms`), faces given rooms by :func:`rooms_by_probe` at their centroids, and
+    ``metadata["rooms"] = "derived"`` (so that :meth:`Scene.structure_samples` gives each sample
+    the room of its own probe, one large triangle being shared by several rooms). The mesh is
+    kept as it is."""
+    from scenes.model import Scene as SceneType
+
+    if scene.rooms:
+        return scene
+    rooms = derive_rooms(scene)
+    if not rooms:
+        return scene
+    mesh = scene.mesh
+    return SceneType(
+        mesh,
+        scene.face_labels,
+        rooms_by_probe(rooms, mesh.triangles_center, mesh.face_normals),
+        rooms=rooms,
+        doors=scene.doors,
+        start=scene.start if scene.has_explicit_start else None,
+        name=scene.name,
+        metadata={**scene.metadata, "rooms": "derived"},
+    )

@@ -1,0 +1,77 @@
+"""Inside from outside by geometry (scenes.interior): the surface the evaluation counts and the rooms
+it derives never depend on a file's room annotations."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+from shapely.geometry import Polygon
+
+from nbs_env.env import NBSEnv
+from nbs_env.settings import make_config
+from policies import make_policy
+from scenes import SurfaceClass, load_scene
+from scenes.importers import export_scene
+from scenes.interior import derive_rooms, interior_mask, interior_samples
+from tests.helpers import boxed_storey
+from train.episode import run_episode
+
+
+@pytest.mark.parametrize("name", ["five_rooms", "office", "l_room"])
+def test_plan_built_storeys_count_exactly_their_room_faces(name):
+    # The extruder builds only the inner faces, each with its room: geometry must agree with it.
+    scene = load_scene(name)
+    every = scene.structure_samples(0.1)
+    inside = interior_mask(scene, every.points, scene.mesh.face_normals[every.faces])
+    assert np.array_equal(inside, every.rooms >= 0)
+
+
+def test_outside_faces_and_a_terrace_do_not_count():
+    outline = [((0, 0), (5, 0)), ((5, 0), (5, 4)), ((5, 4), (0, 4)), ((0, 4), (0, 0))]
+    walls = [(a, b, [(2.0, 3.0, 2.05)] if k == 0 else []) for k, (a, b) in enumerate(outline)]
+    building, terrace = (-0.1, -0.1, 5.1, 4.1), (1.0, -3.0, 4.0, -0.1)
+    scene = boxed_storey(walls, [building, terrace], [building], start=(2.5, 2.0))
+    samples = interior_samples(scene, 0.05)
+    every = scene.structure_samples(0.05)
+    assert 0 < len(samples) < len(every)
+    p = samples.points
+    # Nothing counted lies outside the walls' inner faces, above the ceiling or below the floor...
+    assert p[:, 0].min() > -0.02 and p[:, 0].max() < 5.02 and p[:, 1].min() > -0.25 and p[:, 1].max() < 4.02
+    assert p[:, 2].min() > -0.01 and p[:, 2].max() < 2.61
+    # ...and every inner face counts: floor and ceiling of the 4.8 x 3.8 m clear inside, the walls'
+    # inner faces less the door's opening, its two jambs, its soffit and the floor under it.
+    inner_area = 2 * 4.8 * 3.8 + 2.6 * 2 * (4.8 + 3.8) - 1.0 * 2.05 + 2 * 0.2 * 2.05 + 0.2 + 0.2
+    assert len(samples) * 0.05**2 == pytest.approx(inner_area, rel=0.01)
+    labels = samples.labels[p[:, 1] < 0]  # what counts beyond the south wall's inner face: the opening
+    assert set(np.unique(labels)) <= {SurfaceClass.FLOOR, SurfaceClass.WALL}
+
+
+def test_derived_rooms_follow_the_walls():
+    scene = load_scene("five_rooms")
+    derived = derive_rooms(scene)
+    assert len(derived) == len(scene.rooms)
+    for room in scene.rooms:
+        truth = Polygon(room.polygon)
+        best = max(derived, key=lambda d: Polygon(d.polygon).intersection(truth).area)
+        iou = Polygon(best.polygon).intersection(truth).area / Polygon(best.polygon).union(truth).area
+        assert iou > 0.95, room.name
+
+
+@pytest.mark.expensive
+def test_a_mesh_with_and_without_room_names_reports_the_same_coverage(tmp_path):
+    named = tmp_path / "named.obj"
+    export_scene(load_scene("office"), named)
+    bare = tmp_path / "bare.obj"
+    bare.write_text(re.sub(r"_room\d+", "", named.read_text()))
+    a, b = load_scene(str(named)), load_scene(str(bare))
+    assert a.metadata["rooms"] == "file" and b.metadata["rooms"] == "derived"
+    assert len(b.rooms) == len(a.rooms)
+    start = tuple(a.start[:2])
+    coverage = []
+    for scene in (a, b):
+        env = NBSEnv(make_config("fast", max_scans=6))
+        run_episode(env, make_policy("greedy", 0), seed=0, options={"scene": scene, "start": start})
+        coverage.append([s.structure_sensed_pct for s in env.storey.scans])
+    assert coverage[0] == coverage[1] and coverage[0][-1] > 20

@@ -1,0 +1,59 @@
+"""Door hand-over on storeys built directly with trimesh (not by our floor-plan extruder): a door
+whose point straight in front is blocked is still crossed; an exterior door is recorded, not crossed."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from nbs_env.env import NBSEnv
+from nbs_env.settings import make_config
+from policies import make_policy
+from tests.helpers import boxed_storey
+from train.episode import run_episode
+
+OUTLINE = [((0, 0), (9, 0)), ((9, 0), (9, 4)), ((9, 4), (0, 4)), ((0, 4), (0, 0))]
+#: The door between room A (x < 5) and room B, 0.9 m wide, 2.0 m high, centred at (5, 2).
+PARTITION = ((5, 0), (5, 4), [(1.55, 2.45, 2.0)])
+BUILDING = (-0.1, -0.1, 9.1, 4.1)
+
+
+def _episode(scene) -> NBSEnv:
+    env = NBSEnv(make_config("fast", max_scans=40))
+    run_episode(env, make_policy("greedy", 0), seed=0, options={"scene": scene})
+    return env
+
+
+def _events(env: NBSEnv, kind: str) -> list[dict]:
+    return [e for e in env.storey.door_events if e["event"] == kind]
+
+
+def test_a_door_whose_point_in_front_is_blocked_is_still_crossed():
+    # A box 0.65 m in front of the door's face: the point 0.5 m in front of the frame has 0.15 m of
+    # clearance, less than the robot's radius; the strip between box and wall is free.
+    box = (4.25 - 0.3, 1.8, 4.25, 2.2, 1.0)
+    walls = [(a, b, []) for a, b in OUTLINE] + [PARTITION]
+    scene = boxed_storey(walls, [BUILDING], [BUILDING], clutter=[box], start=(1.5, 2.0), name="blocked")
+    env = _episode(scene)
+    crossed = _events(env, "crossed")
+    assert any(np.linalg.norm(np.subtract(e["centre"], (4.9, 2.0))) < 0.3 for e in crossed), env.storey.door_events
+    assert not _events(env, "abandoned"), env.storey.door_events
+    # Room B was scanned: some scan stands at x > 5.2.
+    assert any(s.true_position[0] > 5.2 for s in env.storey.scans)
+
+
+def test_an_exterior_door_is_recorded_and_not_crossed():
+    # Room A has a 1.0 m door in its south wall onto a terrace: floor outside, no ceiling over it.
+    south = ((0, 0), (9, 0), [(2.0, 3.0, 2.05)])
+    walls = [south, *[(a, b, []) for a, b in OUTLINE[1:]], PARTITION]
+    terrace = (1.0, -3.5, 4.0, -0.1)
+    scene = boxed_storey(walls, [BUILDING, terrace], [BUILDING], start=(1.5, 2.0), name="exterior")
+    env = _episode(scene)
+    detected = _events(env, "detected")
+    outside = [e for e in detected if abs(e["centre"][1]) < 0.4 and 1.8 < e["centre"][0] < 3.2]
+    assert outside and all(e["exterior"] for e in outside), detected
+    inside = [e for e in detected if abs(e["centre"][0] - 4.9) < 0.4]
+    assert inside and not any(e["exterior"] for e in inside), detected
+    # The interior door is crossed, the exterior one never; no scan is taken outside the building.
+    crossed = [tuple(e["centre"]) for e in _events(env, "crossed")]
+    assert any(abs(c[0] - 4.9) < 0.4 for c in crossed) and not any(c[1] < 0.4 for c in crossed), crossed
+    assert all(s.true_position[1] > 0.1 for s in env.storey.scans)
