@@ -184,6 +184,32 @@ class RegistrationConfig(Config):
         Run ICP on one thread so that a seed always gives the same poses. open3d's parallel
         reductions vary in the last bits between runs, and ICP occasionally turns that into a
         different result; one thread costs about 1.7x the ICP time (see benchmarks/README.md).
+    min_points : int
+        Fewest downsampled points a scan, and the part of S(t) facing it, must have to be
+        registered (an empty scan: the scanner in a wall, every return under the minimum range).
+    min_inliers : int
+        Fewest matches at the finest stage for an accepted pose.
+    min_overlap_fitness : float or None
+        A pose whose fitness is below ``min_fitness`` is still accepted when this share of the
+        scan's overlap with S(t) (its points within the coarsest correspondence distance of S(t))
+        matches at the finest stage: a scan into a new room matches little of itself but most of
+        what S(t) holds. None: the rule is off (``min_fitness`` alone decides).
+    robust_kernel : {"none", "tukey", "huber", "cauchy"}
+        M-estimator of the point-to-plane residuals ("none": least squares).
+    kernel_width : float
+        The kernel's scale as a share of each stage's correspondence distance.
+    min_constraint : float
+        Directions of the pose whose point-to-plane information (an eigenvalue of JᵀJ over the
+        finest-stage matches, in point-equivalents; rotations about the scanner counted with their
+        lever arm in metres) is below this keep the odometry's value: along a corridor with no end
+        in view ICP's move is noise. 0 turns it off.
+    exclude_rejected : bool
+        Leave scans whose registration was rejected out of later ICP targets (they lie in S(t) at
+        their odometry pose and double the surfaces they share with registered scans).
+
+    The defaults of the last seven fields come from docs/registration_study.md (measured on tours
+    and episodes of five_rooms, the FZK-Haus storeys and a synthetic corridor; the corpus of
+    scenes/corpus.py was measured with them, not used to choose them).
     """
 
     voxel_size: float = 0.05
@@ -198,6 +224,13 @@ class RegistrationConfig(Config):
     correction_per_metre_deg: float = 2.0
     target_radius: float = 30.0
     deterministic: bool = True
+    min_points: int = 200
+    min_inliers: int = 1000
+    min_overlap_fitness: float | None = 0.6
+    robust_kernel: str = "none"
+    kernel_width: float = 0.5
+    min_constraint: float = 0.0
+    exclude_rejected: bool = True
 
     def __post_init__(self) -> None:
         _finite(
@@ -208,7 +241,23 @@ class RegistrationConfig(Config):
             max_correction_m=self.max_correction_m,
             max_correction_deg=self.max_correction_deg,
             target_radius=self.target_radius,
+            kernel_width=self.kernel_width,
+            min_constraint=self.min_constraint,
         )
+        _integer(self, "min_points", 0)
+        _integer(self, "min_inliers", 0)
+        if self.min_overlap_fitness is not None:
+            _finite(min_overlap_fitness=self.min_overlap_fitness)
+            _require(
+                0 <= self.min_overlap_fitness <= 1,
+                f"min_overlap_fitness is a share in [0, 1] or None, got {self.min_overlap_fitness}",
+            )
+        _require(
+            self.robust_kernel in ("none", "tukey", "huber", "cauchy"),
+            f"robust_kernel must be 'none', 'tukey', 'huber' or 'cauchy', got {self.robust_kernel!r}",
+        )
+        _require(self.kernel_width > 0, f"kernel_width must be > 0, got {self.kernel_width}")
+        _require(self.min_constraint >= 0, f"min_constraint must be >= 0, got {self.min_constraint}")
         _require(self.voxel_size > 0, f"voxel_size must be > 0, got {self.voxel_size}")
         _require(
             len(self.max_correspondence) > 0 and all(d > 0 for d in self.max_correspondence),

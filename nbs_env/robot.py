@@ -30,7 +30,7 @@ from nbs_env.errors import UnreachableDoorError
 from nbs_env.labels import VoxelLabel
 from nbs_env.perception.doors import detect_doors
 from nbs_env.planning.navigation import Geodesic, TraversabilityMap, geodesic
-from nbs_env.planning.planner import Plan, plan, traversable_floor
+from nbs_env.planning.planner import Plan, blocked_directions, plan, traversable_floor
 from nbs_env.sensing.odometry import Odometry
 from nbs_env.sensing.pose import planar, pose_error, yaw_of
 from nbs_env.sensing.registration import AccumulatedCloud, RegistrationResult, register
@@ -360,8 +360,9 @@ class Robot:
             assert belief.grid is not None and belief.roi is not None, "scan first"
             # Standing at a door needs only the robot's radius: its clearance would close a 0.8 m door.
             narrow = replace(self.config.navigation, safety_distance=0.0)
+            blocked = blocked_directions(belief, self.stops)
             tmap = traversable_floor(
-                belief.grid, belief.roi.floor_z, self.stops, self.visited, self.config.scanner, narrow
+                belief.grid, belief.roi.floor_z, self.stops, self.visited, self.config.scanner, narrow, blocked
             )
             self._door_map = (tmap, geodesic(tmap, self.pose[:2, 3]))
         return self._door_map

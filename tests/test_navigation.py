@@ -12,6 +12,7 @@ from nbs_env.errors import ConfigError
 from nbs_env.labels import VoxelLabel, is_occupied
 from nbs_env.planning.navigation import (
     NavigationConfig,
+    assume_blind_zone_free,
     candidates,
     geodesic,
     path_to,
@@ -408,3 +409,25 @@ def test_config_round_trips_as_json_dict():
 
     cfg = NavigationConfig(lattice=0.4, max_candidates=32)
     assert NavigationConfig(**json.loads(json.dumps(cfg.to_dict()))) == cfg
+
+
+def test_low_rays_with_no_return_keep_their_columns_unknown():
+    """A stop beside a wall it cannot measure (closer than the minimum range): the low rays toward
+    the wall returned nothing, so the floor that way is not assumed free; the other way it is."""
+    s, n = 0.1, 40
+    labels = np.full((n, n, 20), VoxelLabel.UNKNOWN, dtype=np.uint8)
+    origin = np.array([-2.0, -2.0, 0.0])
+    sensor = np.array([0.0, 0.0, 1.5])
+    # Rays toward +x (azimuth within ±30°) at elevations -40..+10° returned nothing.
+    az, el = np.meshgrid(np.radians(np.arange(-30, 31, 2)), np.radians(np.arange(-40, 11, 5)))
+    toward_wall = np.column_stack(
+        [(np.cos(el) * np.cos(az)).ravel(), (np.cos(el) * np.sin(az)).ravel(), np.sin(el).ravel()]
+    )
+    free = assume_blind_zone_free(labels, origin, s, [sensor], -40.0, 1.5, blocked=[toward_wall])
+    plain = assume_blind_zone_free(labels, origin, s, [sensor], -40.0, 1.5)
+    column_free = lambda grid, x, y: bool(np.all(grid[int((x + 2) / s), int((y + 2) / s), :10] == VoxelLabel.EMPTY))  # noqa: E731
+    assert column_free(plain, 1.0, 0.0) and column_free(plain, -1.0, 0.0)
+    assert not column_free(free, 1.0, 0.0) and not column_free(free, 0.5, 0.2)
+    assert column_free(free, -1.0, 0.0) and column_free(free, 0.0, 1.0)
+    with pytest.raises(ValueError, match="blocked"):
+        assume_blind_zone_free(labels, origin, s, [sensor, sensor], -40.0, 1.5, blocked=[toward_wall])

@@ -33,6 +33,11 @@ from nbs_env.perception.faces import WallFace
 __all__ = ["RoI", "RoIConfig", "RoIError", "RoIScan", "compute_roi", "floor_and_ceiling", "polygon_from_image"]
 
 
+#: Rays below this elevation (degrees) that return nothing were stopped within the minimum range by
+#: something the robot's body would meet (within 1.5 m, +15° is 0.4 m above a 1.5 m scanner head).
+LOW_ELEVATION_DEG = 15.0
+
+
 class RoIError(NBSError, ValueError):
     """The points do not define a room (too few, or no floor/ceiling found)."""
 
@@ -141,6 +146,11 @@ class RoIScan:
         the robot stands next to, which it cannot measure but must not look through.
     min_range : float
         The scanner's minimum range in metres.
+    low_directions : (k, 3) float
+        World directions of the pattern's rays below :data:`LOW_ELEVATION_DEG` that returned
+        nothing: each met an obstacle nearer than the minimum range (the floor lies farther along
+        every ray of the field of view), so the floor along it within that range is not known to be
+        free.
     keep_direction : (2,) float, optional
         For a scan taken standing in a door frame: the horizontal direction into the room being
         entered. Only the half of the scan's free space on that side belongs to this room.
@@ -151,6 +161,7 @@ class RoIScan:
     near_directions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     min_range: float = 1.5
     keep_direction: np.ndarray | None = None
+    low_directions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     @classmethod
     def from_scan(cls, scan, pose: np.ndarray, keep_direction: np.ndarray | None = None) -> RoIScan:
@@ -161,6 +172,7 @@ class RoIScan:
         returned = np.zeros(len(directions), dtype=bool)
         returned[scan.rows.astype(np.int64) * scan.shape[1] + scan.cols] = True
         up = ~returned & (directions[:, 2] > 0)
+        low = ~returned & (directions[:, 2] < np.sin(np.radians(LOW_ELEVATION_DEG)))
         pose = np.asarray(pose, dtype=float)
         return cls(
             points=scan.to_world(pose),
@@ -168,6 +180,7 @@ class RoIScan:
             near_directions=directions[up].astype(np.float64) @ pose[:3, :3].T,
             min_range=scan.config.min_range,
             keep_direction=None if keep_direction is None else np.asarray(keep_direction, dtype=float),
+            low_directions=directions[low].astype(np.float64) @ pose[:3, :3].T,
         )
 
 

@@ -746,6 +746,7 @@ def assume_blind_zone_free(
     sensors: Sequence[Sequence[float]] | np.ndarray,
     elevation_min: float,
     min_range: float = 0.0,
+    blocked: Sequence[np.ndarray] | None = None,
 ) -> np.ndarray:
     """A copy of ``labels`` with the unsensed voxels under each stop's field of view taken as EMPTY.
 
@@ -771,6 +772,10 @@ def assume_blind_zone_free(
         The scanner's minimum range. Nothing closer than it is ever measured, so the unsensed space
         within it of a stop is taken as free too (same reasoning: the robot's own near-field
         sensing, not simulated, would stop it).
+    blocked : sequence of (k, 3) float, optional
+        Per stop, the world directions of its low rays that returned nothing: something nearer than
+        ``min_range`` stopped each (a wall beside a door frame, furniture). No column along such a
+        ray within ``min_range`` of the stop is assumed free; the robot waits to see it.
     """
     out = np.array(labels, copy=True)
     nx, ny, nz = out.shape
@@ -779,7 +784,10 @@ def assume_blind_zone_free(
     ys = origin[1] + (np.arange(ny) + 0.5) * s
     zs = origin[2] + (np.arange(nz) + 0.5) * s
     slope = np.tan(np.radians(-elevation_min))
-    for sensor in np.asarray(sensors, dtype=float).reshape(-1, 3):
+    sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
+    if blocked is not None and len(blocked) != len(sensors):
+        raise ValueError(f"{len(blocked)} blocked-direction sets for {len(sensors)} stops")
+    for k, sensor in enumerate(sensors):
         d = np.hypot(xs[:, None] - sensor[0], ys[None, :] - sensor[1])  # (nx, ny)
         # Partly below the lowest ray (z < sensor_z - d * tan(-elevation_min)): carving needs the
         # whole voxel in view, so a voxel that straddles the cone is never carved either.
@@ -788,6 +796,35 @@ def assume_blind_zone_free(
         if min_range > 0:
             near = np.hypot(d[:, :, None], zs[None, None, :] - sensor[2]) < min_range
             below |= near
+        if blocked is not None and min_range > 0 and len(blocked[k]):
+            below &= ~_blocked_columns(blocked[k], sensor, min_range, origin, s, (nx, ny))[:, :, None]
         unsensed = (out == VoxelLabel.UNKNOWN) | (out == VoxelLabel.OCCLUDED_CLUTTER)
         out[below & unsensed] = VoxelLabel.EMPTY
     return out
+
+
+def _blocked_columns(
+    directions: np.ndarray, sensor: np.ndarray, min_range: float, origin: np.ndarray, size: float, shape: tuple
+) -> np.ndarray:
+    """(nx, ny) bool: columns a ray of ``directions`` from ``sensor`` crosses within ``min_range``."""
+    d = np.asarray(directions, dtype=float).reshape(-1, 3)
+    horizontal = np.hypot(d[:, 0], d[:, 1])
+    d, horizontal = d[horizontal > 1e-6], horizontal[horizontal > 1e-6]
+    # One ray per azimuth bin of a voxel's width at the far end: the farthest reach among its rays.
+    bins = max(8, int(np.ceil(2 * np.pi * min_range / size)))
+    azimuth = np.arctan2(d[:, 1], d[:, 0])
+    b = ((azimuth + np.pi) / (2 * np.pi) * bins).astype(np.int64) % bins
+    reach = np.zeros(bins)
+    np.maximum.at(reach, b, min_range * horizontal)
+    used = np.flatnonzero(reach > 0)
+    theta = (used + 0.5) / bins * 2 * np.pi - np.pi
+    steps = np.arange(0.0, min_range + size, size / 2)
+    r = np.minimum(steps[None, :], reach[used][:, None])
+    x = sensor[0] + r * np.cos(theta)[:, None]
+    y = sensor[1] + r * np.sin(theta)[:, None]
+    i = np.floor((x - origin[0]) / size).astype(np.int64).ravel()
+    j = np.floor((y - origin[1]) / size).astype(np.int64).ravel()
+    ok = (i >= 0) & (i < shape[0]) & (j >= 0) & (j < shape[1])
+    mask = np.zeros(shape, dtype=bool)
+    mask[i[ok], j[ok]] = True
+    return mask

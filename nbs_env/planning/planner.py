@@ -214,9 +214,10 @@ def traversable_floor(
     visited: np.ndarray | Sequence[Sequence[float]],
     scanner: ScannerConfig,
     navigation: NavigationConfig,
+    blocked: Sequence[np.ndarray] | None = None,
 ) -> TraversabilityMap:
-    """Where the robot may stand in the room: V(t) with each stop's blind zone free, then the
-    footprint's traversability test.
+    """Where the robot may stand in the room: V(t) with each stop's blind zone free (but for what its
+    low rays that returned nothing say is blocked), then the footprint's traversability test.
 
     Parameters
     ----------
@@ -230,11 +231,22 @@ def traversable_floor(
         Where the robot has stood in the room (its footprint there is known to be free).
     scanner : ScannerConfig
     navigation : NavigationConfig
+    blocked : sequence of (k, 3) float, optional
+        Per stop, its low no-return directions (:attr:`~nbs_env.perception.roi.RoIScan.low_directions`).
     """
     walkable = assume_blind_zone_free(
-        grid.labels, grid.origin, grid.voxel_size, stops, scanner.elevation_min, scanner.min_range
+        grid.labels, grid.origin, grid.voxel_size, stops, scanner.elevation_min, scanner.min_range, blocked
     )
     return traversability(walkable, grid.origin, grid.voxel_size, floor_z, navigation, visited)
+
+
+def blocked_directions(belief, stops) -> list[np.ndarray] | None:
+    """Per stop, the low no-return directions of the belief's scan taken there (None when the stops
+    are not the belief's scans, one for one)."""
+    scans = belief.scans
+    if len(scans) != len(stops):
+        return None
+    return [np.asarray(s.low_directions, dtype=float).reshape(-1, 3) for s in scans]
 
 
 def sensor_positions(points_xy: np.ndarray, floor_z: float, scanner: ScannerConfig) -> np.ndarray:
@@ -299,7 +311,9 @@ def plan(
     if grid is None or roi is None:
         raise ValueError("plan needs a belief with at least one scan")
     xy = np.asarray(pose, dtype=float)[:2, 3]
-    tmap = traversable_floor(grid, roi.floor_z, stops, visited, config.scanner, config.navigation)
+    tmap = traversable_floor(
+        grid, roi.floor_z, stops, visited, config.scanner, config.navigation, blocked_directions(belief, stops)
+    )
     cands = candidates(tmap, xy, config.navigation)
     gains = np.zeros(config.navigation.max_candidates, dtype=np.int64)
     if config.predict_gains and cands.count:
