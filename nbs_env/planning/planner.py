@@ -28,10 +28,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
+import shapely
+from shapely.geometry import Polygon
 
 from nbs_env.config import ScannerConfig
 from nbs_env.errors import ConfigError
@@ -240,6 +242,20 @@ def traversable_floor(
     return traversability(walkable, grid.origin, grid.voxel_size, floor_z, navigation, visited)
 
 
+def within_roi(tmap: TraversabilityMap, polygon: np.ndarray) -> TraversabilityMap:
+    """``tmap`` with its free cells limited to the RoI polygon (and the cells the robot stood on).
+
+    The room's grid is the RoI's bounding box; where the room is not a rectangle, or the box reaches
+    through a door, the box holds floor of other rooms that the scans saw, and an NVP there would
+    scan the wrong room (measured on corpus:open_plan: a bathroom's first NVP lay in the living room
+    it was entered from, and the RoI followed the robot there)."""
+    nx, ny = tmap.shape
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+    centres = tmap.centre_of(np.column_stack([i.ravel(), j.ravel()]))
+    inside = shapely.contains_xy(Polygon(polygon), centres[:, 0], centres[:, 1]).reshape(nx, ny)
+    return replace(tmap, free=tmap.free & (inside | tmap.visited))
+
+
 def blocked_directions(belief, stops) -> list[np.ndarray] | None:
     """Per stop, the low no-return directions of the belief's scan taken there (None when the stops
     are not the belief's scans, one for one)."""
@@ -314,7 +330,7 @@ def plan(
     tmap = traversable_floor(
         grid, roi.floor_z, stops, visited, config.scanner, config.navigation, blocked_directions(belief, stops)
     )
-    cands = candidates(tmap, xy, config.navigation)
+    cands = candidates(within_roi(tmap, roi.polygon), xy, config.navigation)
     gains = np.zeros(config.navigation.max_candidates, dtype=np.int64)
     if config.predict_gains and cands.count:
         gains[: cands.count] = predict_gains(
