@@ -86,6 +86,13 @@ class RoomBelief:
         Its ``azimuth_bins`` is capped at the scanner's columns.
     exclude : list of (k, 2) float, optional
         Outlines of the rooms scanned before (the robot's own RoIs), kept out of this room's RoI.
+
+    Attributes
+    ----------
+    unobservable : (n, 3) float
+        Centres of Occluded-structure voxels that a scan was predicted to see, close enough to be hit,
+        and left unconverted (:func:`nbs_env.planning.planner.unobservable_after`); later gains
+        leave them out.
     """
 
     def __init__(
@@ -108,6 +115,8 @@ class RoomBelief:
         self.roi_config = replace(roi_config, azimuth_bins=min(roi_config.azimuth_bins, scanner.n_cols))
         self.exclude = list(exclude or [])
         self.scans: list[RoIScan] = []
+        # Occluded-structure voxels a scan was predicted to see and did not: kept out of later gains.
+        self.unobservable = np.zeros((0, 3))
         self.cloud = AccumulatedCloud(voxel_size=perception_voxel, normals=False, rooms=False)
         self.grid: VoxelGrid | None = None
         self.roi: RoI | None = None

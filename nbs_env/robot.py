@@ -30,7 +30,7 @@ from nbs_env.errors import UnreachableDoorError
 from nbs_env.labels import VoxelLabel
 from nbs_env.perception.doors import detect_doors
 from nbs_env.planning.navigation import Geodesic, TraversabilityMap, geodesic
-from nbs_env.planning.planner import Plan, blocked_directions, plan, traversable_floor
+from nbs_env.planning.planner import Plan, blocked_directions, plan, traversable_floor, unobservable_after
 from nbs_env.sensing.odometry import Odometry
 from nbs_env.sensing.pose import planar, pose_error, yaw_of
 from nbs_env.sensing.registration import AccumulatedCloud, RegistrationResult, register
@@ -193,10 +193,15 @@ class Robot:
         if not (0 <= index < cands.count):
             raise IndexError(f"candidate {index} is not valid: {cands.count} candidates")
         watched = self.belief.occluded_structure_centres() if count_conversions else None
+        roi = self.belief.roi
+        expected, _ = unobservable_after(planned, index, roi.floor_z, self.config.scanner, self.config.voxel_size)
         path = cands.path(index)
         heading = path[-1] - path[-2] if len(path) >= 2 else np.array([1.0, 0.0])
         self._drive(cands.points[index], float(np.arctan2(heading[1], heading[0])), float(cands.path_length[index]))
         report = self.scan(float(cands.path_length[index]), int(planned.gains[index]))
+        if len(expected):
+            missed = expected[self.belief.labels_at(expected) == VoxelLabel.OCCLUDED_STRUCTURE]
+            self.belief.unobservable = np.concatenate([self.belief.unobservable, missed])
         converted = 0
         if watched is not None and len(watched):
             converted = int(np.count_nonzero(self.belief.labels_at(watched) == VoxelLabel.STRUCTURE))

@@ -15,15 +15,11 @@ Two things the robot's own scans do to a door, which the search allows for:
   first (an opening itself is at least ``min_width`` wide and stays empty).
 - The RoI outline may have no edge over the door. From a scan near the door, rays pass under the
   lintel steeply enough to reach the RoI's band beyond it, and the outline bulges through the
-  opening into the next room; the wall's face then stops at the bulge. Each face is therefore
-  searched along its line, extended over such a bulge (or over a stretch of faces not given, not
-  SE) up to where the outline comes back to the line, at most ``max_bridge`` farther.
-
-An opening onto the outside (METHOD §8) has no ceiling beyond it: the scanner's upward rays through
-it return nothing. Of the rising rays of the room's scans that cross the opening farther than the
-scanner's minimum range, those that returned a point beyond the face are counted against those that
-returned nothing (the scan's no-return directions, which the robot knows from its own pattern);
-when fewer than ``covered_share`` of them returned, the door is ``exterior``.
+  opening into the next room (or its line fit is drawn off the wall there); the wall's face then
+  stops short of the door. Each face is therefore first moved onto the wall its points show (a
+  line fitted to them) and then followed along that line beyond its ends for as long as measured
+  points continue on it (a wall does, and so does an opening whose lintel was seen), at most
+  ``max_extension`` farther.
 """
 
 from __future__ import annotations
@@ -70,11 +66,9 @@ class DoorConfig(Config):
     fill_gap : float
         Gaps up to this wide between points of a row of the face image are filled before the
         search (a lintel seen in stripes, module docstring), metres; below ``min_width``.
-    line_tolerance : float
-        How far from a face's line (metres) the RoI outline counts as back on the wall after a
-        bulge (module docstring).
-    max_bridge : float
-        Longest stretch (metres) beyond a face's end over which it is extended.
+    max_extension : float
+        How far beyond either end of a face its line may be followed along measured points
+        (module docstring), metres; 0 searches the faces as given.
     """
 
     min_width: float = 0.6
@@ -89,8 +83,7 @@ class DoorConfig(Config):
     min_rising_rays: int = 20
     cross_exterior: bool = False
     fill_gap: float = 0.2
-    line_tolerance: float = 0.1
-    max_bridge: float = 8.0
+    max_extension: float = 8.0
 
     def __post_init__(self) -> None:
         _finite_fields(
@@ -104,8 +97,7 @@ class DoorConfig(Config):
             "pixel",
             "covered_share",
             "fill_gap",
-            "line_tolerance",
-            "max_bridge",
+            "max_extension",
         )
         _require(
             0 < self.min_width <= self.max_width,
@@ -126,8 +118,7 @@ class DoorConfig(Config):
             0 <= self.fill_gap < self.min_width,
             f"need 0 <= fill_gap < min_width, got {self.fill_gap}, {self.min_width}",
         )
-        _require(self.line_tolerance >= 0, f"line_tolerance must be >= 0 metres, got {self.line_tolerance}")
-        _require(self.max_bridge >= 0, f"max_bridge must be >= 0 metres, got {self.max_bridge}")
+        _require(self.max_extension >= 0, f"max_extension must be >= 0 metres, got {self.max_extension}")
 
 
 @dataclass(frozen=True)
@@ -137,8 +128,8 @@ class DetectedDoor:
     Attributes
     ----------
     face : int
-        Index of the wall face in the list given. The door lies on the face's line, possibly beyond
-        its ends where the RoI outline bulged through the opening (module docstring).
+        Index of the wall face in the list given. The door lies on the face's wall, possibly beyond
+        the face's ends (module docstring).
     centre : (3,) float
         Centre of the opening's bottom edge on the face plane (world).
     width, height : float
@@ -170,9 +161,12 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
 
 
-#: Faces shorter than this (metres) are not extended: their direction is too uncertain to follow
-#: their line over a bulge of the RoI outline.
+#: Faces shorter than this (metres) are not followed: their direction is too uncertain.
 _MIN_LINE = 0.5
+#: Fewest points for refitting a face's line to its wall.
+_MIN_FIT = 20
+#: Half-thickness of the slab around a face whose points make its image (``face_image``'s default).
+_BAND = 0.10
 
 
 def _fill_row_gaps(image: np.ndarray, gap: int) -> np.ndarray:
@@ -186,80 +180,59 @@ def _fill_row_gaps(image: np.ndarray, gap: int) -> np.ndarray:
     return image | ((last >= 0) & (following < cols) & (following - last - 1 <= gap))
 
 
-def _bridge(
-    end: np.ndarray,
-    axis: np.ndarray,
-    normal: np.ndarray,
-    segments: Sequence[tuple[np.ndarray, np.ndarray, bool]],
-    tolerance: float,
-    reach: float,
-) -> float:
-    """How far (metres, >= 0) a face's line runs on past its ``end`` along ``axis``.
-
-    ``segments`` is the RoI outline from ``end`` on: (a, b, hidden) pieces, hidden where faces not
-    given (not SE) lie between two given ones. In the face frame (u along ``axis`` from ``end``,
-    w along ``normal``, into the room) the line runs on over pieces within ``tolerance`` of it
-    (a collinear face) and over a bulge: pieces behind it (w < -tolerance, outside the room) or
-    hidden, up to where the outline comes back to the line, or crosses it into the room (a
-    corner). It stops where the outline turns into the room, or beyond ``reach``.
-    """
-    far = 0.0
-    behind = False  # the outline has left the line, outward or unseen
-    for a, b, hidden in segments:
-        ua, wa = float((a - end) @ axis), float((a - end) @ normal)
-        ub, wb = float((b - end) @ axis), float((b - end) @ normal)
-        if ub > reach and wb < -tolerance:
-            break  # too far along: whatever comes back to the line there is another wall
-        if hidden:
-            behind = True
-        if wb > tolerance:
-            if behind and not hidden and wa <= tolerance and wb > wa:
-                # Back across the line into the room: the outline came back at a corner.
-                u = ua + (ub - ua) * (0.0 - wa) / (wb - wa)
-                if far < u <= reach:
-                    far = u
-            break
-        if wb >= -tolerance:  # on the line (again)
-            if ub > far and ub <= reach:
-                far = ub
-            elif ub > reach:
-                break
-            behind = False
-        else:
-            behind = True
-    return far
-
-
-def _extended(faces: Sequence[WallFace], k: int, tolerance: float, reach: float) -> WallFace:
-    """Face ``k`` extended along its line over bulges of the RoI outline at either end (:func:`_bridge`).
-
-    The faces are the RoI's (SE) faces in outline order; a gap between one's end and the next's
-    start stands for faces left out.
-    """
-    face, n = faces[k], len(faces)
-    if n < 2 or reach <= 0 or face.length < _MIN_LINE:
-        return face
+def _refit(face: WallFace, points: np.ndarray, band: float, margin: float) -> WallFace:
+    """The face moved onto the wall its points show: the line fitted (least squares, then again on
+    the points near that fit) to the points within ``band`` of the face, over its length and
+    between ``margin`` above the floor and below the ceiling. The face itself when fewer than
+    :data:`_MIN_FIT` points are there or the fit leaves the band."""
     p0, p1 = np.asarray(face.p0, dtype=float), np.asarray(face.p1, dtype=float)
-    d, normal = face.direction, face.normal
-    forward: list[tuple[np.ndarray, np.ndarray, bool]] = []
-    backward: list[tuple[np.ndarray, np.ndarray, bool]] = []
-    at_end, at_start = p1, p0
-    for j in range(1, n):
-        after, before = faces[(k + j) % n], faces[(k - j) % n]
-        a0, a1 = np.asarray(after.p0, dtype=float), np.asarray(after.p1, dtype=float)
-        b0, b1 = np.asarray(before.p0, dtype=float), np.asarray(before.p1, dtype=float)
-        if np.linalg.norm(a0 - at_end) > 1e-6:
-            forward.append((at_end, a0, True))
-        forward.append((a0, a1, False))
-        if np.linalg.norm(b1 - at_start) > 1e-6:
-            backward.append((at_start, b1, True))
-        backward.append((b1, b0, False))
-        at_end, at_start = a1, b0
-    ahead = _bridge(p1, d, normal, forward, tolerance, reach)
-    back = _bridge(p0, -d, normal, backward, tolerance, reach)
-    if ahead == 0.0 and back == 0.0:
+    local = face.local(points)
+    u, v, w = local[:, 0], local[:, 1], local[:, 2]
+    keep = (np.abs(w) <= band) & (u >= 0) & (u <= face.length) & (v > margin) & (v < face.height - margin)
+    a = b = 0.0
+    for width in (band, band / 3):
+        near = keep & (np.abs(w - (a + b * u)) <= width)
+        if np.count_nonzero(near) < _MIN_FIT or np.ptp(u[near]) < face.length / 2:
+            return face
+        b, a = np.polyfit(u[near], w[near], 1)
+    if max(abs(a), abs(a + b * face.length)) > band:
         return face
-    return WallFace(p0 - back * d, p1 + ahead * d, face.z0, face.z1)
+    n = face.normal
+    return WallFace(p0 + a * n, p1 + (a + b * face.length) * n, face.z0, face.z1)
+
+
+def _followed(
+    face: WallFace, points: np.ndarray, pixel: float, gap: int, reach: float, margin: float
+) -> tuple[WallFace, np.ndarray]:
+    """The face extended along its line as far as measured points continue on it (at most
+    ``reach`` beyond either end), and its face image with row gaps of up to ``gap`` pixels filled.
+
+    The line is followed while every column of the (filled) image holds a point between
+    ``margin`` above the floor and below the ceiling: a wall does, and so does a door opening whose
+    lintel was seen; past a corner or the end of the wall the line runs in a wall's inside or in
+    open space, where no column does.
+    """
+    if face.length < _MIN_LINE or reach <= 0:
+        return face, _fill_row_gaps(face_image(face, points, pixel=pixel), gap)
+    d = face.direction
+    p0, p1 = np.asarray(face.p0, dtype=float), np.asarray(face.p1, dtype=float)
+    steps = int(np.floor(reach / pixel))
+    start = p0 - steps * pixel * d
+    wide = WallFace(start, p1 + steps * pixel * d, face.z0, face.z1)
+    image = _fill_row_gaps(face_image(wide, points, pixel=pixel), gap)
+    rows = image.shape[0]
+    lo_row = int(np.ceil(margin / pixel))
+    hi_row = max(lo_row + 1, rows - int(np.ceil(margin / pixel)))
+    evidence = image[lo_row:hi_row, :].any(axis=0)
+    first, last = steps, min(image.shape[1], steps + int(np.ceil(face.length / pixel - 1e-9)))
+    while first > 0 and evidence[first - 1]:
+        first -= 1
+    while last < image.shape[1] and evidence[last]:
+        last += 1
+    if first == steps and last == steps + int(np.ceil(face.length / pixel - 1e-9)):
+        return face, _fill_row_gaps(face_image(face, points, pixel=pixel), gap)
+    followed = WallFace(start + first * pixel * d, start + last * pixel * d, face.z0, face.z1)
+    return followed, image[:, first:last]
 
 
 def _seen_through(
@@ -334,8 +307,8 @@ def detect_doors(
     Parameters
     ----------
     faces : sequence of WallFace
-        The RoI's wall faces classified SE (the room lies to their left), in the order of the RoI
-        outline (each is searched along its line over bulges of the outline, module docstring).
+        The RoI's wall faces classified SE (the room lies to their left). Each is searched along
+        its wall's line, also beyond its ends (module docstring).
     scans : sequence of (points, origin)
         The room's registered scans: (n, 3) world points and the (3,) scanner position, both the
         robot's estimates. A point counts as seen through an opening when the ray from its scan's
@@ -357,10 +330,10 @@ def detect_doors(
     doors: list[DetectedDoor] = []
     px = cfg.pixel
     gap = int(np.floor(cfg.fill_gap / px + 1e-9))
-    for k in range(len(faces)):
-        face = _extended(faces, k, cfg.line_tolerance, cfg.max_bridge)
-        image = face_image(face, points, pixel=px)  # (rows from the floor, columns along the face)
-        image = _fill_row_gaps(image, gap)
+    for k, given in enumerate(faces):
+        face = _refit(given, points, _BAND, cfg.floor_gap)
+        # The image's rows run from the floor, its columns along the (followed) face.
+        face, image = _followed(face, points, px, gap, cfg.max_extension, cfg.floor_gap)
         rows = image.shape[0]
         # Height of the empty run from the floor (allowing a threshold) in every column.
         start = int(np.ceil(cfg.floor_gap / px))
@@ -402,7 +375,7 @@ def detect_doors(
 
 
 def _distinct(doors: list[DetectedDoor], distance: float) -> list[DetectedDoor]:
-    """One door per opening: of those found (on overlapping extended faces) closer than
+    """One door per opening: of those found (on faces followed onto the same wall) closer than
     ``distance`` to each other and opening the same way, the one seen through most."""
     kept: list[DetectedDoor] = []
     for door in sorted(doors, key=lambda d: -d.behind_points):

@@ -29,7 +29,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import shapely
@@ -163,12 +163,16 @@ class Plan:
         Structure + Occluded-structure voxels of the room's V(t): the unit the gain is read in.
     seconds : float
         How long planning took.
+    model : GainModel or None
+        The gain model the gains came from (None when gains were not predicted): the robot asks it
+        which voxels the chosen NVP was to see (:func:`unobservable_after`).
     """
 
     candidates: Candidates
     gains: np.ndarray
     structural_voxels: int
     seconds: float
+    model: Any = field(default=None, repr=False, compare=False)
 
     @property
     def count(self) -> int:
@@ -332,8 +336,44 @@ def plan(
     )
     cands = candidates(within_roi(tmap, roi.polygon), xy, config.navigation)
     gains = np.zeros(config.navigation.max_candidates, dtype=np.int64)
+    model = None
     if config.predict_gains and cands.count:
-        gains[: cands.count] = predict_gains(
-            grid.labels, grid.origin, grid.voxel_size, cands.points, roi.floor_z, config.scanner, config.gain
-        )
-    return Plan(cands, gains, structural_voxels(grid.labels), time.perf_counter() - t)
+        labels = _without(grid, belief.unobservable)
+        model = make_gain_model(labels, grid.origin, grid.voxel_size, config.gain)
+        sensors = sensor_positions(cands.points, roi.floor_z, config.scanner)
+        gains[: cands.count] = np.asarray(model.gains(sensors, config.scanner), dtype=np.int64)
+    return Plan(cands, gains, structural_voxels(grid.labels), time.perf_counter() - t, model)
+
+
+def _without(grid: VoxelGrid, unobservable: np.ndarray) -> np.ndarray:
+    """V(t)'s labels with the Occluded-structure voxels at the ``unobservable`` (n, 3) world points
+    taken as Unknown (no target of a gain, no obstacle to a line of sight)."""
+    points = np.asarray(unobservable, dtype=float).reshape(-1, 3)
+    if not len(points):
+        return grid.labels
+    labels = grid.labels.copy()
+    idx = grid.index_of(points)
+    idx = idx[grid.inside(idx)]
+    cells = tuple(idx.T)
+    labels[cells] = np.where(labels[cells] == VoxelLabel.OCCLUDED_STRUCTURE, VoxelLabel.UNKNOWN, labels[cells])
+    return labels
+
+
+def unobservable_after(
+    planned: Plan, index: int, floor_z: float, scanner: ScannerConfig, voxel_size: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which voxels a scan from NVP ``index`` must convert if the gain model is right: the (n, 3)
+    centres of the Occluded-structure voxels it predicted the scan to see, within the range where
+    the scan's point spacing is finer than a voxel; and the sensor position.
+
+    A voxel among them that the scan leaves Occluded-structure was no surface the scanner can see
+    (a face of the RoI prism with no wall behind it under a sloped roof or an open top, a shadow the
+    model got wrong); :attr:`~nbs_env.belief.RoomBelief.unobservable` keeps it out of later gains,
+    so that a phantom gain cannot hold a room open to its scan cap."""
+    sensor = sensor_positions(planned.candidates.points[index : index + 1], floor_z, scanner)[0]
+    model = planned.model
+    if model is None or not hasattr(model, "visible"):
+        return np.zeros((0, 3)), sensor
+    targets = model.targets[model.visible(sensor, scanner)]
+    dense = voxel_size / np.radians(scanner.angular_step)
+    return targets[np.linalg.norm(targets - sensor, axis=1) <= dense], sensor
