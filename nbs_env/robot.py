@@ -347,12 +347,22 @@ class Robot:
         points = points[inside]
         cells = tmap.cell_of(points, "door approach")
         free = tmap.free[cells[:, 0], cells[:, 1]]
-        if not free.any():
-            return None, None, f"no free floor within {APPROACH_DEPTH} m in front of the frame"
         distance = route.distances[cells[:, 0], cells[:, 1]]
         ok = free & np.isfinite(distance)
         if not ok.any():
-            return None, None, "the free floor in front of the frame is cut off from the robot"
+            # The floor just in front of a frame is often unseen (a jamb's shadow, furniture beside
+            # the door): within APPROACH_DEPTH of it, unseen cells that hold no obstacle and keep the
+            # robot's radius may carry the last leg, as the robot's bumpers would allow.
+            centres = tmap.centre_of(np.argwhere(np.ones(tmap.shape, dtype=bool))).reshape(*tmap.shape, 2)
+            near = np.linalg.norm(centres - door.centre[:2], axis=2) <= APPROACH_DEPTH + door.width / 2
+            relaxed = tmap.free | (near & ~tmap.obstacle & (tmap.clearance >= tmap.robot_radius))
+            distance = geodesic(replace(tmap, free=relaxed), self.pose[:2, 3]).distances[cells[:, 0], cells[:, 1]]
+            free = relaxed[cells[:, 0], cells[:, 1]]
+            ok = free & np.isfinite(distance)
+            if not free.any():
+                return None, None, f"no free floor within {APPROACH_DEPTH} m in front of the frame"
+            if not ok.any():
+                return None, None, "the free floor in front of the frame is cut off from the robot"
         last_leg = np.linalg.norm(points - door.centre[:2], axis=1)
         cost = np.where(ok, distance + last_leg, np.inf)
         k = int(np.argmin(cost))
