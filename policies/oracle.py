@@ -2,7 +2,8 @@
 
 It is not a competitor. With the true building it lists the scan positions a robot could stand at
 (a lattice over the indoor free floor, found by geometry as :mod:`scenes.interior` finds it,
-keeping the 0.45 m clearance from walls and furniture), takes a noise-free
+keeping the 0.45 m clearance from walls and furniture, and the pole of any free patch it misses),
+takes a noise-free
 scan of the true building from each with the same scanner as the robot, finds which samples of the
 true structural surface each scan senses by the evaluation's own rule (a point within the
 meter's radius, :class:`nbs_env.evaluation.CoverageMeter`), and picks positions by greedy set cover.
@@ -24,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 from shapely.geometry import Polygon
+from shapely.ops import polylabel
 
 from nbs_env.config import ScannerConfig
 from nbs_env.planning.navigation import NavigationConfig
@@ -95,6 +97,13 @@ def _positions(scene: Scene, lattice: float, clearance: float) -> np.ndarray:
         inside = shapely.contains_xy(free, pts[:, 0], pts[:, 1])
         for p in pts[inside]:
             out.append([p[0], p[1], floor_z])
+        # A free patch the lattice misses (a small room between lattice lines) still has a place to
+        # scan from: its pole of inaccessibility.
+        for patch in getattr(free, "geoms", [free]):
+            if isinstance(patch, Polygon) and not patch.is_empty:
+                if not shapely.contains_xy(patch, pts[inside, 0], pts[inside, 1]).any():
+                    pole = polylabel(patch, tolerance=0.01)
+                    out.append([pole.x, pole.y, floor_z])
     return np.asarray(out, dtype=float).reshape(-1, 3)
 
 
