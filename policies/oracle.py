@@ -100,10 +100,10 @@ def _positions(scene: Scene, lattice: float, clearance: float) -> np.ndarray:
         # A free patch the lattice misses (a small room between lattice lines) still has a place to
         # scan from: its pole of inaccessibility.
         for patch in getattr(free, "geoms", [free]):
-            if isinstance(patch, Polygon) and not patch.is_empty:
-                if not shapely.contains_xy(patch, pts[inside, 0], pts[inside, 1]).any():
-                    pole = polylabel(patch, tolerance=0.01)
-                    out.append([pole.x, pole.y, floor_z])
+            missed = isinstance(patch, Polygon) and not patch.is_empty
+            if missed and not shapely.contains_xy(patch, pts[inside, 0], pts[inside, 1]).any():
+                pole = polylabel(patch, tolerance=0.01)
+                out.append([pole.x, pole.y, floor_z])
     return np.asarray(out, dtype=float).reshape(-1, 3)
 
 
