@@ -20,6 +20,12 @@ Two things the robot's own scans do to a door, which the search allows for:
   line fitted to them) and then followed along that line beyond its ends for as long as measured
   points continue on it (a wall does, and so does an opening whose lintel was seen), at most
   ``max_extension`` farther.
+
+An opening onto the outside (METHOD §8) has no ceiling beyond it: the scanner's upward rays through
+it return nothing. Of the rising rays of the room's scans that cross the opening farther than the
+scanner's minimum range, those that returned a point beyond the face are counted against those that
+returned nothing (the scan's no-return directions, which the robot knows from its own pattern);
+when fewer than ``covered_share`` of them returned, the door is ``exterior``.
 """
 
 from __future__ import annotations
@@ -167,6 +173,10 @@ _MIN_LINE = 0.5
 _MIN_FIT = 20
 #: Half-thickness of the slab around a face whose points make its image (``face_image``'s default).
 _BAND = 0.10
+#: A face's line is followed over runs of columns with no point at all only when they are shorter than
+#: this (metres): thinner than a wall, so that the line does not run through a partition into the
+#: next room's wall.
+_FOLLOW_GAP = 0.10
 
 
 def _fill_row_gaps(image: np.ndarray, gap: int) -> np.ndarray:
@@ -186,8 +196,9 @@ def _refit(face: WallFace, points: np.ndarray, band: float, margin: float) -> Wa
     between ``margin`` above the floor and below the ceiling. The face itself when fewer than
     :data:`_MIN_FIT` points are there or the fit leaves the band."""
     p0, p1 = np.asarray(face.p0, dtype=float), np.asarray(face.p1, dtype=float)
-    local = face.local(points)
-    u, v, w = local[:, 0], local[:, 1], local[:, 2]
+    lo, hi = np.minimum(p0, p1) - band, np.maximum(p0, p1) + band
+    box = np.all((points[:, :2] >= lo) & (points[:, :2] <= hi), axis=1)  # a cheap first cut
+    u, v, w = face.local(points[box]).T
     keep = (np.abs(w) <= band) & (u >= 0) & (u <= face.length) & (v > margin) & (v < face.height - margin)
     a = b = 0.0
     for width in (band, band / 3):
@@ -201,36 +212,83 @@ def _refit(face: WallFace, points: np.ndarray, band: float, margin: float) -> Wa
     return WallFace(p0 + a * n, p1 + (a + b * face.length) * n, face.z0, face.z1)
 
 
+def _crossing(face: WallFace, others: Sequence[WallFace], margin: float) -> tuple[float, float]:
+    """(lo, hi): where along the face's line (u, from p0) the nearest of the ``others`` that meet
+    it lie, at or before its start and at or past its end (-inf, inf where none does).
+
+    A face meets the line where its segment, grown by ``margin`` at both ends, crosses it and it
+    reaches more than ``margin`` into the room: a wall of the room that the line runs into at a
+    corner. (A face that only leaves the line outward, as the RoI outline does where it bulges
+    through a door, does not stop it.)
+    """
+    lo, hi = -np.inf, np.inf
+    for other in others:
+        (ua, wa), (ub, wb) = face.local(np.array([[*other.p0, face.z0], [*other.p1, face.z0]]))[:, [0, 2]]
+        if max(wa, wb) <= margin or abs(wb - wa) < 1e-9:
+            continue
+        t = -wa / (wb - wa)
+        grow = margin / max(other.length, 1e-9)
+        if not (-grow <= t <= 1 + grow):
+            continue
+        u = ua + t * (ub - ua)
+        if u <= margin:
+            lo = max(lo, min(u, 0.0))
+        if u >= face.length - margin:
+            hi = min(hi, max(u, face.length))
+    return lo, hi
+
+
 def _followed(
-    face: WallFace, points: np.ndarray, pixel: float, gap: int, reach: float, margin: float
+    face: WallFace,
+    others: Sequence[WallFace],
+    points: np.ndarray,
+    pixel: float,
+    gap: int,
+    reach: float,
+    margin: float,
 ) -> tuple[WallFace, np.ndarray]:
     """The face extended along its line as far as measured points continue on it (at most
-    ``reach`` beyond either end), and its face image with row gaps of up to ``gap`` pixels filled.
+    ``reach`` beyond either end, never across another of the room's faces), and its face image
+    with row gaps of up to ``gap`` pixels filled.
 
-    The line is followed while every column of the (filled) image holds a point between
-    ``margin`` above the floor and below the ceiling: a wall does, and so does a door opening whose
-    lintel was seen; past a corner or the end of the wall the line runs in a wall's inside or in
-    open space, where no column does.
+    The line is followed while the columns of the image hold points between ``margin`` above the
+    floor and below the ceiling: a wall's do, and so do an opening's whose lintel was seen (in
+    the filled image). Past the end of the wall the line runs in a wall's inside or in open space,
+    where none do; a run of columns with no point at all as wide as :data:`_FOLLOW_GAP` (a
+    partition's inside) ends it.
     """
     if face.length < _MIN_LINE or reach <= 0:
         return face, _fill_row_gaps(face_image(face, points, pixel=pixel), gap)
     d = face.direction
-    p0, p1 = np.asarray(face.p0, dtype=float), np.asarray(face.p1, dtype=float)
-    steps = int(np.floor(reach / pixel))
-    start = p0 - steps * pixel * d
-    wide = WallFace(start, p1 + steps * pixel * d, face.z0, face.z1)
-    image = _fill_row_gaps(face_image(wide, points, pixel=pixel), gap)
+    lo, hi = _crossing(face, others, _BAND)
+    before = max(0, int(np.floor(min(reach, -lo) / pixel + 1e-9)))
+    after = max(0, int(np.floor(min(reach, hi - face.length) / pixel + 1e-9)))
+    start = np.asarray(face.p0, dtype=float) - before * pixel * d
+    wide = WallFace(start, np.asarray(face.p1, dtype=float) + after * pixel * d, face.z0, face.z1)
+    raw = face_image(wide, points, pixel=pixel)
+    image = _fill_row_gaps(raw, gap)
     rows = image.shape[0]
     lo_row = int(np.ceil(margin / pixel))
     hi_row = max(lo_row + 1, rows - int(np.ceil(margin / pixel)))
     evidence = image[lo_row:hi_row, :].any(axis=0)
-    first, last = steps, min(image.shape[1], steps + int(np.ceil(face.length / pixel - 1e-9)))
-    while first > 0 and evidence[first - 1]:
+    seen = raw[lo_row:hi_row, :].any(axis=0)
+    allowed = max(0, int(np.ceil(_FOLLOW_GAP / pixel - 1e-9)) - 1)  # empty columns in a row, fewer than _FOLLOW_GAP
+    own = int(np.ceil(face.length / pixel - 1e-9))
+    first, last = before, min(image.shape[1], before + own)
+
+    def runs_on(c: int, step: int) -> bool:
+        """Whether the line runs on into column c (walking by ``step``)."""
+        if not evidence[c]:
+            return False
+        empty = 0  # columns with no point at all from c on
+        while empty <= allowed and 0 <= c + empty * step < len(seen) and not seen[c + empty * step]:
+            empty += 1
+        return empty <= allowed
+
+    while first > 0 and runs_on(first - 1, -1):
         first -= 1
-    while last < image.shape[1] and evidence[last]:
+    while last < image.shape[1] and runs_on(last, 1):
         last += 1
-    if first == steps and last == steps + int(np.ceil(face.length / pixel - 1e-9)):
-        return face, _fill_row_gaps(face_image(face, points, pixel=pixel), gap)
     followed = WallFace(start + first * pixel * d, start + last * pixel * d, face.z0, face.z1)
     return followed, image[:, first:last]
 
@@ -333,7 +391,8 @@ def detect_doors(
     for k, given in enumerate(faces):
         face = _refit(given, points, _BAND, cfg.floor_gap)
         # The image's rows run from the floor, its columns along the (followed) face.
-        face, image = _followed(face, points, px, gap, cfg.max_extension, cfg.floor_gap)
+        others = [f for j, f in enumerate(faces) if j != k]
+        face, image = _followed(face, others, points, px, gap, cfg.max_extension, cfg.floor_gap)
         rows = image.shape[0]
         # Height of the empty run from the floor (allowing a threshold) in every column.
         start = int(np.ceil(cfg.floor_gap / px))
