@@ -13,6 +13,10 @@ Two things the robot's own scans do to a door, which the search allows for:
   several pixels apart on the wall. Columns with no lintel point would cut the opening into pieces
   narrower than a door, so gaps of up to ``fill_gap`` in each row of the face image are filled
   first (an opening itself is at least ``min_width`` wide and stays empty).
+  When no scan saw the lintel at all (every scan of the room in front of the face stood nearer
+  than the minimum range to it), the empty run of a column goes on up through the pixels no scan
+  could measure; the lintel may lie anywhere in them, so the column counts as tall enough when the
+  run's highest measurable empty pixel is below ``max_height``.
 - The RoI outline may have no edge over the door. From a scan near the door, rays pass under the
   lintel steeply enough to reach the RoI's band beyond it, and the outline bulges through the
   opening into the next room (or its line fit is drawn off the wall there); the wall's face then
@@ -293,6 +297,29 @@ def _followed(
     return followed, image[:, first:last]
 
 
+def _out_of_range(
+    face: WallFace,
+    scans: Sequence[tuple[np.ndarray, np.ndarray]],
+    shape: tuple[int, int],
+    pixel: float,
+    min_range: float,
+) -> np.ndarray:
+    """Which pixels of the face image (by their centres) lie nearer than ``min_range`` to every scanner
+    in front of the face: none of the room's scans could have measured them."""
+    if min_range <= 0:
+        return np.zeros(shape, dtype=bool)
+    rows, cols = shape
+    v = (np.arange(rows) + 0.5) * pixel
+    u = (np.arange(cols) + 0.5) * pixel
+    unseen = np.ones(shape, dtype=bool)
+    for _, origin in scans:
+        o = face.local(np.asarray(origin, dtype=float).reshape(1, 3))[0]
+        if o[2] <= 0:
+            continue  # behind the face: it does not see it
+        unseen &= ((v[:, None] - o[1]) ** 2 + (u[None, :] - o[0]) ** 2 + o[2] ** 2) < min_range**2
+    return unseen
+
+
 def _seen_through(
     face: WallFace,
     scans: Sequence[tuple[np.ndarray, np.ndarray]],
@@ -400,6 +427,14 @@ def detect_doors(
         first_white = np.where(above.any(axis=0), above.argmax(axis=0), rows - start)
         empty_height = (start + first_white) * px
         lintel_seen = above.any(axis=0)
+        # Where the empty run reaches into pixels no scan could measure (nearer than the minimum
+        # range), the lintel may lie unseen anywhere above the run's highest measurable pixel.
+        unseen = _out_of_range(face, scans, image.shape, px, min_range)[start:, :]
+        in_run = np.arange(rows - start)[:, None] < first_white
+        measurable = np.where(in_run & ~unseen, np.arange(1, rows - start + 1)[:, None], 0).max(axis=0, initial=0)
+        lowest = np.maximum((start + measurable) * px, cfg.min_height)
+        hidden = (empty_height > cfg.max_height + px) & (lowest <= cfg.max_height + px)
+        empty_height = np.where(hidden, lowest, empty_height)
         tall = (empty_height >= cfg.min_height) & (empty_height <= cfg.max_height + px) & lintel_seen
         for a, b in _runs(tall):
             width = (b - a) * px
