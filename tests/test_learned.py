@@ -150,10 +150,15 @@ def test_bad_checkpoints_raise_clear_errors(tmp_path):
         LearnedPolicy(evil)
 
 
-def test_the_bundled_reference_policy_reproduces_its_learning_curve():
-    """``ppo:reference`` ships with the package (checksum-verified on load) with its learning curve,
-    and replays the curve's last point: the same validation storeys give its recorded scans, SE %
-    and path (loose tolerances, for other CPUs' floating point), never taking a masked action."""
+def test_the_bundled_reference_policy_keeps_its_standing_against_the_greedy():
+    """``ppo:reference`` ships with the package (checksum-verified on load) with its learning curve.
+    The curve's figures were measured in the env as it was when the policy was trained; the scanning
+    loop has changed since (issue 14: NVPs inside the RoI, door hand-over), so the replay checks the
+    curve's claim in today's env instead of its numbers: on the same validation storeys the policy,
+    never taking a masked action, senses what the greedy senses within the margin its curve
+    recorded (plus 2 points) with no more than 1.3 times the greedy's scans. The network itself is
+    pinned by the stored-logits test below, which holds on any CPU."""
+    from policies.greedy import GreedyPolicy
     from policies.learned import BUNDLED
     from train.ppo import VALIDATION_BASE, evaluate
 
@@ -172,10 +177,11 @@ def test_the_bundled_reference_policy_reproduces_its_learning_curve():
 
     storeys = [VALIDATION_BASE + k for k in range(training["eval_storeys"])]
     replay = evaluate(act, storeys, training["max_episode_steps"])
-    recorded = records[-1]["learned"]
-    assert replay["scans"] == pytest.approx(recorded["scans"], abs=1.0)
-    assert replay["structure_sensed_pct"] == pytest.approx(recorded["structure_sensed_pct"], abs=2.0)
-    assert replay["path_length_m"] == pytest.approx(recorded["path_length_m"], rel=0.1)
+    greedy = evaluate(GreedyPolicy().act, storeys, training["max_episode_steps"])
+    recorded = records[-1]
+    margin = recorded["greedy"]["structure_sensed_pct"] - recorded["learned"]["structure_sensed_pct"]
+    assert replay["structure_sensed_pct"] >= greedy["structure_sensed_pct"] - max(margin, 0.0) - 2.0, (replay, greedy)
+    assert replay["scans"] <= 1.3 * greedy["scans"], (replay, greedy)
 
 
 def test_the_bundled_reference_policy_gives_its_stored_logits():
