@@ -157,6 +157,10 @@ def test_registration_config_checks():
         RegistrationConfig(voxel_size=0)
     with pytest.raises(ConfigError, match="max_correspondence"):
         RegistrationConfig(max_correspondence=())
+    with pytest.raises(ConfigError, match="method"):
+        RegistrationConfig(method="ndt")
+    with pytest.raises(ConfigError, match="min_agreement"):
+        RegistrationConfig(min_agreement=1.5)
 
 
 def test_same_seed_same_registered_poses():
@@ -179,3 +183,75 @@ def test_same_seed_same_registered_poses():
     assert a[0].points.tobytes() == b[0].points.tobytes() and a[1].points.tobytes() == b[1].points.tobytes()
     assert np.array_equal(a[2], b[2])
     assert np.array_equal(a[3], b[3])
+
+
+def _corridor(length: float = 30.0):
+    from scenes.floorplan import FloorPlan
+
+    plan = {
+        "format": "nbs-floorplan",
+        "version": 1,
+        "name": "corridor",
+        "ceiling_height": 2.6,
+        "wall_thickness": 0.2,
+        "rooms": [{"name": "corridor", "polygon": [[0, 0], [length, 0], [length, 2], [0, 2]]}],
+        "start": [1.0, 1.0],
+    }
+    return load_scene(FloorPlan.from_dict(plan, source="corridor"))
+
+
+def test_after_a_long_corridor_leg_the_walls_heading_rescues_icp():
+    # 15 m down a 2 m corridor with the odometry 14° and 0.68 m off: ICP's coarsest stage starts
+    # too far off to turn, the histogram of wall headings does not care how far the robot drove.
+    scene = _corridor()
+    scanner = Scanner(scene, ScannerConfig(angular_step=0.5))
+    rng = np.random.default_rng(1)
+    t0 = pose_from_xyz_rpy(3.0, 1.0, 1.5)
+    first = scanner.scan(t0, rng).truth.points_world
+    t1 = pose_from_xyz_rpy(18.0, 1.0, 1.5)
+    prior = planar(18.67, 1.1, np.radians(14.0), 1.5)
+    points = scanner.scan(t1, rng).points
+    errors = {}
+    for check in (RegistrationConfig().heading_check_deg, 0.0):
+        cloud = AccumulatedCloud()
+        cloud.add(first, t0[:3, 3])
+        result = register(points, prior, cloud, RegistrationConfig(heading_check_deg=check), travelled=15.0)
+        errors[check] = (result.accepted, *pose_error(result.pose, t1))
+    accepted, dt, dr = errors[RegistrationConfig().heading_check_deg]
+    assert accepted and dt < 0.02 and dr < 0.2, errors
+    assert errors[0.0][1] > 0.1, errors  # without the check, ICP does not get there
+
+
+@pytest.mark.parametrize("method", ["gicp", "plane", "open3d"])
+def test_every_icp_method_recovers_a_small_perturbation(method):
+    rng = np.random.default_rng(5)
+    scene = load_scene("l_room")
+    scanner = Scanner(scene, ScannerConfig(angular_step=0.5))
+    t0 = pose_from_xyz_rpy(3.0, 4.5, 1.5)
+    cloud = AccumulatedCloud()
+    cloud.add(scanner.scan(t0, rng).truth.points_world, t0[:3, 3])
+    t1 = pose_from_xyz_rpy(2.0, 5.5, 1.5, 0.0, 0.0, 0.5)
+    prior = planar(2.15, 5.4, 0.55, 1.5)
+    result = register(scanner.scan(t1, rng).points, prior, cloud, RegistrationConfig(method=method))
+    assert result.accepted, result.reason
+    assert pose_error(result.pose, t1)[0] < 0.01 and 0.5 < result.agreement <= 1.0
+
+
+def test_an_empty_scan_is_refused_and_a_refused_scan_stays_out_of_the_target():
+    rng = np.random.default_rng(0)
+    scene = load_scene("l_room")
+    scanner = Scanner(scene, ScannerConfig(angular_step=0.5))
+    t0 = pose_from_xyz_rpy(3.0, 4.5, 1.5)
+    cloud = AccumulatedCloud()
+    cloud.add(scanner.scan(t0, rng).truth.points_world, t0[:3, 3])
+    result = register(np.zeros((0, 3)), t0, cloud)
+    assert not result.accepted and "points" in result.reason and np.array_equal(result.pose, t0)
+    # The refused scan's points (here: a copy of the room 1 m off) join S(t) but not ICP's target.
+    shifted = cloud.storey_points() + np.array([1.0, 0.0, 0.0])
+    cloud.add(shifted, t0[:3, 3] + [1.0, 0.0, 0.0])
+    assert cloud.registered == [True, False]
+    assert len(cloud.target_cloud().points) < len(cloud.working_cloud().points)
+    # The next scan registers against the registered scan only, not its shifted twin.
+    t1 = pose_from_xyz_rpy(2.5, 5.0, 1.5, 0.0, 0.0, 0.2)
+    result = register(scanner.scan(t1, rng).points, planar(2.6, 5.0, 0.25, 1.5), cloud)
+    assert result.accepted and pose_error(result.pose, t1)[0] < 0.01, result.reason
