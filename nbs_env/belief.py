@@ -53,6 +53,8 @@ class RoomModel:
         the voxel size of V(t)).
     structure : (m,) bool
         Which of ``points`` are labelled Structure.
+    has_ceiling : bool
+        False for a room open to the sky (:attr:`RoI.has_ceiling`): ``ceiling_z`` is its walls' top.
     """
 
     index: int
@@ -62,6 +64,7 @@ class RoomModel:
     se_faces: list[WallFace]
     points: np.ndarray = field(repr=False)
     structure: np.ndarray = field(repr=False)
+    has_ceiling: bool = True
 
 
 class RoomBelief:
@@ -154,7 +157,7 @@ class RoomBelief:
         self.se = self.classifier.classify_faces(roi.wall_faces, working)
         self.roi = roi
         se_faces = self.se_faces
-        labels = label_points(new.points, se_faces, roi.floor_z, roi.ceiling_z, roi.polygon)
+        labels = label_points(new.points, se_faces, roi.floor_z, roi.ceiling_z, roi.polygon, ceiling=roi.has_ceiling)
         times["classification"] = time.perf_counter() - t
 
         t = time.perf_counter()
@@ -166,7 +169,7 @@ class RoomBelief:
             self.grid.ensure_covers(lo, hi)
         stats = self.grid.integrate(new.points, labels, pose, scan.depth_image(), self.scanner)
         self._relabel_occupied(working, se_faces, roi)
-        self.grid.update_occlusion(roi.polygon, roi.floor_z, roi.ceiling_z, se_faces)
+        self.grid.update_occlusion(roi.polygon, roi.floor_z, roi.ceiling_z, se_faces, ceiling=roi.has_ceiling)
         times["voxels"] = time.perf_counter() - t
         return BeliefUpdate(stats, int(labels.sum()), int((~labels).sum()), times)
 
@@ -178,7 +181,9 @@ class RoomBelief:
         idx = grid.index_of(working)
         ok = grid.inside(idx)
         idx = idx[ok]
-        structure = label_points(working[ok], se_faces, roi.floor_z, roi.ceiling_z, roi.polygon)
+        structure = label_points(
+            working[ok], se_faces, roi.floor_z, roi.ceiling_z, roi.polygon, ceiling=roi.has_ceiling
+        )
         flat = np.ravel_multi_index(idx.T, grid.shape)
         labels = grid.labels.reshape(-1)
         occupied = is_occupied(labels[flat])
@@ -208,8 +213,10 @@ class RoomBelief:
             return None
         points = self.cloud.working_points()
         se_faces = self.se_faces
-        structure = label_points(points, se_faces, roi.floor_z, roi.ceiling_z, roi.polygon)
-        return RoomModel(index, roi.polygon.copy(), roi.floor_z, roi.ceiling_z, se_faces, points, structure)
+        structure = label_points(points, se_faces, roi.floor_z, roi.ceiling_z, roi.polygon, ceiling=roi.has_ceiling)
+        return RoomModel(
+            index, roi.polygon.copy(), roi.floor_z, roi.ceiling_z, se_faces, points, structure, roi.has_ceiling
+        )
 
     def occluded_structure_centres(self) -> np.ndarray:
         """(n, 3) float: world centres of the OCCLUDED_STRUCTURE voxels."""

@@ -153,7 +153,8 @@ def _room_parts(room: RoomModel) -> list[tuple[str, np.ndarray, np.ndarray]]:
         quads[flip] = quads[flip][:, :, ::-1]
         faces = (4 * np.arange(len(corners))[:, None, None] + quads).reshape(-1, 3)
         parts.append(("wall", corners.reshape(-1, 3), faces))
-    for kind, z, up in (("floor", room.floor_z, True), ("ceiling", room.ceiling_z, False)):
+    horizontal = [("floor", room.floor_z, True)] + [("ceiling", room.ceiling_z, False)] * room.has_ceiling
+    for kind, z, up in horizontal:
         v, f = _polygon_triangles(room.polygon, z, up)
         if len(f):
             parts.append((kind, v, f))
@@ -164,7 +165,7 @@ def structural_model(rooms: list[RoomModel]) -> trimesh.Trimesh:
     """The recovered structural model of the rooms as one triangle mesh.
 
     Every SE wall face of a room (:attr:`RoomModel.se_faces`) is a quad of two triangles; the floor
-    and the ceiling are the room's polygon at ``floor_z`` and ``ceiling_z``, triangulated. All
+    and the ceiling (of a room that has one) are the room's polygon at ``floor_z`` and ``ceiling_z``, triangulated. All
     normals point into the room (walls inwards, floor up, ceiling down).
 
     Parameters

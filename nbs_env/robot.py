@@ -229,11 +229,13 @@ class Robot:
         # (a shelf before it, a short face by a corner) still has its doors, and the see-through test
         # tells a door from a shadow on any face (generated:10000000-19, fast: 3.6% of the rooms
         # were never entered behind doors on faces classified not SE).
+        # Under the sky every opening has the sky beyond it: inside cannot be told from outside.
+        roofed = belief.roi is None or belief.roi.has_ceiling
         found = detect_doors(
             belief.roi.wall_faces if belief.roi is not None else belief.se_faces,
             [(s.points, s.origin) for s in belief.scans],
             self.config.doors,
-            no_return=[s.near_directions for s in belief.scans],
+            no_return=[s.near_directions for s in belief.scans] if roofed else None,
             min_range=self.config.scanner.min_range,
         )
         polygon = Polygon(belief.roi.polygon) if belief.roi is not None else None

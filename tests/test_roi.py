@@ -132,3 +132,61 @@ def test_shipped_classifier_on_real_scans_and_the_figure(tmp_path):
     from PIL import Image
 
     assert Image.open(out).size[0] > 400
+
+
+def _box_returns(origin, size, wall_top=None):
+    """The pattern's rays in a box [0, size] (no roof when ``wall_top`` is given: rays leaving above
+    the walls' top return nothing), with the scanner's minimum range: (directions, returned, heights)."""
+    from nbs_env.sensing.scanner import ray_pattern
+    from tests.helpers import box_ranges
+
+    config = ScannerConfig(angular_step=1.0)
+    directions = ray_pattern(config)[0].astype(float)
+    origin = np.asarray(origin, dtype=float)
+    box = list(size) if wall_top is None else [size[0], size[1], 1e6]
+    r = box_ranges(origin, directions, box)
+    hit_z = origin[2] + r * directions[:, 2]
+    returned = (r >= config.min_range) & (r <= config.max_range)
+    if wall_top is not None:
+        returned &= hit_z <= wall_top
+    heights = (r * directions[:, 2])[returned]
+    return directions, returned, heights
+
+
+@pytest.mark.parametrize(
+    ("origin", "size", "wall_top", "sky"),
+    [
+        ((3.0, 2.0, 1.5), (6.0, 4.0, 2.7), None, False),  # a room
+        ((0.45, 0.45, 1.5), (6.0, 4.0, 2.7), None, False),  # in a corner at the robot's clearance
+        ((5.0, 0.45, 1.5), (10.0, 0.9, 2.6), None, False),  # the middle of a 0.9 m corridor
+        ((3.0, 2.0, 1.5), (6.0, 4.0, 2.2), None, False),  # a ceiling within the minimum range overhead
+        ((3.0, 2.0, 1.5), (6.0, 4.0, 12.0), None, False),  # a hall
+        ((3.0, 2.0, 1.5), (6.0, 4.0, None), 3.0, True),  # walls and no roof
+        ((0.45, 0.45, 1.5), (6.0, 4.0, None), 3.0, True),  # the same, in a corner
+        ((10.0, 10.0, 1.5), (20.0, 20.0, None), 3.0, True),  # a large yard
+    ],
+)
+def test_a_scan_sees_the_sky_only_where_there_is_no_roof(origin, size, wall_top, sky):
+    from nbs_env.perception.roi import sees_sky
+
+    directions, returned, heights = _box_returns(origin, size, wall_top)
+    assert sees_sky(directions, returned, heights, ScannerConfig().min_range) is sky
+
+
+def test_a_room_under_the_sky_has_no_ceiling_and_its_walls_top_the_prism():
+    from tests.helpers import boxed_storey
+
+    outline = [((0, 0), (6, 0)), ((6, 0), (6, 4)), ((6, 4), (0, 4)), ((0, 4), (0, 0))]
+    slab = (-0.1, -0.1, 6.1, 4.1)
+    cfg = ScannerConfig(angular_step=1.0)
+    for ceilings in ([slab], []):
+        scene = boxed_storey([(a, b, []) for a, b in outline], [slab], ceilings, start=(3.0, 2.0))
+        pose = pose_from_xyz_rpy(3.0, 2.0, 1.5)
+        scan = RoIScan.from_scan(Scanner(scene, cfg).scan(pose, np.random.default_rng(0)), pose)
+        roi = compute_roi([scan])
+        assert scan.sky is (not ceilings) and roi.has_ceiling is bool(ceilings)
+        # The whole room either way: the upward rays into the sky are not walls next to the robot.
+        inside = Polygon([(0.1, 0.1), (5.9, 0.1), (5.9, 3.9), (0.1, 3.9)])
+        assert Polygon(roi.polygon).intersection(inside).area >= 0.9 * inside.area, roi.polygon
+        # The prism ends under the ceiling, or at the top of the walls (2.6 m) under the sky.
+        assert roi.ceiling_z == pytest.approx(2.6, abs=0.25)

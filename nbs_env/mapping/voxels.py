@@ -305,12 +305,15 @@ class VoxelGrid:
         floor_z: float,
         ceiling_z: float,
         se_faces: Sequence[WallFace],
+        *,
+        ceiling: bool = True,
     ) -> None:
         """Recompute OCCLUDED_STRUCTURE / OCCLUDED_CLUTTER from the current RoI.
 
         Unsensed voxels (UNKNOWN or previously occluded) whose centre lies inside the RoI prism become
-        OCCLUDED_STRUCTURE when an SE face (an SE wall face, the floor or the ceiling) passes through
-        the voxel, else OCCLUDED_CLUTTER. Occluded voxels outside the current RoI return to UNKNOWN.
+        OCCLUDED_STRUCTURE when an SE face (an SE wall face, the floor or, unless ``ceiling`` is
+        False, the ceiling) passes through the voxel, else OCCLUDED_CLUTTER. Occluded voxels outside
+        the current RoI return to UNKNOWN.
         """
         s = self.voxel_size
         lo = np.array([*np.min(polygon, axis=0), floor_z]) - s
@@ -332,7 +335,7 @@ class VoxelGrid:
         slab = np.zeros(self.shape, dtype=bool)
         half = s / 2 * (1 + 1e-6)  # a face on a voxel boundary passes through both voxels
         near_floor = np.abs(zs - floor_z) <= half
-        near_ceiling = np.abs(zs - ceiling_z) <= half
+        near_ceiling = (np.abs(zs - ceiling_z) <= half) & ceiling
         slab |= in_plan[:, :, None] & (near_floor | near_ceiling)[None, None, :]
         for face in se_faces:
             rel_x, rel_y = gx - face.p0[0], gy - face.p0[1]

@@ -30,12 +30,31 @@ from nbs_env.config import Config, _finite_fields, _integer, _require
 from nbs_env.errors import NBSError
 from nbs_env.perception.faces import WallFace
 
-__all__ = ["RoI", "RoIConfig", "RoIError", "RoIScan", "compute_roi", "floor_and_ceiling", "polygon_from_image"]
+__all__ = [
+    "RoI",
+    "RoIConfig",
+    "RoIError",
+    "RoIScan",
+    "compute_roi",
+    "floor_and_ceiling",
+    "floor_and_wall_top",
+    "polygon_from_image",
+    "sees_sky",
+]
 
 
 #: Rays below this elevation (degrees) that return nothing were stopped within the minimum range by
 #: something the robot's body would meet (within 1.5 m, +15° is 0.4 m above a 1.5 m scanner head).
 LOW_ELEVATION_DEG = 15.0
+
+#: Rays steeper than this (degrees) are where a scan looks for the sky.
+SKY_MIN_ELEVATION_DEG = 30.0
+
+#: A scan sees the sky when at least this share of its steep rays that should have returned returned
+#: nothing. Walls within the minimum range take at most about 80% of them (the robot in the middle
+#: of a 0.9 m corridor, the narrowest it drives through; in a corner at its 0.45 m clearance, about
+#: 60%); open sky takes all.
+SKY_SHARE = 0.9
 
 
 class RoIError(NBSError, ValueError):
@@ -105,6 +124,10 @@ class RoI:
         World xy of the image's pixel (0, 0) corner; rows grow with y, columns with x.
     pixel : float
         Pixel size in metres.
+    has_ceiling : bool
+        False when most of the room's scans saw the sky overhead (:attr:`RoIScan.sky`): a storey
+        without a slab above (a shell under construction, an IFC storey with no roof). The
+        prism's top is then the top of the measured walls, and it is not a structural element.
     """
 
     polygon: np.ndarray
@@ -113,6 +136,7 @@ class RoI:
     image: np.ndarray = field(repr=False)
     origin: np.ndarray = field(repr=False)
     pixel: float = 0.05
+    has_ceiling: bool = True
 
     @property
     def wall_faces(self) -> list[WallFace]:
@@ -154,6 +178,9 @@ class RoIScan:
     keep_direction : (2,) float, optional
         For a scan taken standing in a door frame: the horizontal direction into the room being
         entered. Only the half of the scan's free space on that side belongs to this room.
+    sky : bool
+        Whether the scan saw the sky (:func:`sees_sky`): its steep rays that should have returned
+        did not. Its upward rays with no return are then not walls next to the robot.
     """
 
     points: np.ndarray
@@ -162,6 +189,7 @@ class RoIScan:
     min_range: float = 1.5
     keep_direction: np.ndarray | None = None
     low_directions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    sky: bool = False
 
     @classmethod
     def from_scan(cls, scan, pose: np.ndarray, keep_direction: np.ndarray | None = None) -> RoIScan:
@@ -174,14 +202,45 @@ class RoIScan:
         up = ~returned & (directions[:, 2] > 0)
         low = ~returned & (directions[:, 2] < np.sin(np.radians(LOW_ELEVATION_DEG)))
         pose = np.asarray(pose, dtype=float)
+        points = scan.to_world(pose)
         return cls(
-            points=scan.to_world(pose),
+            points=points,
             origin=pose[:3, 3].copy(),
             near_directions=directions[up].astype(np.float64) @ pose[:3, :3].T,
             min_range=scan.config.min_range,
             keep_direction=None if keep_direction is None else np.asarray(keep_direction, dtype=float),
             low_directions=directions[low].astype(np.float64) @ pose[:3, :3].T,
+            sky=sees_sky(directions, returned, points[:, 2] - pose[2, 3], scan.config.min_range),
         )
+
+
+def sees_sky(directions: np.ndarray, returned: np.ndarray, heights: np.ndarray, min_range: float) -> bool:
+    """Whether a scan saw the sky overhead (see :attr:`RoIScan.sky`).
+
+    Of the rays steeper than :data:`SKY_MIN_ELEVATION_DEG`, those that would have met a cover as
+    high as the scan's highest measured structure beyond the minimum range should have returned;
+    the sky is seen when at least :data:`SKY_SHARE` of them returned nothing. (Under a roof they
+    return from it, except those that meet a wall next to the robot first; under a low cover every
+    steep ray meets it within the minimum range, and nothing is concluded.)
+
+    Parameters
+    ----------
+    directions : (n, 3) float
+        The pattern's unit ray directions (z up; the scanner's tilt is a fraction of a degree).
+    returned : (n,) bool
+        Which rays returned a point.
+    heights : (m,) float
+        Heights of the scan's points above the scanner, metres.
+    min_range : float
+        The scanner's minimum range, metres.
+    """
+    above = heights[heights > 0]
+    cover = float(np.quantile(above, 0.99)) if len(above) else 0.0
+    steep = directions[:, 2] >= np.sin(np.radians(SKY_MIN_ELEVATION_DEG))
+    expected = steep & (min_range * directions[:, 2] < cover)
+    if not expected.any():
+        return False
+    return bool(np.count_nonzero(expected & ~returned) >= SKY_SHARE * np.count_nonzero(expected))
 
 
 def floor_and_ceiling(z: np.ndarray, sensor_z: float, bin_size: float = 0.02) -> tuple[float, float]:
@@ -205,15 +264,38 @@ def floor_and_ceiling(z: np.ndarray, sensor_z: float, bin_size: float = 0.02) ->
     below, above = z[z < sensor_z - 0.5], z[z > sensor_z + 0.3]
     if len(below) < 10 or len(above) < 10:
         raise RoIError(f"cannot find floor and ceiling: {len(below)} points below and {len(above)} above the scanner")
+    return _peak(below, bin_size), _peak(above, bin_size)
 
-    def peak(values: np.ndarray) -> float:
-        edges = np.arange(values.min(), values.max() + 2 * bin_size, bin_size)
-        counts, edges = np.histogram(values, bins=edges)
-        k = int(np.argmax(counts))
-        near = values[(values >= edges[k] - bin_size) & (values < edges[k + 1] + bin_size)]
-        return float(np.median(near))
 
-    return peak(below), peak(above)
+def _peak(values: np.ndarray, bin_size: float) -> float:
+    """The median of the values in and beside the fullest histogram bin."""
+    edges = np.arange(values.min(), values.max() + 2 * bin_size, bin_size)
+    counts, edges = np.histogram(values, bins=edges)
+    k = int(np.argmax(counts))
+    near = values[(values >= edges[k] - bin_size) & (values < edges[k + 1] + bin_size)]
+    return float(np.median(near))
+
+
+#: Under the sky, the share of the points above the scanner that lie below the walls' top.
+WALL_TOP_QUANTILE = 0.9
+
+
+def floor_and_wall_top(z: np.ndarray, sensor_z: float, bin_size: float = 0.02) -> tuple[float, float]:
+    """Floor height (the z-histogram peak below the scanner) and the top of the walls: the height
+    under which :data:`WALL_TOP_QUANTILE` of the points above the scanner lie, for a room open to
+    the sky, whose highest points are a few columns, parapets or tree tops.
+
+    Raises
+    ------
+    RoIError
+        No points below or above the scanner.
+    """
+    z = np.asarray(z, dtype=float)
+    z = z[:: max(1, len(z) // 100_000)]
+    below, above = z[z < sensor_z - 0.5], z[z > sensor_z + 0.3]
+    if len(below) < 10 or len(above) < 10:
+        raise RoIError(f"cannot find floor and walls: {len(below)} points below and {len(above)} above the scanner")
+    return _peak(below, bin_size), float(np.quantile(above, WALL_TOP_QUANTILE))
 
 
 def _free_space_radii(
@@ -295,7 +377,11 @@ def compute_roi(scans: Sequence[RoIScan], config: RoIConfig | None = None, exclu
         raise RoIError("no scans: the RoI needs at least one registered scan of the room")
     all_z = np.concatenate([np.asarray(s.points)[:, 2] for s in scans])
     sensor_z = float(np.mean([s.origin[2] for s in scans]))
-    floor_z, ceiling_z = floor_and_ceiling(all_z, sensor_z, cfg.histogram_bin)
+    has_ceiling = 2 * sum(s.sky for s in scans) <= len(scans)
+    if has_ceiling:
+        floor_z, ceiling_z = floor_and_ceiling(all_z, sensor_z, cfg.histogram_bin)
+    else:
+        floor_z, ceiling_z = floor_and_wall_top(all_z, sensor_z, cfg.histogram_bin)
     hi = ceiling_z - cfg.band_below_ceiling
     lo = min(floor_z + cfg.band_above_floor, hi - 0.10)
     stars: list[tuple[np.ndarray, np.ndarray]] = []
@@ -308,7 +394,8 @@ def compute_roi(scans: Sequence[RoIScan], config: RoIConfig | None = None, exclu
         # An upward ray with no return met something within the minimum range. If it would have
         # reached the band by then but not the ceiling, that something is a wall next to the robot
         # and bounds the band; if it would have reached the ceiling, the ceiling explains it.
-        d = np.asarray(scan.near_directions, dtype=float).reshape(-1, 3)
+        # Under the sky, they went up into it.
+        d = np.asarray(scan.near_directions, dtype=float).reshape(-1, 3)[: 0 if scan.sky else None]
         reach = origin[2] + scan.min_range * d[:, 2]
         wall = (reach >= lo) & (reach < ceiling_z - cfg.histogram_bin)
         blocks = origin[:2] + scan.min_range * d[wall][:, :2]
@@ -344,7 +431,15 @@ def compute_roi(scans: Sequence[RoIScan], config: RoIConfig | None = None, exclu
     # Give back the pixels the wall cut took from the room's own side.
     image = ndimage.binary_fill_holes(ndimage.binary_dilation(room, iterations=2) & image)
     polygon = polygon_from_image(image, origin_xy, cfg.pixel, cfg.corner_distance, cfg.collinear_deg)
-    return RoI(polygon=polygon, floor_z=floor_z, ceiling_z=ceiling_z, image=image, origin=origin_xy, pixel=cfg.pixel)
+    return RoI(
+        polygon=polygon,
+        floor_z=floor_z,
+        ceiling_z=ceiling_z,
+        image=image,
+        origin=origin_xy,
+        pixel=cfg.pixel,
+        has_ceiling=has_ceiling,
+    )
 
 
 def _rasterise_polygon(

@@ -618,6 +618,7 @@ def label_points(
     polygon: np.ndarray,
     *,
     distance: float = 0.10,
+    ceiling: bool = True,
 ) -> np.ndarray:
     """Label points Structure (True) or Clutter (False) by their distance to the SE faces.
 
@@ -633,6 +634,8 @@ def label_points(
         The RoI polygon, counter-clockwise (orientation does not matter here).
     distance : float, keyword-only
         How close to an SE face a point must be, metres (>= 0).
+    ceiling : bool, keyword-only
+        Whether the ceiling is an SE face (False under the sky: :attr:`RoI.has_ceiling`).
 
     Returns
     -------
@@ -667,7 +670,7 @@ def label_points(
             & (v <= face.height + distance)
         )
     z = points[:, 2]
-    horizontal = ~structure & ((np.abs(z - floor_z) <= distance) | (np.abs(z - ceiling_z) <= distance))
+    horizontal = ~structure & ((np.abs(z - floor_z) <= distance) | (ceiling & (np.abs(z - ceiling_z) <= distance)))
     if horizontal.any():
         # Only the candidates at floor or ceiling height go through the polygon test, the costly part.
         grown = Polygon(polygon).buffer(distance)
