@@ -142,3 +142,14 @@ def test_the_living_room_of_five_rooms_has_its_two_doors():
         nearest = min(found, key=lambda f: np.linalg.norm(f.centre[:2] - door.position[:2]))
         assert np.linalg.norm(nearest.centre[:2] - door.position[:2]) < 0.2
         assert nearest.width == pytest.approx(door.width, abs=0.1)
+
+
+def test_a_face_is_followed_over_a_lintel_seen_in_stripes():
+    # Scans along a corridor see the wall over a door at a grazing angle, one column of points every
+    # few pixels (corpus:large_storey: columns two pixels apart), and the RoI face stops at the
+    # door's jamb; the line is followed over such gaps, not only over a solid wall.
+    face = WallFace(np.array([0.0, 0.0]), np.array([0.95, 0.0]), 0.0, 2.6)
+    for stripes in (0.1, 0.15):
+        doors = detect_doors([face], wall_scan((1.0, 1.9), None, through=True, lintel_stripes=stripes))
+        assert len(doors) == 1, stripes
+        assert np.allclose(doors[0].centre[:2], [1.45, 0.0], atol=0.05)

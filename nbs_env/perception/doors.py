@@ -178,9 +178,12 @@ _MIN_FIT = 20
 #: Half-thickness of the slab around a face whose points make its image (``face_image``'s default).
 _BAND = 0.10
 #: A face's line is followed over runs of columns with no point at all only when they are shorter than
-#: this (metres): thinner than a wall, so that the line does not run through a partition into the
-#: next room's wall.
-_FOLLOW_GAP = 0.10
+#: this (metres): thinner than most walls, so that the line does not run through a partition into
+#: the next room's wall, yet wider than the gaps between the stripes in which scans along a corridor
+#: see a lintel at a grazing angle (corpus:large_storey: a 0.1 m limit stopped the corridor's wall
+#: line 0.4 m into a door whose lintel showed in columns two pixels apart, and the room behind it was
+#: never entered).
+_FOLLOW_GAP = 0.15
 
 
 def _fill_row_gaps(image: np.ndarray, gap: int) -> np.ndarray:
@@ -352,9 +355,15 @@ def _rising_rays(
     u1: float,
     height: float,
     min_range: float,
+    blockers: Sequence[WallFace] = (),
 ) -> tuple[int, int]:
     """(returned, empty): the rising rays through [u0, u1] x [0, height] that crossed farther than
-    ``min_range`` from their scanner, by whether they returned a point beyond the face."""
+    ``min_range`` from their scanner, by whether they returned a point beyond the face.
+
+    A ray that returned nothing may have met something within the minimum range before it reached
+    the opening: it tells of the sky beyond only when its way there crosses none of the room's
+    ``blockers`` (its other faces; generated:10000019: from round a corner of an L room, 71 rays
+    toward a door 4 m off met the corner's wall 1.2 m out and made an interior door exterior)."""
     returned = empty = 0
     for (points, origin), directions in zip(scans, no_return, strict=True):
         o = face.local(np.asarray(origin, dtype=float).reshape(1, 3))[0]
@@ -376,8 +385,32 @@ def _rising_rays(
         dl = dl[out]
         t = o[2] / -dl[:, 2]
         u, v = o[0] + t * dl[:, 0], o[1] + t * dl[:, 1]
-        empty += int(np.count_nonzero((u > u0) & (u < u1) & (v > 0) & (v < height) & (t >= min_range)))
+        through = (u > u0) & (u < u1) & (v > 0) & (v < height) & (t >= min_range)
+        if through.any() and blockers:
+            start = np.asarray(origin, dtype=float)[:2]
+            ends = start + t[through, None] * d[out][through, :2]
+            through[np.flatnonzero(through)] = ~_blocked(start, ends, blockers)
+        empty += int(np.count_nonzero(through))
     return returned, empty
+
+
+def _blocked(start: np.ndarray, ends: np.ndarray, faces: Sequence[WallFace], margin: float = 0.05) -> np.ndarray:
+    """(m,) bool: whether the plan segment from ``start`` to each of ``ends`` crosses one of the
+    ``faces`` more than ``margin`` before its end (a face that touches the end does not count)."""
+    d = ends - start  # (m, 2)
+    length = np.maximum(np.linalg.norm(d, axis=1), 1e-9)
+    hit = np.zeros(len(ends), dtype=bool)
+    for face in faces:
+        p0 = np.asarray(face.p0, dtype=float)
+        e = np.asarray(face.p1, dtype=float) - p0
+        denom = d[:, 0] * e[1] - d[:, 1] * e[0]
+        ok = np.abs(denom) > 1e-12
+        q = p0 - start
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (q[0] * e[1] - q[1] * e[0]) / denom  # along the segment, 0..1
+            r = (q[0] * d[:, 1] - q[1] * d[:, 0]) / denom  # along the face, 0..1
+        hit |= ok & (s >= 0) & (s * length < length - margin) & (r >= 0) & (r <= 1)
+    return hit
 
 
 def detect_doors(
@@ -447,7 +480,7 @@ def detect_doors(
                 continue
             covered = float("nan")
             if no_return is not None:
-                hits, misses = _rising_rays(face, scans, no_return, u0, u1, height, min_range)
+                hits, misses = _rising_rays(face, scans, no_return, u0, u1, height, min_range, others)
                 if hits + misses >= cfg.min_rising_rays:
                     covered = hits / (hits + misses)
             width = width + px  # the run counts whole pixels; the opening's edges fall inside its end pixels
