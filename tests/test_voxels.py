@@ -109,6 +109,27 @@ def test_occlusion_labels_follow_the_roi_and_se_faces():
     assert label_at(1.55, 1.55, 0.55) == VoxelLabel.UNKNOWN
 
 
+def test_floor_and_ceiling_go_on_past_a_frontier_face_and_not_past_a_wall():
+    grid = VoxelGrid.covering([-1, -1, 0], [3, 3, 1], 0.1)
+    polygon = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])  # counter-clockwise
+    east = WallFace(np.array([2.0, 0.0]), np.array([2.0, 2.0]), 0.0, 1.0)  # the room on its left
+    north = WallFace(np.array([2.0, 2.0]), np.array([0.0, 2.0]), 0.0, 1.0)
+
+    def label_at(x, y, z):
+        return grid.labels[tuple(grid.index_of(np.array([[x, y, z]]))[0])]
+
+    grid.update_occlusion(polygon, 0.0, 1.0, [north], frontier=[east], frontier_reach=0.5)
+    for z in (0.05, 0.95):
+        assert label_at(2.35, 1.05, z) == VoxelLabel.OCCLUDED_STRUCTURE  # past the frontier
+        assert label_at(2.75, 1.05, z) == VoxelLabel.UNKNOWN  # farther than the reach
+        assert label_at(1.05, 2.35, z) == VoxelLabel.UNKNOWN  # past a wall
+    assert label_at(2.35, 1.05, 0.55) == VoxelLabel.UNKNOWN  # only the floor and ceiling go on
+    # Without a ceiling (a room under the sky) only the floor does.
+    grid.update_occlusion(polygon, 0.0, 1.0, [north], ceiling=False, frontier=[east], frontier_reach=0.5)
+    assert label_at(2.35, 1.05, 0.05) == VoxelLabel.OCCLUDED_STRUCTURE
+    assert label_at(2.35, 1.05, 0.95) == VoxelLabel.UNKNOWN
+
+
 def test_npz_round_trip_and_ply(tmp_path):
     grid = VoxelGrid.covering([0, 0, 0], [1, 1, 1], 0.1)
     grid.labels[2:4, 2:4, 2:4] = VoxelLabel.STRUCTURE

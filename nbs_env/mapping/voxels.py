@@ -307,6 +307,8 @@ class VoxelGrid:
         se_faces: Sequence[WallFace],
         *,
         ceiling: bool = True,
+        frontier: Sequence[WallFace] = (),
+        frontier_reach: float = 0.5,
     ) -> None:
         """Recompute OCCLUDED_STRUCTURE / OCCLUDED_CLUTTER from the current RoI.
 
@@ -314,10 +316,23 @@ class VoxelGrid:
         OCCLUDED_STRUCTURE when an SE face (an SE wall face, the floor or, unless ``ceiling`` is
         False, the ceiling) passes through the voxel, else OCCLUDED_CLUTTER. Occluded voxels outside
         the current RoI return to UNKNOWN.
+
+        ``frontier`` faces are edges of the RoI where no wall was measured (the edge of what the
+        scans saw: past a corner, the sides of the view from a door frame). The room's floor and
+        ceiling are taken to go on past them: unsensed floor and ceiling voxels within
+        ``frontier_reach`` metres beyond such a face are OCCLUDED_STRUCTURE too, so that a scan that
+        would see past the edge has a gain and the RoI can grow.
         """
         s = self.voxel_size
         lo = np.array([*np.min(polygon, axis=0), floor_z]) - s
         hi = np.array([*np.max(polygon, axis=0), ceiling_z]) + s
+        strips = []
+        for face in frontier:
+            p0, p1 = np.asarray(face.p0, dtype=float), np.asarray(face.p1, dtype=float)
+            out = -np.asarray(face.normal, dtype=float) * frontier_reach  # the room is on the face's left
+            strips.append(Polygon([p0, p1, p1 + out, p0 + out]))
+            corners = np.array([p0, p1, p1 + out, p0 + out])
+            lo[:2], hi[:2] = np.minimum(lo[:2], corners.min(axis=0) - s), np.maximum(hi[:2], corners.max(axis=0) + s)
         self.ensure_covers(lo, hi)
         labels = self.labels
         occluded = (labels == VoxelLabel.OCCLUDED_CLUTTER) | (labels == VoxelLabel.OCCLUDED_STRUCTURE)
@@ -337,6 +352,10 @@ class VoxelGrid:
         near_floor = np.abs(zs - floor_z) <= half
         near_ceiling = (np.abs(zs - ceiling_z) <= half) & ceiling
         slab |= in_plan[:, :, None] & (near_floor | near_ceiling)[None, None, :]
+        if strips:
+            beyond = shapely.contains_xy(shapely.union_all(strips), gx, gy) & ~in_plan
+            past = beyond[:, :, None] & (near_floor | near_ceiling)[None, None, :]
+            labels[past & (labels == VoxelLabel.UNKNOWN)] = VoxelLabel.OCCLUDED_STRUCTURE
         for face in se_faces:
             rel_x, rel_y = gx - face.p0[0], gy - face.p0[1]
             u = rel_x * face.direction[0] + rel_y * face.direction[1]
