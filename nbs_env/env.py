@@ -257,6 +257,8 @@ class NBSEnv(gym.Env):
             "times": StageTimes(dict(last.times)),
             "registration_error_m": m,
             "registration_error_deg": deg,
+            # Why ICP's pose was refused and the odometry's kept (METHOD §2); empty when accepted.
+            "registration_refused": last.registration_refused,
             "door_events": list(storey.door_events),
             "action_mask": self.action_masks(),
             "candidate_gains": self.candidate_gains(),

@@ -56,6 +56,8 @@ scene's ground truth (true positions, true rooms), which the robot never sees.
         door                bool    a scan taken in a door frame on entering a room
         times               {stage: seconds}: scan, registration, roi, classification, voxels,
                             planning, evaluation
+        registration_refused str    why ICP's pose was refused and the odometry's kept ("" when
+                            accepted)
     door_events             list of the env's door events: detected (with exterior, covered),
                             crossed, abandoned (with reason)
     room_ends               list, one per room the robot completed: {room (the robot's number),
@@ -294,6 +296,7 @@ def metrics_dict(
             "structure_points": int(s.structure_points),
             "door": bool(s.door),
             "times": {str(k): float(v) for k, v in s.times.items()},
+            "registration_refused": str(s.registration_refused),
         }
         for k, (s, room) in enumerate(zip(steps, true_rooms, strict=True))
     ]

@@ -88,6 +88,7 @@ class ScanRecord:
     structure_points: int
     registration_error: tuple[float, float]
     times: dict[str, float]
+    registration_refused: str = ""
 
 
 @dataclass(frozen=True)
@@ -433,6 +434,9 @@ class Storey:
                 structure_points=report.belief.structure_points,
                 registration_error=robot.registration_error(),
                 times=times,
+                registration_refused=report.registration.reason
+                if report.registration is not None and not report.registration.accepted
+                else "",
             )
         )
 

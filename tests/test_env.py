@@ -324,7 +324,19 @@ def test_rooms_behind_closed_doors_are_reported_unscanned(tmp_path, capsys):
     from train.cli import main
 
     out = tmp_path / "fzk"
-    args = ["scan", "--scene", FZK, "--storey", "Erdgeschoss", "--resolution", "1", "--voxel", "0.1"]
+    args = [
+        "scan",
+        "--scene",
+        FZK,
+        "--storey",
+        "Erdgeschoss",
+        "--ifc-doors",
+        "closed",
+        "--resolution",
+        "1",
+        "--voxel",
+        "0.1",
+    ]
     code = main([*args, "--out", str(out), "--no-steps", "--quiet", "--max-scans", "40"])
     assert code in (0, None)
     metrics = json.loads((out / "metrics.json").read_text())

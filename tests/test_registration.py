@@ -255,3 +255,23 @@ def test_an_empty_scan_is_refused_and_a_refused_scan_stays_out_of_the_target():
     t1 = pose_from_xyz_rpy(2.5, 5.0, 1.5, 0.0, 0.0, 0.2)
     result = register(scanner.scan(t1, rng).points, planar(2.6, 5.0, 0.25, 1.5), cloud)
     assert result.accepted and pose_error(result.pose, t1)[0] < 0.01, result.reason
+
+
+def test_a_refused_registration_is_reported_in_info_and_metrics():
+    from dataclasses import replace
+
+    from nbs_env.env import NBSEnv
+    from nbs_env.evaluation import metrics_dict
+    from nbs_env.settings import make_config
+
+    config = make_config("default", scene="l_room", max_scans=3)
+    # No pose can have every point of its overlap on S(t)'s planes within 1 mm: every ICP is refused.
+    strict = replace(config.robot.registration, min_agreement=1.0, plane_tolerance=0.001)
+    env = NBSEnv(replace(config, robot=replace(config.robot, registration=strict)))
+    _, info = env.reset(seed=0)
+    assert info["registration_refused"] == ""  # the first scan is placed as it is
+    mask = env.action_masks()
+    _, _, _, _, info = env.step(int(np.flatnonzero(mask)[0]))
+    assert "S(t)'s planes" in info["registration_refused"], info["registration_refused"]
+    steps = metrics_dict(env.storey, "l_room", "greedy", 0)["steps"]
+    assert steps[0]["registration_refused"] == "" and "S(t)'s planes" in steps[-1]["registration_refused"]
