@@ -38,6 +38,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import shapely
 
 from nbs_env.config import Config, _finite_fields, _integer, _require
 from nbs_env.perception.faces import WallFace
@@ -397,20 +398,12 @@ def _rising_rays(
 def _blocked(start: np.ndarray, ends: np.ndarray, faces: Sequence[WallFace], margin: float = 0.05) -> np.ndarray:
     """(m,) bool: whether the plan segment from ``start`` to each of ``ends`` crosses one of the
     ``faces`` more than ``margin`` before its end (a face that touches the end does not count)."""
-    d = ends - start  # (m, 2)
-    length = np.maximum(np.linalg.norm(d, axis=1), 1e-9)
-    hit = np.zeros(len(ends), dtype=bool)
-    for face in faces:
-        p0 = np.asarray(face.p0, dtype=float)
-        e = np.asarray(face.p1, dtype=float) - p0
-        denom = d[:, 0] * e[1] - d[:, 1] * e[0]
-        ok = np.abs(denom) > 1e-12
-        q = p0 - start
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = (q[0] * e[1] - q[1] * e[0]) / denom  # along the segment, 0..1
-            r = (q[0] * d[:, 1] - q[1] * d[:, 0]) / denom  # along the face, 0..1
-        hit |= ok & (s >= 0) & (s * length < length - margin) & (r >= 0) & (r <= 1)
-    return hit
+    d = ends - start
+    length = np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+    short = start + d * np.clip(1.0 - margin / length, 0.0, None)
+    paths = shapely.linestrings(np.stack([np.broadcast_to(start, short.shape), short], axis=1))
+    walls = shapely.MultiLineString([[tuple(f.p0), tuple(f.p1)] for f in faces])
+    return shapely.intersects(paths, walls)
 
 
 def detect_doors(

@@ -288,10 +288,6 @@ class RegistrationResult:
     see_through: float = 0.0
 
 
-def _estimation(cfg: RegistrationConfig, distance: float):
-    return open3d().pipelines.registration.TransformationEstimationPointToPlane()
-
-
 def _select_target(cloud: AccumulatedCloud, centre: np.ndarray, cfg: RegistrationConfig, extent=None):
     """The part of S(t) a scan from ``centre`` can overlap: ICP's target (the accepted scans, or
     every scan when ``cfg.exclude_rejected`` is off) within ``target_radius`` and, given the scan's
@@ -663,18 +659,19 @@ class _RangeImage:
 
 
 class _Source:
-    """The downsampled scan, and small_gicp's copy with covariances for ``method="gicp"``."""
+    """The downsampled scan, small_gicp's copy of it (with covariances for ``method="gicp"``) and
+    the raw scan's range image for the see-through gate."""
 
     def __init__(self, source, cfg: RegistrationConfig, raw: np.ndarray | None = None) -> None:
         self.cloud = source
         self.points = np.asarray(source.points)
         self.image = None if raw is None or cfg.max_see_through is None else _RangeImage(raw)
-        if cfg.method == "gicp":  # plane-to-plane needs the scan's covariances; point-to-plane does not
+        if cfg.method != "open3d":
             small_gicp = _small_gicp()
             self.sg = small_gicp.PointCloud(self.points)
-            small_gicp.estimate_covariances(
-                self.sg, small_gicp.KdTree(self.sg, num_threads=1), num_neighbors=cfg.neighbours, num_threads=1
-            )
+            if cfg.method == "gicp":  # plane-to-plane needs the scan's covariances; point-to-plane does not
+                tree = small_gicp.KdTree(self.sg, num_threads=1)
+                small_gicp.estimate_covariances(self.sg, tree, num_neighbors=cfg.neighbours, num_threads=1)
 
 
 @dataclass(frozen=True)
@@ -706,8 +703,6 @@ def _align(src: _Source, target: _Target, start: np.ndarray, cfg: RegistrationCo
     pose = start.copy()
     if cfg.method != "open3d":
         small_gicp = _small_gicp()
-        if not hasattr(src, "sg"):
-            src.sg = small_gicp.PointCloud(src.points)
         for distance in cfg.max_correspondence:
             result = small_gicp.align(
                 target.sg,
@@ -731,7 +726,7 @@ def _align(src: _Source, target: _Target, start: np.ndarray, cfg: RegistrationCo
             target.cloud,
             distance,
             pose,
-            _estimation(cfg, distance),
+            reg.TransformationEstimationPointToPlane(),
             reg.ICPConvergenceCriteria(relative_fitness=1e-7, relative_rmse=1e-7, max_iteration=cfg.max_iterations),
         )
         pose = np.asarray(result.transformation).copy()
