@@ -37,7 +37,6 @@ __all__ = [
     "RoIScan",
     "compute_roi",
     "floor_and_ceiling",
-    "floor_and_wall_top",
     "polygon_from_image",
     "sees_sky",
 ]
@@ -243,7 +242,9 @@ def sees_sky(directions: np.ndarray, returned: np.ndarray, heights: np.ndarray, 
     return bool(np.count_nonzero(expected & ~returned) >= SKY_SHARE * np.count_nonzero(expected))
 
 
-def floor_and_ceiling(z: np.ndarray, sensor_z: float, bin_size: float = 0.02) -> tuple[float, float]:
+def floor_and_ceiling(
+    z: np.ndarray, sensor_z: float, bin_size: float = 0.02, *, has_ceiling: bool = True
+) -> tuple[float, float]:
     """Floor and ceiling heights: the z-histogram peaks below and above the scanner.
 
     Parameters
@@ -252,6 +253,12 @@ def floor_and_ceiling(z: np.ndarray, sensor_z: float, bin_size: float = 0.02) ->
         Heights of the room's points.
     sensor_z : float
         Height of the scanner (the robot's estimate).
+    bin_size : float
+        Histogram bin, metres.
+    has_ceiling : bool, keyword-only
+        False for a room open to the sky: the second height is then the top of its walls, under
+        which :data:`WALL_TOP_QUANTILE` of the points above the scanner lie (its highest points are
+        a few columns, parapets or tree tops).
 
     Raises
     ------
@@ -264,7 +271,12 @@ def floor_and_ceiling(z: np.ndarray, sensor_z: float, bin_size: float = 0.02) ->
     below, above = z[z < sensor_z - 0.5], z[z > sensor_z + 0.3]
     if len(below) < 10 or len(above) < 10:
         raise RoIError(f"cannot find floor and ceiling: {len(below)} points below and {len(above)} above the scanner")
-    return _peak(below, bin_size), _peak(above, bin_size)
+    top = _peak(above, bin_size) if has_ceiling else float(np.quantile(above, WALL_TOP_QUANTILE))
+    return _peak(below, bin_size), top
+
+
+#: Under the sky, the share of the points above the scanner that lie below the walls' top.
+WALL_TOP_QUANTILE = 0.9
 
 
 def _peak(values: np.ndarray, bin_size: float) -> float:
@@ -274,28 +286,6 @@ def _peak(values: np.ndarray, bin_size: float) -> float:
     k = int(np.argmax(counts))
     near = values[(values >= edges[k] - bin_size) & (values < edges[k + 1] + bin_size)]
     return float(np.median(near))
-
-
-#: Under the sky, the share of the points above the scanner that lie below the walls' top.
-WALL_TOP_QUANTILE = 0.9
-
-
-def floor_and_wall_top(z: np.ndarray, sensor_z: float, bin_size: float = 0.02) -> tuple[float, float]:
-    """Floor height (the z-histogram peak below the scanner) and the top of the walls: the height
-    under which :data:`WALL_TOP_QUANTILE` of the points above the scanner lie, for a room open to
-    the sky, whose highest points are a few columns, parapets or tree tops.
-
-    Raises
-    ------
-    RoIError
-        No points below or above the scanner.
-    """
-    z = np.asarray(z, dtype=float)
-    z = z[:: max(1, len(z) // 100_000)]
-    below, above = z[z < sensor_z - 0.5], z[z > sensor_z + 0.3]
-    if len(below) < 10 or len(above) < 10:
-        raise RoIError(f"cannot find floor and walls: {len(below)} points below and {len(above)} above the scanner")
-    return _peak(below, bin_size), float(np.quantile(above, WALL_TOP_QUANTILE))
 
 
 def _free_space_radii(
@@ -378,10 +368,7 @@ def compute_roi(scans: Sequence[RoIScan], config: RoIConfig | None = None, exclu
     all_z = np.concatenate([np.asarray(s.points)[:, 2] for s in scans])
     sensor_z = float(np.mean([s.origin[2] for s in scans]))
     has_ceiling = 2 * sum(s.sky for s in scans) <= len(scans)
-    if has_ceiling:
-        floor_z, ceiling_z = floor_and_ceiling(all_z, sensor_z, cfg.histogram_bin)
-    else:
-        floor_z, ceiling_z = floor_and_wall_top(all_z, sensor_z, cfg.histogram_bin)
+    floor_z, ceiling_z = floor_and_ceiling(all_z, sensor_z, cfg.histogram_bin, has_ceiling=has_ceiling)
     hi = ceiling_z - cfg.band_below_ceiling
     lo = min(floor_z + cfg.band_above_floor, hi - 0.10)
     stars: list[tuple[np.ndarray, np.ndarray]] = []
