@@ -70,7 +70,9 @@ class RoomModel:
 #: A RoI face is a frontier when less than this share of its image between 0.3 m above the floor and
 #: 0.3 m below the ceiling holds measured points: no wall was seen along it. (Measured on RoI faces at
 #: room ends, fast preset: walls 0.2-0.95, clutter-hidden or door faces 0.2-0.4, the sides of the
-#: view from a door frame and edges past a corner 0.0-0.07.)
+#: view from a door frame and edges past a corner 0.0-0.07.) A face that is a wall after all (hidden
+#: behind furniture, beyond a window) costs at most one scan: the voxels guessed past it that a scan
+#: should have seen and did not leave later gains (``planner.unobservable_after``).
 FRONTIER_OCCUPANCY = 0.1
 
 
@@ -78,12 +80,11 @@ def frontier_faces(faces: list[WallFace], points: np.ndarray, min_length: float 
     """The RoI faces along which no wall was measured (:data:`FRONTIER_OCCUPANCY`), at least
     ``min_length`` metres long: where the room may go on beyond what the scans saw."""
     out = []
+    margin = round(0.3 / 0.05)
     for face in faces:
         if face.length < min_length:
             continue
-        image = face_image(face, points)
-        margin = round(0.3 / 0.05)
-        band = image[margin : image.shape[0] - margin]
+        band = face_image(face, points)[margin:-margin]
         if band.size == 0 or band.mean() < FRONTIER_OCCUPANCY:
             out.append(face)
     return out
@@ -192,7 +193,8 @@ class RoomBelief:
             self.grid.ensure_covers(lo, hi)
         stats = self.grid.integrate(new.points, labels, pose, scan.depth_image(), self.scanner)
         self._relabel_occupied(working, se_faces, roi)
-        self.frontier = frontier_faces(roi.wall_faces, working)
+        # Under the sky the floor goes on outdoors: no edge of the view says the room does.
+        self.frontier = frontier_faces(roi.wall_faces, working) if roi.has_ceiling else []
         self.grid.update_occlusion(
             roi.polygon, roi.floor_z, roi.ceiling_z, se_faces, ceiling=roi.has_ceiling, frontier=self.frontier
         )

@@ -194,7 +194,10 @@ class Robot:
             raise IndexError(f"candidate {index} is not valid: {cands.count} candidates")
         watched = self.belief.occluded_structure_centres() if count_conversions else None
         roi = self.belief.roi
-        expected, _ = unobservable_after(planned, index, roi.floor_z, self.config.scanner, self.config.voxel_size)
+        grid = self.belief.grid
+        expected, _ = unobservable_after(
+            planned, index, roi.floor_z, self.config.scanner, self.config.voxel_size, grid.speculative if grid else None
+        )
         path = cands.path(index)
         heading = path[-1] - path[-2] if len(path) >= 2 else np.array([1.0, 0.0])
         self._drive(cands.points[index], float(np.arctan2(heading[1], heading[0])), float(cands.path_length[index]))

@@ -124,10 +124,23 @@ def test_floor_and_ceiling_go_on_past_a_frontier_face_and_not_past_a_wall():
         assert label_at(2.75, 1.05, z) == VoxelLabel.UNKNOWN  # farther than the reach
         assert label_at(1.05, 2.35, z) == VoxelLabel.UNKNOWN  # past a wall
     assert label_at(2.35, 1.05, 0.55) == VoxelLabel.UNKNOWN  # only the floor and ceiling go on
+    # The guesses are known as such (a scan that should see them and does not refutes them).
+    assert grid.speculative(np.array([[2.35, 1.05, 0.05], [0.55, 0.55, 0.05]])).tolist() == [True, False]
     # Without a ceiling (a room under the sky) only the floor does.
     grid.update_occlusion(polygon, 0.0, 1.0, [north], ceiling=False, frontier=[east], frontier_reach=0.5)
     assert label_at(2.35, 1.05, 0.05) == VoxelLabel.OCCLUDED_STRUCTURE
     assert label_at(2.35, 1.05, 0.95) == VoxelLabel.UNKNOWN
+
+
+def test_a_frontier_is_an_edge_without_wall():
+    from nbs_env.belief import frontier_faces
+
+    east = WallFace(np.array([2.0, 0.0]), np.array([2.0, 2.0]), 0.0, 1.0)
+    wall = np.array([[2.0, y, z] for y in np.arange(0.0, 2.0, 0.02) for z in np.arange(0.0, 1.0, 0.02)])
+    floor = np.array([[x, y, 0.0] for x in np.arange(1.9, 2.1, 0.02) for y in np.arange(0.0, 2.0, 0.02)])
+    assert frontier_faces([east], floor) == [east]  # only the floor along it: no wall seen
+    assert frontier_faces([east], np.concatenate([wall, floor])) == []
+    assert frontier_faces([WallFace(np.array([2.0, 0.0]), np.array([2.0, 0.2]), 0.0, 1.0)], floor) == []  # short
 
 
 def test_npz_round_trip_and_ply(tmp_path):

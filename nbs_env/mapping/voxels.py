@@ -120,6 +120,8 @@ class VoxelGrid:
         self.origin = origin
         self.voxel_size = float(voxel_size)
         self.labels = labels
+        # Flat indices of the voxels the last update_occlusion guessed past frontier faces.
+        self._speculative = np.zeros(0, dtype=np.int64)
 
     # ------------------------------------------------------------------ construction and growth
     @classmethod
@@ -162,6 +164,7 @@ class VoxelGrid:
         nx, ny, nz = self.shape
         grown[offset[0] : offset[0] + nx, offset[1] : offset[1] + ny, offset[2] : offset[2] + nz] = self.labels
         self.labels = grown
+        self._speculative = np.zeros(0, dtype=np.int64)  # flat indices of the old shape
         self.origin = first * s
         return offset
 
@@ -352,10 +355,12 @@ class VoxelGrid:
         near_floor = np.abs(zs - floor_z) <= half
         near_ceiling = (np.abs(zs - ceiling_z) <= half) & ceiling
         slab |= in_plan[:, :, None] & (near_floor | near_ceiling)[None, None, :]
+        self._speculative = np.zeros(0, dtype=np.int64)
         if strips:
             beyond = shapely.contains_xy(shapely.union_all(strips), gx, gy) & ~in_plan
-            past = beyond[:, :, None] & (near_floor | near_ceiling)[None, None, :]
-            labels[past & (labels == VoxelLabel.UNKNOWN)] = VoxelLabel.OCCLUDED_STRUCTURE
+            past = beyond[:, :, None] & (near_floor | near_ceiling)[None, None, :] & (labels == VoxelLabel.UNKNOWN)
+            labels[past] = VoxelLabel.OCCLUDED_STRUCTURE
+            self._speculative = np.flatnonzero(past)
         for face in se_faces:
             rel_x, rel_y = gx - face.p0[0], gy - face.p0[1]
             u = rel_x * face.direction[0] + rel_y * face.direction[1]
@@ -365,6 +370,19 @@ class VoxelGrid:
         unsensed = labels == VoxelLabel.UNKNOWN
         labels[inside & unsensed & slab] = VoxelLabel.OCCLUDED_STRUCTURE
         labels[inside & unsensed & ~slab] = VoxelLabel.OCCLUDED_CLUTTER
+
+    def speculative(self, points: np.ndarray) -> np.ndarray:
+        """(n,) bool: which of the (n, 3) world points lie in a voxel the last
+        :meth:`update_occlusion` made Occluded-structure past a frontier face (a guess, not the RoI)."""
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        out = np.zeros(len(points), dtype=bool)
+        guessed = self._speculative
+        if not len(guessed) or not len(points):
+            return out
+        idx = self.index_of(points)
+        ok = self.inside(idx)
+        out[ok] = np.isin(np.ravel_multi_index(tuple(idx[ok].T), self.shape), guessed)
+        return out
 
     # ------------------------------------------------------------------ export
     def to_npz(self, path: str | Path) -> Path:

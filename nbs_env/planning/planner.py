@@ -360,7 +360,12 @@ def _without(grid: VoxelGrid, unobservable: np.ndarray) -> np.ndarray:
 
 
 def unobservable_after(
-    planned: Plan, index: int, floor_z: float, scanner: ScannerConfig, voxel_size: float
+    planned: Plan,
+    index: int,
+    floor_z: float,
+    scanner: ScannerConfig,
+    voxel_size: float,
+    speculative: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Which voxels a scan from NVP ``index`` must convert if the gain model is right: the (n, 3)
     centres of the Occluded-structure voxels it predicted the scan to see, within the range where
@@ -369,11 +374,18 @@ def unobservable_after(
     A voxel among them that the scan leaves Occluded-structure was no surface the scanner can see
     (a face of the RoI prism with no wall behind it under a sloped roof or an open top, a shadow the
     model got wrong); :attr:`~nbs_env.belief.RoomBelief.unobservable` keeps it out of later gains,
-    so that a phantom gain cannot hold a room open to its scan cap."""
+    so that a phantom gain cannot hold a room open to its scan cap. ``speculative`` tells which
+    targets were guessed past a frontier face (:meth:`VoxelGrid.speculative`): those are checked
+    at any range."""
     sensor = sensor_positions(planned.candidates.points[index : index + 1], floor_z, scanner)[0]
     model = planned.model
     if model is None or not hasattr(model, "visible"):
         return np.zeros((0, 3)), sensor
     targets = model.targets[model.visible(sensor, scanner)]
     dense = voxel_size / np.radians(scanner.angular_step)
-    return targets[np.linalg.norm(targets - sensor, axis=1) <= dense], sensor
+    near = np.linalg.norm(targets - sensor, axis=1) <= dense
+    # A voxel guessed past a frontier face is tested at any range: a scan that should see it and
+    # does not refutes the guess (far beyond a window, an edge of the RoI outside the building).
+    if speculative is not None:
+        near |= speculative(targets)
+    return targets[near], sensor
