@@ -113,6 +113,7 @@ STEP_KEYS = {
     "structure_points": int,
     "door": bool,
     "times": dict,
+    "registration_refused": str,
 }
 
 
@@ -377,6 +378,7 @@ def test_door_frame_scans_belong_to_the_room_entered():
             estimated_position=np.array([*xy, 1.5]), predicted_gain=np.int64(3), path_length=path,
             structure_sensed_pct=10.0 * (k + 1), processing_time=0.5, acquisition_time=0.2,
             points=1000 + k, structure_points=500 + k, registration_error=(0.01 * k, 0.1 * k), times={"scan": 0.1},
+            registration_refused="",
         )  # fmt: skip
 
     steps = [
