@@ -55,13 +55,18 @@ def test_icp_recovers_known_perturbations_on_generated_storeys():
     assert good >= 0.95 * trials, errors
 
 
-def test_icp_recovers_roll_and_pitch_the_odometry_cannot_see():
-    rng = np.random.default_rng(5)
-    scene = load_scene("l_room")
-    scanner = Scanner(scene, ScannerConfig(angular_step=0.5))
+def _l_room_first_scan(seed: int):
+    """(scanner, rng, first pose, S(t) holding the first scan's noise-free points) in l_room."""
+    rng = np.random.default_rng(seed)
+    scanner = Scanner(load_scene("l_room"), ScannerConfig(angular_step=0.5))
     t0 = pose_from_xyz_rpy(3.0, 4.5, 1.5)
     cloud = AccumulatedCloud()
     cloud.add(scanner.scan(t0, rng).truth.points_world, t0[:3, 3])
+    return scanner, rng, t0, cloud
+
+
+def test_icp_recovers_roll_and_pitch_the_odometry_cannot_see():
+    scanner, rng, _, cloud = _l_room_first_scan(5)
     t1 = pose_from_xyz_rpy(2.0, 5.5, 1.5, np.radians(0.4), np.radians(-0.3), 0.5)
     initial = planar(2.0 + 0.1, 5.5 - 0.05, 0.5 + np.radians(2), 1.5)
     result = register(scanner.scan(t1, rng).points, initial, cloud)
@@ -224,12 +229,7 @@ def test_after_a_long_corridor_leg_the_walls_heading_rescues_icp():
 
 @pytest.mark.parametrize("method", ["gicp", "plane", "open3d"])
 def test_every_icp_method_recovers_a_small_perturbation(method):
-    rng = np.random.default_rng(5)
-    scene = load_scene("l_room")
-    scanner = Scanner(scene, ScannerConfig(angular_step=0.5))
-    t0 = pose_from_xyz_rpy(3.0, 4.5, 1.5)
-    cloud = AccumulatedCloud()
-    cloud.add(scanner.scan(t0, rng).truth.points_world, t0[:3, 3])
+    scanner, rng, _, cloud = _l_room_first_scan(5)
     t1 = pose_from_xyz_rpy(2.0, 5.5, 1.5, 0.0, 0.0, 0.5)
     prior = planar(2.15, 5.4, 0.55, 1.5)
     result = register(scanner.scan(t1, rng).points, prior, cloud, RegistrationConfig(method=method))
@@ -238,12 +238,7 @@ def test_every_icp_method_recovers_a_small_perturbation(method):
 
 
 def test_an_empty_scan_is_refused_and_a_refused_scan_stays_out_of_the_target():
-    rng = np.random.default_rng(0)
-    scene = load_scene("l_room")
-    scanner = Scanner(scene, ScannerConfig(angular_step=0.5))
-    t0 = pose_from_xyz_rpy(3.0, 4.5, 1.5)
-    cloud = AccumulatedCloud()
-    cloud.add(scanner.scan(t0, rng).truth.points_world, t0[:3, 3])
+    scanner, rng, t0, cloud = _l_room_first_scan(0)
     result = register(np.zeros((0, 3)), t0, cloud)
     assert not result.accepted and "points" in result.reason and np.array_equal(result.pose, t0)
     # The refused scan's points (here: a copy of the room 1 m off) join S(t) but not ICP's target.
