@@ -366,16 +366,19 @@ def _turned(pose: np.ndarray, yaw: float) -> np.ndarray:
     return out
 
 
-def _agreement(world: np.ndarray, target: _Target, cfg: RegistrationConfig) -> tuple[int, int]:
+def _agreement(
+    world: np.ndarray, target: _Target, cfg: RegistrationConfig, nearest: tuple[np.ndarray, np.ndarray] | None = None
+) -> tuple[int, int]:
     """(overlap, agreeing): source points (``world``, placed) within ``cfg.overlap_distance`` of
     S(t), and those of them within ``cfg.plane_tolerance`` of the nearest target point's plane.
+    ``nearest``: ``target.nearest(world)`` when the caller has it already.
 
     A distance to the plane, not to the point: where S(t) is sparse (surfaces seen at a grazing
     angle or from afar, 9 cm between returns at 10 m with the 0.5° pattern) a correctly placed
     point is often more than ICP's finest 8 cm from the nearest target point though on its plane;
     fitness and RMSE then condemn a correct pose.
     """
-    dist, idx = target.nearest(world)
+    dist, idx = target.nearest(world) if nearest is None else nearest
     near = dist < cfg.overlap_distance
     if not near.any():
         return 0, 0
@@ -738,8 +741,10 @@ def _attempt(src: _Source, target: _Target, start, initial, cfg: RegistrationCon
     """ICP from ``start``, the degeneracy check and the gates (against ``initial``)."""
     pose, fitness, rmse, pairs = _align(src, target, start, cfg)
     finest = cfg.max_correspondence[-1]
+    world = src.points @ pose[:3, :3].T + pose[:3, 3]
+    nearest = None
     if pairs is None:  # GICP: fitness, RMSE and pairs as open3d defines them, at the finest distance
-        dist, idx = target.nearest(src.points @ pose[:3, :3].T + pose[:3, 3])
+        nearest = dist, idx = target.nearest(world)
         inl = dist < finest
         fitness = float(inl.mean()) if len(dist) else 0.0
         rmse = float(np.sqrt(np.mean(dist[inl] ** 2))) if inl.any() else 0.0
@@ -749,6 +754,8 @@ def _attempt(src: _Source, target: _Target, start, initial, cfg: RegistrationCon
     if cfg.min_constraint > 0 and inliers:
         H = _information(src.points, target.normals, pairs, pose)
         pose, weak = _keep_constrained(pose, initial, H, cfg.min_constraint)
+        if weak:  # the pose moved: the scan's place and its nearest target points with it
+            world, nearest = src.points @ pose[:3, :3].T + pose[:3, 3], None
     moved_m, moved_deg = pose_error(pose, initial)
     reason = ""
     if cfg.min_agreement is None:
@@ -763,7 +770,7 @@ def _attempt(src: _Source, target: _Target, start, initial, cfg: RegistrationCon
     else:
         # Judged on the part of the scan S(t) can explain: a scan that sees mostly new surface (a
         # new room through a door) agrees with S(t) where they overlap; a wrong pose does not.
-        near, agreeing = _agreement(src.points @ pose[:3, :3].T + pose[:3, 3], target, cfg)
+        near, agreeing = _agreement(world, target, cfg, nearest)
         overlap, agreement = near / len(src.points), (agreeing / near if near else 0.0)
         if agreeing < cfg.min_inliers:
             reason = f"{agreeing} points on S(t)'s planes, fewer than {cfg.min_inliers}"
