@@ -90,6 +90,11 @@ class BeliefView:
         scanner position.
     grid : VoxelGrid or None
         The room's labelled voxel space V(t).
+    labels : (nx, ny, nz) uint8 or None
+        ``grid``'s labels as the planner reads them: what no scan from the room's stops could
+        measure (the blind zone under each stop) taken as Empty
+        (:func:`~nbs_env.planning.planner.unseeable_free`). The greedy navigates on it; the compared
+        methods build their maps from it, so that all share one treatment of the blind zone.
     roi : RoI or None
         The room's region of interest.
     se : (f,) bool
@@ -114,6 +119,7 @@ class BeliefView:
     new_room: bool
     scans: list[tuple[np.ndarray, np.ndarray]]
     grid: VoxelGrid | None
+    labels: np.ndarray | None
     roi: RoI | None
     se: np.ndarray
     candidates_xy: np.ndarray

@@ -272,18 +272,21 @@ class Storey:
         k = robot.config.navigation.max_candidates
         xy, length, mask = np.zeros((k, 2)), np.zeros(k), np.zeros(k, dtype=bool)
         gains, share = np.zeros(k, dtype=np.int64), np.zeros(k)
+        belief = robot.belief
+        labels = belief.grid.labels if belief.grid is not None else None
         if self.open:
             planned = robot.plan()
             cands = planned.candidates
             xy[: cands.count], length, mask = cands.points, cands.path_length.astype(float), cands.mask
             gains, share = planned.gains.copy(), planned.gain_share()
-        belief = robot.belief
+            labels = planned.labels if planned.labels is not None else labels
         return BeliefView(
             pose=robot.pose,
             room=robot.room_index,
             new_room=self.new_room,
             scans=list(self.step_scans),
             grid=belief.grid,
+            labels=labels,
             roi=belief.roi,
             se=belief.se,
             candidates_xy=xy,

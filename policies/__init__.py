@@ -37,9 +37,20 @@ def _random(seed: int | None, option: str | None = None):
     return RandomPolicy(seed)
 
 
+def _controlled(name: str, option: str | None) -> bool:
+    """Whether ``option`` asks for the controlled mode (the greedy's room completion)."""
+    if option in (None, ""):
+        return False
+    if option != "controlled":
+        raise UnknownPolicyError(
+            f"policy {name!r} takes one option, controlled ({name}:controlled), got {name}:{option}"
+        )
+    return True
+
+
 def _baseline(name: str):
     def factory(seed: int | None, option: str | None = None):
-        _no_option(name, option)
+        controlled = _controlled(name, option)
         from policies import baselines
 
         cls = {
@@ -48,7 +59,7 @@ def _baseline(name: str):
             "potthast_sukhatme": baselines.PotthastSukhatmePolicy,
             "nearest_frontier": baselines.NearestFrontierPolicy,
         }[name]
-        return cls()
+        return cls(controlled=controlled)
 
     return factory
 
@@ -56,10 +67,14 @@ def _baseline(name: str):
 def _information_gain(seed: int | None, option: str | None = None):
     from policies.baselines.information_gain import FORMULATIONS, InformationGainPolicy
 
-    if option is not None and option not in FORMULATIONS:
+    formulation, plus, mode = (option or "").partition("+")
+    controlled = _controlled("information_gain", mode) if plus else False
+    if formulation and formulation not in FORMULATIONS:
         known = ", ".join(FORMULATIONS)
-        raise UnknownPolicyError(f"information_gain:{option}: unknown formulation {option!r}; formulations: {known}")
-    return InformationGainPolicy(option or "occlusion_aware")
+        raise UnknownPolicyError(
+            f"information_gain:{option}: unknown formulation {formulation!r}; formulations: {known}"
+        )
+    return InformationGainPolicy(formulation or "occlusion_aware", controlled=controlled)
 
 
 def _learned(seed: int | None, option: str | None = None):
@@ -72,7 +87,8 @@ def _learned(seed: int | None, option: str | None = None):
     return LearnedPolicy(option)
 
 
-#: Policy names → factories taking a seed (and, after a colon, an option: ``information_gain:rear_side_voxel``).
+#: Policy names → factories taking a seed (and, after a colon, an option: ``information_gain:rear_side_voxel``,
+#: ``blaer_allen:controlled``, ``information_gain:rear_side_voxel+controlled``).
 POLICIES = {
     "greedy": _greedy,
     "stachniss_burgard": _baseline("stachniss_burgard"),
@@ -87,7 +103,9 @@ POLICIES = {
 
 def make_policy(name: str, seed: int | None = None) -> Policy:
     """A policy by name (see :data:`POLICIES`); ``name:option`` passes an option: a formulation
-    (``information_gain:rear_side_voxel``) or a checkpoint (``ppo:PATH``).
+    (``information_gain:rear_side_voxel``), the controlled mode of a compared method, which ends
+    rooms by the greedy's rule (``stachniss_burgard:controlled``,
+    ``information_gain:rear_side_voxel+controlled``), or a checkpoint (``ppo:PATH``).
 
     Raises
     ------

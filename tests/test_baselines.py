@@ -96,3 +96,155 @@ def test_oracle_sees_an_empty_box_almost_whole_and_is_monotone():
     assert plan.scans_to_reach(plan.coverage_pct[0]) == 1 and plan.scans_to_reach(100.1) is None
     # One scan misses the floor of its blind zone (1.5 m minimum range); a second one covers it.
     assert 1 < len(plan.positions) <= 4
+
+
+# ---------------------------------------------------------------------- a fair comparison (issue 15)
+PAPER_METHODS = ["stachniss_burgard", "blaer_allen", "potthast_sukhatme"]
+
+
+def _episode(policy, scene, seed: int = 0, max_scans: int = 30):
+    env = NBSEnv(config_for(make_config("fast", max_scans=max_scans), policy))
+    obs, info = env.reset(seed=seed, options={"scene": scene})
+    policy.reset()
+    done = not env.storey.open
+    while not done:
+        obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
+        done = terminated or truncated
+    env.last_info = info
+    return env
+
+
+@pytest.mark.parametrize("name", PAPER_METHODS)
+def test_each_compared_method_ends_a_small_room_by_its_own_rule_before_the_cap(name):
+    from tests.helpers import box_room
+
+    policy = make_policy(name, 0)
+    env = _episode(policy, box_room(5.0, 4.0, 2.6))
+    ends = env.storey.room_ends
+    cap = env.config.robot.max_scans_per_room
+    assert len(ends) == 1 and ends[0]["reason"] == "declared" and ends[0]["scans"] < cap, ends
+
+    # The rule, not chance: the last decision's statistic was below the method's calibrated ε and
+    # every earlier one at or above it.
+    def value(t):
+        return t["statistic"] / t["area_m2"] if policy.stop_per_m2 else t["statistic"]
+
+    assert policy.trace[-1]["stop"] and value(policy.trace[-1]) < policy.stop_below
+    assert all(value(t) >= policy.stop_below for t in policy.trace[:-1])
+    assert env.last_info["structure_sensed_pct"] > 80.0
+
+
+@pytest.mark.parametrize("name", PAPER_METHODS)
+def test_a_threshold_of_zero_never_stops_and_a_huge_one_stops_at_the_first_decision(name):
+    from tests.helpers import box_room
+
+    room = box_room(5.0, 4.0, 2.6)
+    never = make_policy(name, 0)
+    never.stop_below = 0.0
+    env = _episode(never, room, max_scans=6)
+    assert not any(t["stop"] for t in never.trace) and len(env.storey.scans) == 6
+    at_once = make_policy(name, 0)
+    at_once.stop_below = 1e12
+    env = _episode(at_once, room)
+    # Blaer & Allen visit their phase-1 views before the rule applies.
+    assert env.storey.room_ends[0]["reason"] == "declared" and at_once.trace[-1]["stop"]
+    if name != "blaer_allen":
+        assert len(env.storey.scans) == 1
+
+
+@pytest.mark.parametrize("name", [*PAPER_METHODS, "nearest_frontier", "information_gain:rear_side_voxel+controlled"])
+def test_the_controlled_mode_ends_rooms_by_the_greedys_rule(name):
+    full = name if name.endswith("controlled") else f"{name}:controlled"
+    policy = make_policy(full, 0)
+    env = _episode(policy, "l_room", max_scans=40)
+    # No "room done" action: the greedy's gain rule (or the cap, or no NVP) ends every room.
+    assert env.stop_action is None and env.config.completion == "gain"
+    assert {e["reason"] for e in env.storey.room_ends} <= {"gain", "cap", "no NVP"}
+    assert env.storey.room_ends and not any(t.get("stop") for t in getattr(policy, "trace", []))
+
+
+def test_a_bad_option_of_a_compared_method_is_refused():
+    with pytest.raises(UnknownPolicyError, match="controlled"):
+        make_policy("blaer_allen:fast")
+    with pytest.raises(UnknownPolicyError, match="controlled"):
+        make_policy("information_gain:rear_side_voxel+uncontrolled")
+    with pytest.raises(ValueError, match="stop_below"):
+        from policies.baselines import StachnissBurgardPolicy
+
+        StachnissBurgardPolicy(stop_below=float("nan"))
+
+
+def test_the_blind_zone_helper_is_the_one_the_greedy_and_the_compared_methods_read(monkeypatch):
+    """Changing :func:`nbs_env.planning.planner.unseeable_free` changes the greedy's NVPs and the
+    compared methods' maps alike."""
+    import nbs_env.planning.planner as planner
+
+    def views(name):
+        policy = make_policy(name, 0)
+        env = NBSEnv(config_for(make_config("fast", scene="l_room", max_scans=5), policy))
+        _, info = env.reset(seed=0)
+        return env, info
+
+    _, info = views("stachniss_burgard")
+    belief = info["belief"]
+    walls_only = belief.grid.labels
+    # The view takes the cone under the first stop as free: Empty voxels V(t) itself does not have.
+    assert (belief.labels == 1).sum() > (walls_only == 1).sum()
+    greedy_before = NBSEnv("fast", scene="l_room").reset(seed=0)[1]["action_mask"].sum()
+    policy = make_policy("stachniss_burgard", 0)
+    policy.observe(belief)
+    free_before = policy.free.sum()
+
+    monkeypatch.setattr(planner, "unseeable_free", lambda grid, stops, scanner, blocked=None: grid.labels.copy())
+    _, info = views("stachniss_burgard")
+    belief = info["belief"]
+    assert np.array_equal(belief.labels, belief.grid.labels)
+    policy.observe(belief)
+    assert policy.free.sum() < free_before
+    greedy_after = NBSEnv("fast", scene="l_room").reset(seed=0)[1]["action_mask"].sum()
+    assert greedy_after < greedy_before  # the unseen cone under the stop is no floor to stand on
+
+
+def test_potthast_sukhatme_sees_unknown_space_across_free_space():
+    """A ray crosses known-free voxels (OctoMap's ray casting) and reaches the unknown beyond: the
+    gain of a view over 2 m of free space onto unknown space is about what the same view has from
+    right beside it."""
+    from types import SimpleNamespace
+
+    from policies.baselines.information_gain import PotthastSukhatmePolicy, sphere_directions
+
+    policy = PotthastSukhatmePolicy()
+    shape, s = (80, 20, 20), 0.1
+    log_odds = np.full(shape, -2.0, dtype=np.float32)  # known free
+    log_odds[40:] = 0.0  # unknown from x = 4 m
+    policy.log_odds = log_odds
+    grid = SimpleNamespace(shape=shape, origin=np.zeros(3), voxel_size=s)
+    p = (1.0 / (1.0 + np.exp(-log_odds))).astype(np.float32)
+    p[log_odds < -0.2] = 0.0
+    unknown = np.abs(log_odds) < 0.2
+    dirs = sphere_directions(5.0, -40.0, 60.0)
+
+    def gain(x, probs=p):
+        return policy._gain(probs, unknown, None, grid, np.array([x, 1.0, 1.0]), dirs, 6.0, 0.0)
+
+    near, far = gain(3.5), gain(1.5)
+    assert far > 0.1 * near > 0
+    # Free voxels at their clamped p (0.12) would hide the unknown 2.5 m off almost entirely.
+    clamped = (1.0 / (1.0 + np.exp(-log_odds))).astype(np.float32)
+    assert gain(1.5, clamped) < 0.1 * far
+
+
+def test_collapse_takes_the_skin_before_a_measured_surface_as_crossed_and_nothing_else():
+    from nbs_env.labels import VoxelLabel
+    from policies.baselines._maps import collapse
+
+    labels = np.full((20, 6, 6), VoxelLabel.UNKNOWN, dtype=np.uint8)
+    labels[:9] = VoxelLabel.EMPTY  # measured free space up to x = 8
+    labels[10] = VoxelLabel.STRUCTURE  # a wall at x = 10; x = 9 is the carving's skin before it
+    labels[3:5, 5, :] = VoxelLabel.UNKNOWN  # an unseen pocket in the free space, no surface beside it
+    labels[3:5, 5, :] = VoxelLabel.UNKNOWN
+    free, occupied, unknown = collapse(labels)
+    assert free[9].all() and not unknown[9].any()  # crossed by the rays that measured the wall
+    assert unknown[11:].all()  # behind the wall: unseen
+    assert unknown[3:5, 5, :].all()  # free space beside it, but no measured surface: still unknown
+    assert occupied[10].all() and not (free & occupied).any() and (free | occupied | unknown).all()

@@ -59,6 +59,50 @@ def test_the_tiny_grid_writes_a_complete_table(tiny):
     metrics = json.loads((out / "runs" / "l_room" / "stachniss_burgard" / "seed1" / "metrics.json").read_text())
     # A structure-agnostic method processes every point it measured.
     assert metrics["processed_points"] == metrics["measured_points"] > 0
+    # methods.md: one line per policy, with how its rooms ended.
+    methods = (out / "methods.md").read_text()
+    assert "by its rule (%)" in methods and all(methods.count(f"| {p} |") == 1 for p in totals)
+
+
+def _fake_metrics(scale: float) -> dict:
+    """five_rooms metrics whose every quantity is ``scale`` times a base (rooms 1-5)."""
+    rooms = [
+        {"id": k, "name": f"r{k}", "scans": 2, "structure_sensed_pct": 90.0, "path_length_m": scale * (k + 1),
+         "processed_points": int(scale * 1000 * (k + 1)), "processing_time_s": scale * 10.0}
+        for k in range(5)
+    ]  # fmt: skip
+    steps = [{"room": k, "points": 1000} for k in range(5) for _ in range(2)]
+    return {
+        "scans": 10, "processing_time_s": scale * 50.0, "acquisition_time_s": 50.0 * scale,
+        "travel_time_s": 50.0 * scale, "structure_sensed_pct": 90.0,
+        "processed_points": int(scale * 15000), "path_length_m": scale * 15.0, "rooms": rooms, "steps": steps,
+        "room_ends": [{"room": k, "scans": 2, "reason": "declared"} for k in range(5)],
+    }  # fmt: skip
+
+
+def test_the_paper_section5_tables_compute_reductions_as_the_paper_states_them(tmp_path):
+    from train.paper_section5 import METHODS, tables
+
+    scale = {"greedy": 1.0, "stachniss_burgard": 2.0, "blaer_allen": 4.0, "potthast_sukhatme": 1.25}
+    for p in METHODS:
+        for seed in (0, 1):
+            folder = tmp_path / "runs" / "five_rooms" / p / f"seed{seed}"
+            folder.mkdir(parents=True)
+            (folder / "metrics.json").write_text(json.dumps(_fake_metrics(scale[p])))
+    text = tables(tmp_path)
+    # Against a method that takes twice as long, processes twice the points and drives twice as far,
+    # every reduction is 50%; against 4x, 75%; against 1.25x, 20%.
+    assert (
+        "| Stachniss & Burgard [12] | 33.6% | 50.0 ± 0.0% | 7.2% | 50.0 ± 0.0% | 30.0% | 50.0 ± 0.0% | #1, #2, #3 |"
+        in text
+    )
+    assert (
+        "| Blaer & Allen [3] | 83.7% | 75.0 ± 0.0% |" in text
+        and "| Potthast & Sukhatme [2] | 78.7% | 20.0 ± 0.0%" in text
+    )
+    assert text.count("| | ours |") == 4 and "0 of 10" in text  # no room ended by the cap
+    with pytest.raises(FileNotFoundError, match="controlled"):
+        tables(tmp_path, controlled=True)
 
 
 def test_rerunning_reproduces_the_table(tiny):

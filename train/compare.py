@@ -13,7 +13,10 @@ Each run plays one policy on one scene with one seed (:func:`run_one`) and retur
 - ``storeys.md``: per scene and policy, what a storey is judged by: scans, coverage, its share of the
   oracle's and the oracle's scans to it, the rooms the oracle covers (at least
   :data:`COVERABLE_ROOM_PCT` % of their surface) that the robot never scanned, the rooms ended by the
-  per-room cap, the doors abandoned (and why) and found exterior, path, registration error;
+  per-room cap and the share ended by the policy's own rule (or by having no NVP left), the doors
+  abandoned (and why) and found exterior, path, registration error;
+- ``methods.md``: per policy over every scene and seed, how its rooms ended (its own rule or the
+  per-room cap), the rooms it left unscanned, its mean scans, coverage and path;
 - ``coverage_vs_scans.png`` (one curve per policy, a band over runs) and ``path_time.png``.
 
 Runs are deterministic: the same seeds give the same table, times aside.
@@ -270,7 +273,7 @@ def _total_time(m: dict[str, Any]) -> float:
 
 
 TOTAL_KEYS = ("scans", "time_s", "structure_sensed_pct", "processed_points", "path_length_m",
-              "of_oracle_pct", "vs_oracle_scans", "unscanned_rooms", "cap_ended", "abandoned",
+              "of_oracle_pct", "vs_oracle_scans", "unscanned_rooms", "cap_ended", "rule_ended_pct", "abandoned",
               "exterior_doors", "reg_mean_cm", "reg_max_cm")  # fmt: skip
 #: A room counts as one the oracle covers when it sees at least this share (%) of its surface.
 COVERABLE_ROOM_PCT = 10.0
@@ -279,16 +282,20 @@ COVERABLE_ROOM_PCT = 10.0
 def _run_quantities(m: dict[str, Any], oracle: dict[str, Any]) -> dict[str, float]:
     """One run's storey totals, and its standing against the scene's oracle when there is one."""
     events = m.get("door_events", [])
+    ends = m.get("room_ends", [])
     q = {
         "scans": float(m["scans"]),
         "time_s": _total_time(m),
         "structure_sensed_pct": float(m["structure_sensed_pct"]),
         "processed_points": float(m["processed_points"]),
         "path_length_m": float(m["path_length_m"]),
-        "cap_ended": float(sum(1 for e in m.get("room_ends", []) if e["reason"] == "cap")),
+        "cap_ended": float(sum(1 for e in ends if e["reason"] == "cap")),
         "abandoned": float(sum(1 for e in events if e["event"] == "abandoned")),
         "exterior_doors": float(sum(1 for e in events if e["event"] == "detected" and e.get("exterior"))),
     }
+    if ends:
+        # Rooms the policy's rule ended (or that had no NVP left), not the per-room scan cap.
+        q["rule_ended_pct"] = 100.0 * sum(1 for e in ends if e["reason"] != "cap") / len(ends)
     if "registration_error" in m:
         q["reg_mean_cm"] = 100.0 * float(m["registration_error"]["mean_m"])
         q["reg_max_cm"] = 100.0 * float(m["registration_error"]["max_m"])
@@ -410,7 +417,8 @@ def _markdown(rows: list[dict[str, Any]]) -> str:
 def _storeys_markdown(rows: list[dict[str, Any]]) -> str:
     """One line per scene and policy: the figures the corpus is judged by (mean ± std over seeds)."""
     head = ["scene", "policy", "scans", "SE sensed (%)", "% of oracle max", "scans ÷ oracle's",
-            "rooms unscanned", "rooms ended by cap", "doors abandoned", "exterior doors", "path (m)",
+            "rooms unscanned", "rooms ended by cap", "rooms ended by rule (%)", "doors abandoned", "exterior doors",
+            "path (m)",
             "reg. error mean / max (cm)", "notes"]  # fmt: skip
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
@@ -429,10 +437,36 @@ def _storeys_markdown(rows: list[dict[str, Any]]) -> str:
             _cell(r.get("structure_sensed_pct"), "{:.1f}"),
         ]
         cells += [_cell(r.get("of_oracle_pct"), "{:.1f}"), _cell(r.get("vs_oracle_scans"), "{:.2f}")]
-        cells += [_cell(r.get(k), "{:.1f}") for k in ("unscanned_rooms", "cap_ended", "abandoned", "exterior_doors")]
+        cells += [_cell(r.get(k), "{:.1f}") for k in ("unscanned_rooms", "cap_ended", "rule_ended_pct")]
+        cells += [_cell(r.get(k), "{:.1f}") for k in ("abandoned", "exterior_doors")]
         cells.append(_cell(r.get("path_length_m"), "{:.1f}"))
         cells.append(" / ".join(_cell(v, "{:.1f}") for v in reg))
         cells.append("; ".join(notes))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _methods_markdown(results: Sequence[dict[str, Any]], oracles: dict[str, dict[str, Any]]) -> str:
+    """One line per policy over every scene and seed: how its rooms ended (its own rule, the
+    per-room cap) and what it left, the figures a fair comparison is judged by."""
+    head = ["policy", "runs", "rooms ended", "by its rule (%)", "by the cap", "rooms unscanned",
+            "scans / storey", "SE sensed (%)", "% of oracle max", "path (m) / storey"]  # fmt: skip
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for policy in dict.fromkeys(r["spec"]["policy"] for r in results):
+        runs = [r for r in results if r["spec"]["policy"] == policy and r["ok"]]
+        if not runs:
+            continue
+        ends = [e for r in runs for e in r["metrics"].get("room_ends", [])]
+        qs = [_run_quantities(r["metrics"], oracles.get(r["spec"]["scene"], {})) for r in runs]
+        rule = sum(1 for e in ends if e["reason"] != "cap")
+
+        def mean(key: str, qs=qs) -> str:
+            v = [q[key] for q in qs if key in q]
+            return f"{np.mean(v):.1f}" if v else "–"
+
+        cells = [policy, str(len(runs)), str(len(ends)), f"{100.0 * rule / max(1, len(ends)):.1f}",
+                 str(len(ends) - rule), str(int(sum(q.get("unscanned_rooms", 0) for q in qs))),
+                 mean("scans"), mean("structure_sensed_pct"), mean("of_oracle_pct"), mean("path_length_m")]  # fmt: skip
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
@@ -524,6 +558,7 @@ def write_outputs(
         _csv(rows, out / "table.csv")
         (out / "table.md").write_text(_markdown(rows))
         (out / "storeys.md").write_text(_storeys_markdown(rows))
+        (out / "methods.md").write_text(_methods_markdown(results, oracles))
         _plots(results, oracles, out)
     except Exception as exc:  # the runs are on disk; say what failed and where they are
         (out / "summary_error.txt").write_text(f"{type(exc).__name__}: {exc}\n\n{traceback.format_exc()}")

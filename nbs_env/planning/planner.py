@@ -5,9 +5,10 @@ with goes through here::
 
     plan(belief, pose, stops, visited, config) -> Plan(candidates, gains, structural_voxels, seconds)
 
-1. :func:`traversable_floor`: V(t) with the blind zone under each stop taken as free
-   (:func:`~nbs_env.planning.navigation.assume_blind_zone_free`, with the scanner's lowest
-   elevation *and* its minimum range), then the traversability test with the robot's footprint;
+1. :func:`unseeable_free`: V(t) with what no scan from the room's stops could measure (the blind
+   zone under each stop: the scanner's lowest elevation *and* its minimum range) taken as free,
+   the one view every method plans on; :func:`traversable_floor`: the traversability test with
+   the robot's footprint on it;
 2. the next valid positions (NVPs) on that floor
    (:func:`~nbs_env.planning.navigation.candidates`);
 3. :func:`sensor_positions`: the scanner above each NVP, at its height over the room's floor;
@@ -65,6 +66,7 @@ __all__ = [
     "sensor_positions",
     "structural_voxels",
     "traversable_floor",
+    "unseeable_free",
 ]
 
 
@@ -166,6 +168,10 @@ class Plan:
     model : GainModel or None
         The gain model the gains came from (None when gains were not predicted): the robot asks it
         which voxels the chosen NVP was to see (:func:`unobservable_after`).
+    labels : (nx, ny, nz) uint8 or None
+        The room's V(t) as every method plans on it (:func:`unseeable_free`): what no scan from the
+        room's stops could measure taken as free. The greedy navigates on it, and the compared
+        methods build their maps from it (``info["belief"].labels``).
     """
 
     candidates: Candidates
@@ -173,6 +179,7 @@ class Plan:
     structural_voxels: int
     seconds: float
     model: Any = field(default=None, repr=False, compare=False)
+    labels: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def count(self) -> int:
@@ -213,6 +220,41 @@ def structural_voxels(labels: np.ndarray) -> int:
     return int(np.count_nonzero((labels == VoxelLabel.STRUCTURE) | (labels == VoxelLabel.OCCLUDED_STRUCTURE)))
 
 
+def unseeable_free(
+    grid: VoxelGrid,
+    stops: np.ndarray | Sequence[Sequence[float]],
+    scanner: ScannerConfig,
+    blocked: Sequence[np.ndarray] | None = None,
+) -> np.ndarray:
+    """V(t)'s labels with what no scan from the room's stops could measure taken as free: the cone
+    under each stop below the scanner's lowest elevation and the ball within its minimum range
+    (:func:`~nbs_env.planning.navigation.assume_blind_zone_free`), but for what each stop's low rays
+    that returned nothing say is blocked.
+
+    This is the one treatment of the scanner's blind zone in the project: the greedy's navigation
+    (:func:`traversable_floor`) and every compared method's map (``BeliefView.labels``) read it, so
+    that no method is drawn back to the unseen cone under the stop it stands on.
+
+    Parameters
+    ----------
+    grid : VoxelGrid
+        The room's V(t).
+    stops : (m, 3) float
+        Scanner positions of the room's stops (the robot's estimates).
+    scanner : ScannerConfig
+    blocked : sequence of (k, 3) float, optional
+        Per stop, its low no-return directions (:attr:`~nbs_env.perception.roi.RoIScan.low_directions`).
+
+    Returns
+    -------
+    (nx, ny, nz) uint8
+        A copy: V(t) itself keeps its labels.
+    """
+    return assume_blind_zone_free(
+        grid.labels, grid.origin, grid.voxel_size, stops, scanner.elevation_min, scanner.min_range, blocked
+    )
+
+
 def traversable_floor(
     grid: VoxelGrid,
     floor_z: float,
@@ -221,9 +263,10 @@ def traversable_floor(
     scanner: ScannerConfig,
     navigation: NavigationConfig,
     blocked: Sequence[np.ndarray] | None = None,
+    labels: np.ndarray | None = None,
 ) -> TraversabilityMap:
-    """Where the robot may stand in the room: V(t) with each stop's blind zone free (but for what its
-    low rays that returned nothing say is blocked), then the footprint's traversability test.
+    """Where the robot may stand in the room: V(t) with each stop's blind zone free
+    (:func:`unseeable_free`), then the footprint's traversability test.
 
     Parameters
     ----------
@@ -239,10 +282,10 @@ def traversable_floor(
     navigation : NavigationConfig
     blocked : sequence of (k, 3) float, optional
         Per stop, its low no-return directions (:attr:`~nbs_env.perception.roi.RoIScan.low_directions`).
+    labels : (nx, ny, nz) uint8, optional
+        :func:`unseeable_free`'s answer for these stops, when the caller has it already.
     """
-    walkable = assume_blind_zone_free(
-        grid.labels, grid.origin, grid.voxel_size, stops, scanner.elevation_min, scanner.min_range, blocked
-    )
+    walkable = unseeable_free(grid, stops, scanner, blocked) if labels is None else labels
     return traversability(walkable, grid.origin, grid.voxel_size, floor_z, navigation, visited)
 
 
@@ -331,9 +374,8 @@ def plan(
     if grid is None or roi is None:
         raise ValueError("plan needs a belief with at least one scan")
     xy = np.asarray(pose, dtype=float)[:2, 3]
-    tmap = traversable_floor(
-        grid, roi.floor_z, stops, visited, config.scanner, config.navigation, blocked_directions(belief, stops)
-    )
+    view = unseeable_free(grid, stops, config.scanner, blocked_directions(belief, stops))
+    tmap = traversable_floor(grid, roi.floor_z, stops, visited, config.scanner, config.navigation, labels=view)
     cands = candidates(within_roi(tmap, roi.polygon), xy, config.navigation)
     gains = np.zeros(config.navigation.max_candidates, dtype=np.int64)
     model = None
@@ -342,7 +384,7 @@ def plan(
         model = make_gain_model(labels, grid.origin, grid.voxel_size, config.gain)
         sensors = sensor_positions(cands.points, roi.floor_z, config.scanner)
         gains[: cands.count] = np.asarray(model.gains(sensors, config.scanner), dtype=np.int64)
-    return Plan(cands, gains, structural_voxels(grid.labels), time.perf_counter() - t, model)
+    return Plan(cands, gains, structural_voxels(grid.labels), time.perf_counter() - t, model, view)
 
 
 def _without(grid: VoxelGrid, unobservable: np.ndarray) -> np.ndarray:

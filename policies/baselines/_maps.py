@@ -3,7 +3,9 @@
 
 The compared methods got the paper's dynamic voxel space and door detection, not its SE
 classification: here the five labels collapse to free (Empty), occupied (Clutter or Structure) and
-unknown (Unknown, Occluded-clutter, Occluded-structure).
+unknown (Unknown, Occluded-clutter, Occluded-structure), read from the planner's view of the room
+(the blind zone under each stop free, as for the greedy) with the rays' semantics of their papers
+(:func:`collapse`).
 """
 
 from __future__ import annotations
@@ -12,18 +14,78 @@ import math
 from typing import Any, ClassVar
 
 import numpy as np
+from scipy import ndimage
 
 from nbs_env.labels import VoxelLabel, is_occupied
 from nbs_env.observation import BeliefView
 
-__all__ = ["MappingPolicy", "band_columns", "collapse", "march", "sphere_directions", "visible_cells_2d"]
+__all__ = [
+    "WORKSPACE_REACH",
+    "MappingPolicy",
+    "band_columns",
+    "collapse",
+    "march",
+    "sphere_directions",
+    "visible_cells_2d",
+    "workspace",
+]
 
 
 def collapse(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(free, occupied, unknown) bool arrays of the labels' shape: what a structure-agnostic method sees."""
+    """(free, occupied, unknown) bool arrays of the labels' shape: what a structure-agnostic method
+    sees, with the rays' semantics of its papers (OctoMap's: every voxel a ray crosses before its
+    end point is free).
+
+    Our carving is conservative: a voxel is Empty only when its whole angular footprint lies before
+    the measured range, so the one-voxel skin in front of every measured surface stays unknown,
+    though the rays that measured the surface crossed it. To the compared methods that skin was
+    unknown space any view would see and none ever did: on ``generated:0`` (fast preset) it held
+    97% of Potthast & Sukhatme's best gain after ten scans of a room whose coverage had stopped
+    growing, so no stopping rule could fire. An unknown voxel with an occupied and a free voxel
+    among its six face neighbours counts here as free (crossed)."""
     free = labels == VoxelLabel.EMPTY
     occupied = is_occupied(labels)
-    return free, occupied, ~(free | occupied)
+    unknown = ~(free | occupied)
+    cross = ndimage.generate_binary_structure(3, 1)
+    crossed = unknown & ndimage.binary_dilation(occupied, cross) & ndimage.binary_dilation(free, cross)
+    free = free | crossed
+    return free, occupied, unknown & ~crossed
+
+
+#: How far past the RoI's edges the workspace reaches, metres: the room's floor and ceiling are taken
+#: to go on this far past an edge where no wall was measured, as for the greedy's frontier strips
+#: (``VoxelGrid.update_occlusion``'s ``frontier_reach``).
+WORKSPACE_REACH = 0.5
+
+
+def workspace(belief: BeliefView) -> tuple[np.ndarray, np.ndarray]:
+    """The room's dynamic workspace in its grid: the RoI prism, widened by :data:`WORKSPACE_REACH`.
+
+    The paper gave the compared methods its dynamic voxel space (their fixed-size grids were resized
+    to it at every scan); what lies outside the room's RoI is no part of the room's task, for them as
+    for the greedy, whose targets are the RoI's. Counting it kept gains up that no scan of the room
+    could take: on ``generated:0`` (fast preset), 94% of Stachniss & Burgard's best gain after ten
+    scans of its first room lay in unobserved cells outside the RoI.
+
+    Returns
+    -------
+    plan : (nx, ny) bool
+        Columns inside the widened RoI polygon.
+    prism : (nx, ny, nz) bool
+        Voxels of those columns from the floor to the ceiling (one voxel either side).
+    """
+    import shapely
+    from shapely.geometry import Polygon
+
+    grid, roi = belief.grid, belief.roi
+    s = grid.voxel_size
+    nx, ny, nz = grid.shape
+    gx, gy = np.meshgrid(grid.origin[0] + (np.arange(nx) + 0.5) * s, grid.origin[1] + (np.arange(ny) + 0.5) * s,
+                         indexing="ij")  # fmt: skip
+    plan = shapely.contains_xy(Polygon(roi.polygon).buffer(WORKSPACE_REACH), gx, gy)
+    zs = grid.origin[2] + (np.arange(nz) + 0.5) * s
+    height = (zs >= roi.floor_z - s) & (zs <= roi.ceiling_z + s)
+    return plan, plan[:, :, None] & height[None, None, :]
 
 
 def band_columns(grid, floor_z: float, lo: float = 0.3, hi: float = 2.0) -> slice:
@@ -117,12 +179,30 @@ def march(
 
 
 class MappingPolicy:
-    """Base of the compared methods: keeps per-room state from ``info["belief"]``, and ends a room by
-    its own rule (completion="policy": the last action means "room done").
+    """Base of the compared methods: keeps per-room state from ``info["belief"]`` and ends a room by
+    its own stopping rule, or, in the controlled mode, by the greedy's.
 
-    The stopping rule, common in spirit to all of them ("stop when no candidate's gain is above
-    ε"), is made scale-free: a room ends when the best utility falls below ``stop_fraction`` of the
-    best utility at the room's first decision.
+    Every method reads the planner's view of the room (``belief.labels``: what no scan from the
+    room's stops could measure taken as free, the treatment the greedy's navigation gets) and the
+    planner's NVPs, so the methods differ only where their papers do: the utility, what counts as
+    seen, and the stopping rule.
+
+    The stopping rule is the papers' "stop when no candidate's gain is above ε": a room ends when
+    :meth:`stop_statistic`, the method's best gain in its own unit (made independent of the voxel
+    size where the gain counts voxels or cells), or that per m² of the RoI's floor where
+    :attr:`stop_per_m2` says so, falls below ``stop_below``. Each method's default
+    ``stop_below`` was calibrated on generated training storeys (``python -m train.calibrate_stops``;
+    the figures are in its module docstring and ``benchmarks/README.md``).
+
+    Parameters
+    ----------
+    stop_below : float
+        ε of the stopping rule, in the method's unit; 0 never stops by the rule (the per-room scan
+        cap then ends every room).
+    controlled : bool
+        The controlled mode: the room ends by the greedy's rule (``completion="gain"``: its predicted
+        conversions below 1% of the room's structural voxels) and the method only chooses where to
+        scan, so that "where to scan" can be told from "when to stop".
     """
 
     name = "mapping"
@@ -131,14 +211,33 @@ class MappingPolicy:
     robot_overrides: ClassVar[dict[str, Any]] = {"predict_gains": False}
     #: Structure-agnostic methods process every point (METHOD §9).
     structure_aware = False
+    #: The calibrated ε (subclasses set theirs).
+    default_stop_below: ClassVar[float] = 0.0
+    #: Whether ε is per m² of the RoI's floor (the greedy's threshold is a share of its room's
+    #: structural voxels); which form each method takes was chosen by the calibration.
+    stop_per_m2: ClassVar[bool] = False
 
-    def __init__(self, stop_fraction: float = 0.05) -> None:
-        self.stop_fraction = stop_fraction
+    def __init__(self, stop_below: float | None = None, controlled: bool = False) -> None:
+        stop_below = self.default_stop_below if stop_below is None else float(stop_below)
+        if not (math.isfinite(stop_below) and stop_below >= 0):
+            raise ValueError(f"stop_below must be a finite number >= 0, got {stop_below!r}")
+        self.stop_below = stop_below
+        self.controlled = bool(controlled)
+        if self.controlled:
+            # The greedy's room completion needs its predicted gains.
+            self.env_overrides = {"completion": "gain", "expose_belief": True}  # type: ignore[misc]
+            self.robot_overrides = {}  # type: ignore[misc]
         self.reset()
 
     def reset(self) -> None:
         self._room: int | None = None
-        self._first_best: float | None = None
+        self._expected: tuple[np.ndarray, Any] | None = None
+        #: World points of the room (voxel centres, or cell centres at floor height) that a scan
+        #: was predicted to observe and did not: no longer counted (:meth:`expect`).
+        self.dropped = np.zeros((0, 3))
+        #: Per decision: the room, the method's stop statistic, the RoI's floor area and whether the
+        #: rule ended the room (what ``train.calibrate_stops`` reads).
+        self.trace: list[dict[str, Any]] = []
 
     def _belief(self, info: dict[str, Any]) -> BeliefView:
         if "belief" not in info:
@@ -148,29 +247,75 @@ class MappingPolicy:
             )
         return info["belief"]
 
+    @staticmethod
+    def labels_of(belief: BeliefView) -> np.ndarray:
+        """The room's labels as the planner reads them (``belief.labels``), else V(t)'s own."""
+        return belief.labels if getattr(belief, "labels", None) is not None else belief.grid.labels
+
     def act(self, obs: dict[str, np.ndarray], info: dict[str, Any]) -> int:
         belief = self._belief(info)
-        stop = len(belief.mask)  # the "room done" action
+        stop = len(belief.mask)  # the "room done" action (completion="policy")
         self._track_room(belief)
         self.observe(belief)
+        self._settle(belief)
         valid = np.flatnonzero(belief.mask)
         if not len(valid):
-            return stop
+            return 0 if self.controlled else stop
         utility = self.utilities(belief, valid)
-        best = int(valid[int(np.argmax(utility))])
-        top = float(np.max(utility))
-        if self._first_best is None:
-            self._first_best = max(top, 1e-9)
-        elif self.should_stop(top, belief):
-            return stop
-        return best
+        return self._choose(belief, valid, utility, self.stop_statistic(belief, valid, utility))
+
+    def _choose(self, belief: BeliefView, valid: np.ndarray, utility: np.ndarray, statistic: float) -> int:
+        """The best candidate, or "room done" when the rule fires (never in the controlled mode)."""
+        import shapely
+        from shapely.geometry import Polygon
+
+        area = float(shapely.area(Polygon(belief.roi.polygon))) if belief.roi is not None else 0.0
+        value = statistic / max(area, 1e-9) if self.stop_per_m2 else statistic
+        stop = not self.controlled and value < self.stop_below
+        self.trace.append(
+            {"room": int(belief.room), "statistic": float(statistic), "area_m2": area, "stop": bool(stop)}
+        )
+        if stop:
+            return len(belief.mask)
+        best = int(np.argmax(utility))
+        self._expected = self.expect(belief, int(valid[best]))
+        return int(valid[best])
 
     def _track_room(self, belief: BeliefView) -> None:
         """Start afresh when the robot has entered a room."""
         if belief.room != self._room or belief.new_room:
             self._room = belief.room
-            self._first_best = None
+            self._expected = None
+            self.dropped = np.zeros((0, 3))
             self.new_room(belief)
+
+    def _settle(self, belief: BeliefView) -> None:
+        """Drop what the last chosen view was to observe and did not."""
+        if self._expected is None:
+            return
+        points, memo = self._expected
+        self._expected = None
+        if len(points):
+            missed = np.asarray(points, dtype=float)[self.still_unseen(belief, points, memo)]
+            self.dropped = np.concatenate([self.dropped, missed.reshape(-1, 3)])
+
+    def dropped_mask(self, grid, plan: bool = False) -> np.ndarray:
+        """(nx, ny, nz) bool (or (nx, ny) with ``plan``) of the grid's voxels or columns holding a
+        dropped point."""
+        shape = grid.shape[:2] if plan else grid.shape
+        out = np.zeros(shape, dtype=bool)
+        if len(self.dropped):
+            idx = grid.index_of(self.dropped)[:, : len(shape)]
+            ok = np.all((idx >= 0) & (idx < np.asarray(shape)), axis=1)
+            out[tuple(idx[ok].T)] = True
+        return out
+
+    @staticmethod
+    def dense_range(belief: BeliefView) -> float:
+        """Metres within which a scan's point spacing is finer than a voxel: a voxel there that a
+        scan had in view and left unseen was not to be seen (the greedy's rule,
+        :func:`nbs_env.planning.planner.unobservable_after`)."""
+        return float(belief.grid.voxel_size / np.radians(belief.scanner.angular_step))
 
     # ------------------------------------------------------------------ hooks
     def new_room(self, belief: BeliefView) -> None:
@@ -180,9 +325,22 @@ class MappingPolicy:
         """Take in this step's measurements."""
 
     def utilities(self, belief: BeliefView, valid: np.ndarray) -> np.ndarray:
-        """(len(valid),) float: the utility of each valid candidate."""
+        """(len(valid),) float: the utility of each valid candidate (the argmax is the next scan)."""
         raise NotImplementedError
 
-    def should_stop(self, best: float, belief: BeliefView) -> bool:
-        assert self._first_best is not None
-        return best < self.stop_fraction * self._first_best
+    def stop_statistic(self, belief: BeliefView, valid: np.ndarray, utility: np.ndarray) -> float:
+        """The best gain in the method's unit, which the rule compares with ``stop_below``."""
+        return float(np.max(utility))
+
+    def expect(self, belief: BeliefView, index: int) -> tuple[np.ndarray, Any] | None:
+        """What the method's gain says candidate ``index`` will observe: ((n, 3) world points, memo).
+
+        As the greedy does (:func:`nbs_env.planning.planner.unobservable_after`), what a chosen
+        scan was predicted to observe within :meth:`dense_range` and did not is dropped from later
+        gains (:meth:`still_unseen` tells which), so that a gain no scan can take does not hold a
+        room open to its cap. None: the method predicts nothing checkable."""
+        return None
+
+    def still_unseen(self, belief: BeliefView, points: np.ndarray, memo: Any) -> np.ndarray:
+        """(n,) bool: which of :meth:`expect`'s points the scans since have left unobserved."""
+        return np.zeros(len(points), dtype=bool)

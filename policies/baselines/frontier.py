@@ -6,7 +6,10 @@
 RoI prism (the dynamic workspace the compared methods were given), projected to the floor. The next
 scan is the candidate that minimises its path length plus its distance to the nearest frontier
 column, among candidates within 3 m of one; the room ends when fewer than 1% of the RoI's columns
-are frontier. Structure-agnostic.
+are frontier. Structure-agnostic. Like the compared methods it reads the planner's view of the room
+(``belief.labels``: the blind zone under each stop free) with the rays' semantics of
+:func:`~policies.baselines._maps.collapse`; in the controlled mode (``nearest_frontier:controlled``)
+the greedy's rule ends rooms and, with no frontier left, the nearest candidate is taken.
 """
 
 from __future__ import annotations
@@ -28,29 +31,33 @@ class NearestFrontierPolicy(MappingPolicy):
 
     name = "nearest_frontier"
 
-    def __init__(self, reach: float = 3.0, stop_share: float = 0.01) -> None:
+    def __init__(self, reach: float = 3.0, stop_share: float = 0.01, controlled: bool = False) -> None:
         self.reach = reach
         self.stop_share = stop_share
-        super().__init__()
+        super().__init__(controlled=controlled)
 
     def act(self, obs, info) -> int:
         belief = self._belief(info)
         stop = len(belief.mask)
         valid = np.flatnonzero(belief.mask)
+        if not len(valid):
+            return 0 if self.controlled else stop
         frontier, columns = self._frontier(belief)
-        if not len(valid) or len(frontier) < max(1, self.stop_share * columns):
-            return stop
+        if len(frontier) < max(1, self.stop_share * columns):
+            return int(valid[int(np.argmin(belief.path_length[valid]))]) if self.controlled else stop
         d, _ = cKDTree(frontier).query(belief.candidates_xy[valid])
         ok = d <= self.reach
         if not ok.any():
-            return stop
+            ok = np.ones(len(valid), dtype=bool) if self.controlled else ok
+            if not ok.any():
+                return stop
         cost = np.where(ok, belief.path_length[valid] + d, np.inf)
         return int(valid[int(np.argmin(cost))])
 
     def _frontier(self, belief: BeliefView) -> tuple[np.ndarray, int]:
         """(f, 2) world xy of the frontier columns inside the RoI, and the RoI's column count."""
         grid, roi = belief.grid, belief.roi
-        free, _, unknown = collapse(grid.labels)
+        free, _, unknown = collapse(self.labels_of(belief))
         k0 = max(0, int(np.floor((roi.floor_z + 0.1 - grid.origin[2]) / grid.voxel_size)))
         k1 = min(grid.shape[2], int(np.ceil((roi.ceiling_z - 0.1 - grid.origin[2]) / grid.voxel_size)))
         near_free = ndimage.binary_dilation(free, structure=ndimage.generate_binary_structure(3, 1))

@@ -1,0 +1,258 @@
+"""Calibrate the compared methods' stopping thresholds on generated training storeys.
+
+The papers state their rules ("stop when no view's gain is above ε") but give no ε that transfers
+to our rooms and units, so each method's ε is chosen here, once, on training storeys (never on
+``five_rooms`` or the test storeys ``generated:10000000`` on), and recorded with the figure that
+chose it.
+
+How: each method plays every training storey with ε = 0, so that only the per-room scan cap ends a
+room, and records, per decision, its stop statistic (its best gain, :meth:`MappingPolicy.stop_statistic`)
+and what the scan it led to added to the storey's structural surface sensed. Replaying those logs,
+a threshold ε ends each room at its first decision whose statistic is below ε; it saves the scans
+after it and loses what they added. The chosen ε is the largest on the grid that loses at most
+``--max-loss`` points (default 1) of the storeys' mean coverage: the rule stops where more scans add
+little; where the rule would then end fewer than 90% of the training rooms (the rest running to the
+per-room cap, a failure of the adaptation), ε is raised to the smallest that ends 90%, and the
+coverage that costs is reported. Two forms of the rule are swept: ε in the method's unit, and ε
+per m² of the RoI's floor (as the greedy's threshold is a share of its room's structural voxels);
+the form that loses less is chosen. The replay does not see what an earlier stop changes later
+(a door found by a scan that is not taken); the verification runs of ``nbs compare`` do.
+
+Run ``python -m train.calibrate_stops --out DIR``: ``DIR/logs/*.json`` (one per method and storey),
+``DIR/calibration.json`` (the sweep and the choice per method) and ``DIR/calibration.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["log_episode", "main", "replay", "sweep"]
+
+#: The methods calibrated (policy names).
+METHODS = ("stachniss_burgard", "blaer_allen", "potthast_sukhatme")
+
+
+def log_episode(scene: str, method: str, seed: int, preset: str, max_scans: int) -> dict[str, Any]:
+    """Play ``method`` with ε = 0 on ``scene``: per decision its room, stop statistic and the storey
+    coverage (%) before and after the scan it led to."""
+    from nbs_env.env import NBSEnv
+    from nbs_env.evaluation import metrics_dict
+    from nbs_env.settings import make_config
+    from policies import make_policy
+    from train.episode import config_for
+
+    policy = make_policy(method, seed)
+    policy.stop_below = 0.0
+    env = NBSEnv(config_for(make_config(preset, scene=scene, max_scans=max_scans), policy))
+    obs, info = env.reset(seed=seed)
+    policy.reset()
+    decisions: list[dict[str, Any]] = []
+    done = not env.storey.open
+    while not done:
+        before = info["scans"]
+        n = len(policy.trace)
+        action = policy.act(obs, info)
+        obs, _, terminated, truncated, info = env.step(action)
+        done = terminated or truncated
+        if len(policy.trace) > n:
+            decisions.append({**policy.trace[-1], "scan": before})
+    metrics = metrics_dict(env.storey, scene, policy, seed)
+    coverage = [0.0] + [float(s["structure_sensed_pct"]) for s in metrics["steps"]]
+    for d in decisions:
+        # The decision's own scan is scan index d["scan"] (0-based); what it added to the storey.
+        k = d["scan"]
+        d["added_pct"] = coverage[k + 1] - coverage[k] if k + 1 < len(coverage) else 0.0
+    return {
+        "scene": scene,
+        "method": method,
+        "seed": seed,
+        "preset": preset,
+        "coverage_pct": coverage[-1],
+        "scans": metrics["scans"],
+        "room_ends": metrics.get("room_ends", []),
+        "decisions": decisions,
+    }
+
+
+def _value(d: dict[str, Any], per_m2: bool) -> float:
+    return d["statistic"] / max(d["area_m2"], 1e-9) if per_m2 else d["statistic"]
+
+
+def replay(log: dict[str, Any], epsilon: float, per_m2: bool = False) -> tuple[int, float]:
+    """(scans saved, coverage points lost) had the rule used ``epsilon`` (per m² of the RoI's floor
+    with ``per_m2``) on this logged episode."""
+    saved, lost = 0, 0.0
+    stopped: set[int] = set()
+    for d in log["decisions"]:
+        room = d["room"]
+        if room not in stopped and _value(d, per_m2) < epsilon:
+            stopped.add(room)
+        if room in stopped:
+            saved += 1
+            lost += max(0.0, d["added_pct"])
+    return saved, lost
+
+
+def sweep(
+    logs: Sequence[dict[str, Any]],
+    grid: Sequence[float],
+    max_loss: float,
+    per_m2: bool = False,
+    min_rule_share: float = 0.9,
+) -> dict[str, Any]:
+    """Per ε: the mean scans saved and coverage lost per storey, and the rooms the rule ends.
+
+    ``knee`` is the largest ε that loses at most ``max_loss`` points; ``chosen`` is the knee, or,
+    where the rule would then end fewer than ``min_rule_share`` of the rooms, the smallest ε that
+    ends that many (a room ended by the per-room cap is a failure of the adaptation)."""
+    rows = []
+    for eps in grid:
+        per = [replay(log, eps, per_m2) for log in logs]
+        rows.append(
+            {
+                "epsilon": eps,
+                "scans_saved": float(np.mean([p[0] for p in per])),
+                "coverage_lost_pct": float(np.mean([p[1] for p in per])),
+                "rooms_ended_by_rule": int(
+                    sum(len({d["room"] for d in log["decisions"] if _value(d, per_m2) < eps}) for log in logs)
+                ),
+            }
+        )
+    rooms = sum(len({d["room"] for d in log["decisions"]}) for log in logs)
+    within = [r for r in rows if r["coverage_lost_pct"] <= max_loss]
+    knee = max(within, key=lambda r: r["epsilon"]) if within else rows[0]
+    # The rule, not the cap, must end the rooms: raise ε to the smallest that ends min_rule_share.
+    enough = [r for r in rows if r["rooms_ended_by_rule"] >= min_rule_share * rooms]
+    floor = min(enough, key=lambda r: r["epsilon"]) if enough else rows[-1]
+    chosen = max(knee, floor, key=lambda r: r["epsilon"])
+    return {
+        "per_m2": per_m2,
+        "rows": rows,
+        "knee": knee,
+        "chosen": chosen,
+        "rooms": rooms,
+        "scans": float(np.mean([log["scans"] for log in logs])),
+        "coverage_pct": float(np.mean([log["coverage_pct"] for log in logs])),
+    }
+
+
+def _grid(logs: Sequence[dict[str, Any]], per_m2: bool = False, steps: int = 60) -> list[float]:
+    """Log-spaced ε from the smallest to the largest positive statistic logged."""
+    values = np.array([_value(d, per_m2) for log in logs for d in log["decisions"] if d["statistic"] > 0])
+    if not len(values):
+        return [0.0]
+    lo, hi = float(values.min()), float(values.max())
+    return [0.0, *np.geomspace(lo, hi * 1.01, steps).tolist()]
+
+
+def _markdown(results: dict[str, Any], args: argparse.Namespace) -> str:
+    lines = [
+        f"Training storeys {args.scenes}, preset {args.preset}, seed {args.seed}, ε = 0 (rooms end at the cap); "
+        f"chosen: the largest ε losing at most {args.max_loss} points of mean coverage.",
+        "",
+        "| method | form | unit | storey coverage at ε = 0 (%) | scans at ε = 0 | ε within the loss (rooms ended) "
+        "| ε | scans saved / storey | coverage lost (points) | rooms the rule ends (of all) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    units = {"stachniss_burgard": "nat·m²", "blaer_allen": "m²", "potthast_sukhatme": "nats"}
+    for method, forms in results.items():
+        for r in (forms["absolute"], forms["per_m2"]):
+            c = r["chosen"]
+            unit = units.get(method, "") + (" per m² of floor" if r["per_m2"] else "")
+            form = (
+                ("**per m²**" if r["per_m2"] else "**absolute**")
+                if forms["choice"] == r["per_m2"]
+                else ("per m²" if r["per_m2"] else "absolute")
+            )
+            lines.append(
+                f"| {method} | {form} | {unit} | {r['coverage_pct']:.1f} | {r['scans']:.1f} "
+                f"| {r['knee']['epsilon']:.4g} ({r['knee']['rooms_ended_by_rule']}) | {c['epsilon']:.4g} | "
+                f"{c['scans_saved']:.1f} | {c['coverage_lost_pct']:.2f} | {c['rooms_ended_by_rule']} of {r['rooms']} |"
+            )
+    lines += [
+        "",
+        "ε: the largest losing at most the allowed points, raised where needed to the smallest with "
+        "which the rule ends 90% of the rooms. Bold: the form chosen (the one that loses less).",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    from train.compare import expand_scenes
+
+    p = argparse.ArgumentParser(prog="python -m train.calibrate_stops", description=__doc__.splitlines()[0])
+    p.add_argument("--scenes", default="generated:0-9", help="training storeys (default generated:0-9)")
+    p.add_argument("--methods", default=",".join(METHODS))
+    p.add_argument("--preset", default="fast")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--max-scans", type=int, default=200, help="storey budget (default 200: only the room cap ends)")
+    p.add_argument("--max-loss", type=float, default=1.0, help="coverage points the rule may lose (default 1)")
+    p.add_argument("--jobs", type=int, default=1)
+    p.add_argument("--out", required=True)
+    args = p.parse_args(argv)
+    if not (math.isfinite(args.max_loss) and args.max_loss >= 0) or args.seed < 0 or args.jobs < 1:
+        print("calibrate_stops: --max-loss must be >= 0, --seed >= 0, --jobs >= 1", file=sys.stderr)
+        return 2
+    scenes = expand_scenes(args.scenes)
+    if any(s.startswith("generated:") and int(s.split(":")[1]) >= 10_000_000 for s in scenes):
+        print("calibrate_stops: generated:10000000 on are the test storeys: calibrate on others", file=sys.stderr)
+        return 2
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    out = Path(args.out)
+    (out / "logs").mkdir(parents=True, exist_ok=True)
+    tasks = [(s, m) for m in methods for s in scenes]
+    todo = []
+    for scene, method in tasks:
+        path = out / "logs" / f"{method}_{scene.replace(':', '_')}.json"
+        if not path.exists():
+            todo.append((scene, method, path))
+    from tqdm import tqdm
+
+    def write(path: Path, log: dict[str, Any]) -> None:
+        path.write_text(json.dumps(log))
+
+    if args.jobs == 1:
+        for scene, method, path in tqdm(todo, unit="run"):
+            write(path, log_episode(scene, method, args.seed, args.preset, args.max_scans))
+    else:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        with ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = {
+                pool.submit(log_episode, scene, method, args.seed, args.preset, args.max_scans): path
+                for scene, method, path in todo
+            }
+            for future in tqdm(as_completed(futures), total=len(futures), unit="run"):
+                write(futures[future], future.result())
+    results = {}
+    for method in methods:
+        logs = [json.loads((out / "logs" / f"{method}_{s.replace(':', '_')}.json").read_text()) for s in scenes]
+        forms = {
+            "absolute": sweep(logs, _grid(logs), args.max_loss),
+            "per_m2": sweep(logs, _grid(logs, True), args.max_loss, per_m2=True),
+        }
+        # The form that gives up less coverage for its choice (more rooms ended by the rule on a tie).
+        a, b = (forms[k]["chosen"] for k in ("absolute", "per_m2"))
+        forms["choice"] = (b["coverage_lost_pct"], -b["rooms_ended_by_rule"]) < (
+            a["coverage_lost_pct"],
+            -a["rooms_ended_by_rule"],
+        )
+        results[method] = forms
+    (out / "calibration.json").write_text(json.dumps({"args": vars(args), "methods": results}, indent=1))
+    text = _markdown(results, args)
+    (out / "calibration.md").write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
