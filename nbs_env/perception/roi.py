@@ -577,6 +577,11 @@ def polygon_from_image(
         x = _intersect(p, d, q, e)
         if x is None:
             return _fallback(boundary, pixel)
+        # Nearly parallel neighbours meet far off the outline (l_room, seed 3, 1° scans: 1.2 m past
+        # its corner); the corner is then where the outline turns, its nearest boundary sample.
+        gap = np.hypot(*(boundary - x).T)
+        if gap.min() > 2 * corner_distance:
+            x = boundary[int(np.argmin(gap))]
         vertices.append(x)
     vertices = _drop_small_notches(np.asarray(vertices), min_area=(2 * corner_distance) ** 2 / 2)
     poly = Polygon(vertices)
