@@ -58,6 +58,8 @@ __all__ = ["FORMULATIONS", "STOP_BELOW", "InformationGainPolicy", "PotthastSukha
 FORMULATIONS = ("occlusion_aware", "unobserved_voxel", "rear_side_voxel", "rear_side_entropy", "proximity_count")
 _HIT, _MISS, _LO, _HI = 0.85, -0.41, -2.0, 3.5
 #: ε of each formulation's stopping rule, and Potthast & Sukhatme's (``train.calibrate_stops``).
+#: Only Potthast & Sukhatme's is calibrated; the Isler et al. formulations' 1.0 is a placeholder in
+#: their units, not yet measured (``python -m train.calibrate_stops --methods information_gain:F``).
 STOP_BELOW: dict[str, float] = {
     # generated:0-9, fast preset: the rule ends 53 of 56 training rooms, at a cost of 2.1 points
     # of coverage against running every room to the cap.
