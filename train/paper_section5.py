@@ -28,6 +28,8 @@ from typing import Any
 
 import numpy as np
 
+from train.compare import _cell, _mean_std
+
 __all__ = ["PAPER", "main", "tables"]
 
 #: The methods, as ``nbs compare`` names them, and the paper's reference numbers.
@@ -104,8 +106,8 @@ def _per_run(m: dict[str, Any]) -> dict[str, Any]:
 
 
 def _ms(values: Sequence[float], fmt: str) -> str:
-    v = np.asarray(values, float)
-    return f"{fmt.format(v.mean())} ± {fmt.format(v.std(ddof=1) if len(v) > 1 else 0.0)}"
+    """``mean ± std`` over seeds, as ``nbs compare``'s tables write it."""
+    return _cell(_mean_std(values), fmt)
 
 
 def tables(folder: str | Path, controlled: bool = False) -> str:

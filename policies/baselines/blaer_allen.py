@@ -36,7 +36,7 @@ from scipy import ndimage
 
 from nbs_env.labels import VoxelLabel
 from nbs_env.observation import BeliefView
-from nbs_env.planning.planner import predict_gains, sensor_positions
+from nbs_env.planning.planner import sensor_positions
 from nbs_env.planning.visibility import GainConfig, VisibilityModel
 from policies.baselines._maps import MappingPolicy, band_columns, collapse, visible_cells_2d, workspace
 
@@ -113,28 +113,22 @@ class BlaerAllenPolicy(MappingPolicy):
         free, occupied, unknown = collapse(self.labels_of(belief))
         near_free = ndimage.binary_dilation(free, structure=ndimage.generate_binary_structure(3, 1))
         frontier = unknown & near_free & workspace(belief)[1] & ~self.dropped_mask(grid)
-        self._frontier = frontier
         # The visibility model counts OCCLUDED_STRUCTURE targets; give it the frontier as targets and
         # the occupied voxels as blockers, with no structure knowledge.
         proxy = np.where(occupied, VoxelLabel.CLUTTER, VoxelLabel.UNKNOWN).astype(np.uint8)
         proxy[frontier] = VoxelLabel.OCCLUDED_STRUCTURE
         # The paper's visibility model whatever gain the greedy is configured with: this is B&A's
-        # own utility, counted with the same lines of sight.
-        counts = predict_gains(
-            proxy, grid.origin, grid.voxel_size, belief.candidates_xy[valid], belief.roi.floor_z, belief.scanner,
-            GainConfig(model="visibility"),
-        )  # fmt: skip
-        self._proxy = proxy
-        return counts.astype(float)
+        # own utility, counted with the same lines of sight. Kept for :meth:`expect`.
+        self._model = VisibilityModel(proxy, grid.origin, grid.voxel_size, GainConfig(model="visibility"))
+        sensors = sensor_positions(belief.candidates_xy[valid], belief.roi.floor_z, belief.scanner)
+        return np.asarray(self._model.gains(sensors, belief.scanner), dtype=float)
 
     def expect(self, belief: BeliefView, index: int):
         """The boundary-unseen voxels the view sees within the dense range."""
         if self.phase == 1:
             return None
-        grid = belief.grid
-        model = VisibilityModel(self._proxy, grid.origin, grid.voxel_size, GainConfig(model="visibility"))
         sensor = sensor_positions(belief.candidates_xy[index : index + 1], belief.roi.floor_z, belief.scanner)[0]
-        targets = model.targets[model.visible(sensor, belief.scanner)]
+        targets = self._model.targets[self._model.visible(sensor, belief.scanner)]
         near = np.linalg.norm(targets - sensor, axis=1) <= self.dense_range(belief)
         return targets[near], None
 
