@@ -25,6 +25,7 @@ import numpy as np
 from nbs_env.config import Config, ScannerConfig, _finite, _require
 from nbs_env.labels import VoxelLabel
 from nbs_env.mapping.voxels import VoxelGrid
+from nbs_env.perception.faces import WallFace
 from nbs_env.perception.roi import RoI
 
 __all__ = [
@@ -99,6 +100,9 @@ class BeliefView:
         The room's region of interest.
     se : (f,) bool
         Which of ``roi.wall_faces`` are classified SE.
+    frontier : list of WallFace
+        The RoI faces along which no wall was measured, where the room may go on past what the
+        scans saw (:func:`~nbs_env.belief.frontier_faces`).
     candidates_xy : (K, 2) float
         World positions of the NVPs (zeros for padding, and all padding once the episode is over).
     path_length : (K,) float
@@ -122,6 +126,7 @@ class BeliefView:
     labels: np.ndarray | None
     roi: RoI | None
     se: np.ndarray
+    frontier: list[WallFace]
     candidates_xy: np.ndarray
     path_length: np.ndarray
     mask: np.ndarray

@@ -289,6 +289,7 @@ class Storey:
             labels=labels,
             roi=belief.roi,
             se=belief.se,
+            frontier=list(belief.frontier),
             candidates_xy=xy,
             path_length=length,
             mask=mask,

@@ -248,3 +248,33 @@ def test_collapse_takes_the_skin_before_a_measured_surface_as_crossed_and_nothin
     assert unknown[11:].all()  # behind the wall: unseen
     assert unknown[3:5, 5, :].all()  # free space beside it, but no measured surface: still unknown
     assert occupied[10].all() and not (free & occupied).any() and (free | occupied | unknown).all()
+
+
+def test_the_workspace_reaches_past_frontier_faces_only():
+    """The compared methods' region is the greedy's: the RoI, and 0.5 m past a frontier face; not past
+    a wall or a door face (a margin all round reached into the next rooms through the doors)."""
+    from types import SimpleNamespace
+
+    from nbs_env.mapping.voxels import VoxelGrid
+    from nbs_env.perception.faces import WallFace
+    from policies.baselines._maps import WORKSPACE_REACH, workspace
+
+    s = 0.1
+    grid = VoxelGrid(np.array([-1.0, -1.0, -0.2]), s, np.zeros((60, 50, 30), dtype=np.uint8))
+    square = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 3.0], [0.0, 3.0]])  # counter-clockwise
+    roi = SimpleNamespace(polygon=square, floor_z=0.0, ceiling_z=2.5)
+    east = WallFace(square[1], square[2], 0.0, 2.5)
+
+    def column(belief, x, y):
+        plan, prism = workspace(belief)
+        i, j = int((x - grid.origin[0]) / s), int((y - grid.origin[1]) / s)
+        assert prism[i, j].any() == plan[i, j]
+        return bool(plan[i, j])
+
+    walls = SimpleNamespace(grid=grid, roi=roi, frontier=[])
+    opening = SimpleNamespace(grid=grid, roi=roi, frontier=[east])
+    assert column(walls, 2.0, 1.5) and column(walls, 4.03, 1.5)  # inside, and the wall's voxels
+    assert not column(walls, 4.3, 1.5)  # past a wall: none of the room's task
+    assert column(opening, 4.3, 1.5) and column(opening, 4.0 + WORKSPACE_REACH - s, 1.5)
+    assert not column(opening, 4.0 + WORKSPACE_REACH + s, 1.5)
+    assert not column(opening, -0.3, 1.5) and not column(opening, 2.0, 3.3)  # other faces: walls
