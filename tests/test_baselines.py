@@ -268,7 +268,7 @@ def test_the_workspace_reaches_past_frontier_faces_only():
     def column(belief, x, y):
         plan, prism = workspace(belief)
         i, j = int((x - grid.origin[0]) / s), int((y - grid.origin[1]) / s)
-        assert prism[i, j].any() == plan[i, j]
+        assert prism[i, j].any() == plan[i, j]  # every column of the plan has voxels in the prism
         return bool(plan[i, j])
 
     walls = SimpleNamespace(grid=grid, roi=roi, frontier=[])
@@ -278,3 +278,9 @@ def test_the_workspace_reaches_past_frontier_faces_only():
     assert column(opening, 4.3, 1.5) and column(opening, 4.0 + WORKSPACE_REACH - s, 1.5)
     assert not column(opening, 4.0 + WORKSPACE_REACH + s, 1.5)
     assert not column(opening, -0.3, 1.5) and not column(opening, 2.0, 3.3)  # other faces: walls
+    prism = workspace(opening)[1]
+    i, j = int((4.3 - grid.origin[0]) / s), int((1.5 - grid.origin[1]) / s)
+    k_floor, k_mid, k_ceiling = (int((z - grid.origin[2]) / s) for z in (0.02, 1.25, 2.48))
+    # Past the frontier only the floor and ceiling are taken to go on; inside, the whole height counts.
+    assert prism[i, j, k_floor] and prism[i, j, k_ceiling] and not prism[i, j, k_mid]
+    assert workspace(walls)[1][int((2.0 + 1) / s), j, k_mid]

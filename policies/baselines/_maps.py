@@ -60,8 +60,8 @@ WORKSPACE_REACH = 0.5
 
 def workspace(belief: BeliefView) -> tuple[np.ndarray, np.ndarray]:
     """The room's dynamic workspace in its grid: the RoI prism (one voxel wider, for the walls'
-    voxels) and, past each frontier face, the strip :data:`WORKSPACE_REACH` deep: the greedy's
-    targets' region (``VoxelGrid.update_occlusion``).
+    voxels) and, past each frontier face, the strip :data:`WORKSPACE_REACH` deep (its floor and
+    ceiling layers in 3-D): the greedy's targets' region (``VoxelGrid.update_occlusion``).
 
     The paper gave the compared methods its dynamic voxel space (their fixed-size grids were resized
     to it at every scan); what lies outside the room's RoI is no part of the room's task, for them as
@@ -78,7 +78,8 @@ def workspace(belief: BeliefView) -> tuple[np.ndarray, np.ndarray]:
     plan : (nx, ny) bool
         Columns inside the workspace.
     prism : (nx, ny, nz) bool
-        Voxels of those columns from the floor to the ceiling (one voxel either side).
+        Voxels of the RoI's columns from the floor to the ceiling (one voxel either side), and the
+        floor's and ceiling's layers of the strips.
     """
     import shapely
     from shapely.geometry import Polygon
@@ -88,15 +89,20 @@ def workspace(belief: BeliefView) -> tuple[np.ndarray, np.ndarray]:
     nx, ny, nz = grid.shape
     gx, gy = np.meshgrid(grid.origin[0] + (np.arange(nx) + 0.5) * s, grid.origin[1] + (np.arange(ny) + 0.5) * s,
                          indexing="ij")  # fmt: skip
-    parts = [Polygon(roi.polygon).buffer(s)]
+    room = shapely.contains_xy(Polygon(roi.polygon).buffer(s), gx, gy)
+    strips = []
     for face in belief.frontier:
         p0, p1 = np.asarray(face.p0, dtype=float), np.asarray(face.p1, dtype=float)
         out = -np.asarray(face.normal, dtype=float) * WORKSPACE_REACH  # the room is on the face's left
-        parts.append(Polygon([p0, p1, p1 + out, p0 + out]))
-    plan = shapely.contains_xy(shapely.union_all(parts), gx, gy)
+        strips.append(Polygon([p0, p1, p1 + out, p0 + out]))
+    beyond = shapely.contains_xy(shapely.union_all(strips), gx, gy) & ~room if strips else np.zeros_like(room)
     zs = grid.origin[2] + (np.arange(nz) + 0.5) * s
     height = (zs >= roi.floor_z - s) & (zs <= roi.ceiling_z + s)
-    return plan, plan[:, :, None] & height[None, None, :]
+    # Past a frontier face the greedy assumes only that the floor and ceiling go on, so only their
+    # layers are targets there; the full height past it would be the next space's volume.
+    slabs = (np.abs(zs - roi.floor_z) <= s) | ((np.abs(zs - roi.ceiling_z) <= s) & getattr(roi, "has_ceiling", True))
+    prism = (room[:, :, None] & height[None, None, :]) | (beyond[:, :, None] & slabs[None, None, :])
+    return room | beyond, prism
 
 
 def band_columns(grid, floor_z: float, lo: float = 0.3, hi: float = 2.0) -> slice:
