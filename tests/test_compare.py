@@ -191,3 +191,31 @@ def test_resume_reuses_finished_runs_and_reruns_the_rest(tiny, monkeypatch):
     # Another preset or scan budget is another spec: nothing is reused.
     other = grid(**{**TINY, "max_scans": 2})
     assert compare.load_finished(resumed, other)["runs"] == {}
+
+
+def test_the_calibration_raises_epsilon_until_the_rule_ends_the_share_of_rooms():
+    """The knee (most ε losing at most the allowed points) is kept unless the rule would then end
+    fewer than the required share of rooms; then ε rises to the smallest that ends that share."""
+    from train.calibrate_stops import replay, sweep
+
+    def room(room, stats, added):
+        pairs = zip(stats, added, strict=True)
+        return [{"room": room, "statistic": s, "area_m2": 10.0, "added_pct": a} for s, a in pairs]
+
+    # Twenty rooms: the gain of room k falls to k/10 and stays; each scan after the first adds 0.01 points.
+    logs = [
+        {"decisions": room(k, [50.0, 5.0, k / 10, k / 10], [10.0, 0.01, 0.01, 0.01]), "scans": 4, "coverage_pct": 10.0}
+        for k in range(1, 21)
+    ]
+    assert replay(logs[0], 0.15) == (2, pytest.approx(0.02))  # stops at its third decision (0.1 < 0.15)
+    assert replay(logs[0], 6.0) == (3, pytest.approx(0.03))
+    grid = [0.0, 0.5, 1.05, 1.95, 2.05, 10.0]
+    loose = sweep(logs, grid, max_loss=1.0, min_rule_share=0.5)
+    strict = sweep(logs, grid, max_loss=1.0, min_rule_share=0.95)
+    # The knee: 10.0 loses 0.03 points a storey, within 1 point, and ends every room.
+    assert loose["chosen"]["epsilon"] == strict["chosen"]["epsilon"] == 10.0
+    tight = sweep(logs, grid, max_loss=0.0, min_rule_share=0.5)  # no loss allowed: the knee is ε = 0
+    assert tight["knee"]["epsilon"] == 0.0
+    assert tight["chosen"]["epsilon"] == 1.05 and tight["chosen"]["rooms_ended_by_rule"] == 10
+    assert sweep(logs, grid, max_loss=0.0, min_rule_share=0.95)["chosen"]["epsilon"] == 1.95  # 19 of 20
+    assert sweep(logs, grid, max_loss=0.0, min_rule_share=1.0)["chosen"]["epsilon"] == 2.05

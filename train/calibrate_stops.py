@@ -184,7 +184,8 @@ def _markdown(results: dict[str, Any], args: argparse.Namespace) -> str:
     lines += [
         "",
         "ε: the largest losing at most the allowed points, raised where needed to the smallest with "
-        f"which the rule ends {100 * args.rule_share:g}% of the rooms. Bold: the form chosen (the one that loses less).",
+        f"which the rule ends {100 * args.rule_share:g}% of the rooms. "
+        "Bold: the form chosen (the one that loses less).",
     ]
     return "\n".join(lines) + "\n"
 
@@ -211,7 +212,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         or args.seed < 0
         or args.jobs < 1
     ):
-        print("calibrate_stops: --max-loss must be >= 0, --rule-share in [0, 1], --seed >= 0, --jobs >= 1", file=sys.stderr)
+        print(
+            "calibrate_stops: --max-loss must be >= 0, --rule-share in [0, 1], --seed >= 0, --jobs >= 1",
+            file=sys.stderr,
+        )
         return 2
     scenes = expand_scenes(args.scenes)
     if any(s.startswith("generated:") and int(s.split(":")[1]) >= 10_000_000 for s in scenes):
