@@ -262,7 +262,7 @@ def test_the_workspace_reaches_past_frontier_faces_only():
     s = 0.1
     grid = VoxelGrid(np.array([-1.0, -1.0, -0.2]), s, np.zeros((60, 50, 30), dtype=np.uint8))
     square = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 3.0], [0.0, 3.0]])  # counter-clockwise
-    roi = SimpleNamespace(polygon=square, floor_z=0.0, ceiling_z=2.5)
+    roi = SimpleNamespace(polygon=square, floor_z=0.0, ceiling_z=2.5, has_ceiling=True)
     east = WallFace(square[1], square[2], 0.0, 2.5)
 
     def column(belief, x, y):

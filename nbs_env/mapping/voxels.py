@@ -29,7 +29,23 @@ from nbs_env.labels import LABEL_COLOURS, VoxelLabel, is_occupied
 from nbs_env.perception.faces import WallFace
 from nbs_env.sensing.pose import check_pose
 
-__all__ = ["IntegrationStats", "VoxelGrid"]
+__all__ = ["FRONTIER_REACH", "IntegrationStats", "VoxelGrid", "frontier_strips"]
+
+#: How far past a frontier face of the RoI (an edge where no wall was measured) the room's floor and
+#: ceiling are taken to go on, metres.
+FRONTIER_REACH = 0.5
+
+
+def frontier_strips(frontier: Sequence[WallFace], reach: float = FRONTIER_REACH) -> list[Polygon]:
+    """The plan rectangle ``reach`` metres deep past each frontier face (the room lies on a face's
+    left, so the strip extends along minus its normal)."""
+    strips = []
+    for face in frontier:
+        p0, p1 = np.asarray(face.p0, dtype=float), np.asarray(face.p1, dtype=float)
+        out = -np.asarray(face.normal, dtype=float) * reach
+        strips.append(Polygon([p0, p1, p1 + out, p0 + out]))
+    return strips
+
 
 _POOL_SIZES = (1, 3, 5, 7, 9, 13, 17, 25, 33, 49, 65)
 
@@ -311,7 +327,7 @@ class VoxelGrid:
         *,
         ceiling: bool = True,
         frontier: Sequence[WallFace] = (),
-        frontier_reach: float = 0.5,
+        frontier_reach: float = FRONTIER_REACH,
     ) -> None:
         """Recompute OCCLUDED_STRUCTURE / OCCLUDED_CLUTTER from the current RoI.
 
@@ -329,12 +345,9 @@ class VoxelGrid:
         s = self.voxel_size
         lo = np.array([*np.min(polygon, axis=0), floor_z]) - s
         hi = np.array([*np.max(polygon, axis=0), ceiling_z]) + s
-        strips = []
-        for face in frontier:
-            p0, p1 = np.asarray(face.p0, dtype=float), np.asarray(face.p1, dtype=float)
-            out = -np.asarray(face.normal, dtype=float) * frontier_reach  # the room is on the face's left
-            strips.append(Polygon([p0, p1, p1 + out, p0 + out]))
-            corners = np.array([p0, p1, p1 + out, p0 + out])
+        strips = frontier_strips(frontier, frontier_reach)
+        for strip in strips:
+            corners = np.asarray(strip.exterior.coords)
             lo[:2], hi[:2] = np.minimum(lo[:2], corners.min(axis=0) - s), np.maximum(hi[:2], corners.max(axis=0) + s)
         self.ensure_covers(lo, hi)
         labels = self.labels

@@ -17,6 +17,7 @@ import numpy as np
 from scipy import ndimage
 
 from nbs_env.labels import VoxelLabel, is_occupied
+from nbs_env.mapping.voxels import FRONTIER_REACH, frontier_strips
 from nbs_env.observation import BeliefView
 
 __all__ = [
@@ -52,10 +53,9 @@ def collapse(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return free, occupied, unknown & ~crossed
 
 
-#: How far past a frontier face of the RoI the workspace reaches, metres: the room's floor and ceiling
-#: are taken to go on this far past an edge where no wall was measured, as for the greedy's frontier
-#: strips (``VoxelGrid.update_occlusion``'s ``frontier_reach``).
-WORKSPACE_REACH = 0.5
+#: How far past a frontier face of the RoI the workspace reaches, metres: the greedy's
+#: (:data:`~nbs_env.mapping.voxels.FRONTIER_REACH`).
+WORKSPACE_REACH = FRONTIER_REACH
 
 
 def workspace(belief: BeliefView) -> tuple[np.ndarray, np.ndarray]:
@@ -90,17 +90,13 @@ def workspace(belief: BeliefView) -> tuple[np.ndarray, np.ndarray]:
     gx, gy = np.meshgrid(grid.origin[0] + (np.arange(nx) + 0.5) * s, grid.origin[1] + (np.arange(ny) + 0.5) * s,
                          indexing="ij")  # fmt: skip
     room = shapely.contains_xy(Polygon(roi.polygon).buffer(s), gx, gy)
-    strips = []
-    for face in belief.frontier:
-        p0, p1 = np.asarray(face.p0, dtype=float), np.asarray(face.p1, dtype=float)
-        out = -np.asarray(face.normal, dtype=float) * WORKSPACE_REACH  # the room is on the face's left
-        strips.append(Polygon([p0, p1, p1 + out, p0 + out]))
+    strips = frontier_strips(belief.frontier, WORKSPACE_REACH)
     beyond = shapely.contains_xy(shapely.union_all(strips), gx, gy) & ~room if strips else np.zeros_like(room)
     zs = grid.origin[2] + (np.arange(nz) + 0.5) * s
     height = (zs >= roi.floor_z - s) & (zs <= roi.ceiling_z + s)
     # Past a frontier face the greedy assumes only that the floor and ceiling go on, so only their
     # layers are targets there; the full height past it would be the next space's volume.
-    slabs = (np.abs(zs - roi.floor_z) <= s) | ((np.abs(zs - roi.ceiling_z) <= s) & getattr(roi, "has_ceiling", True))
+    slabs = (np.abs(zs - roi.floor_z) <= s) | ((np.abs(zs - roi.ceiling_z) <= s) & roi.has_ceiling)
     prism = (room[:, :, None] & height[None, None, :]) | (beyond[:, :, None] & slabs[None, None, :])
     return room | beyond, prism
 

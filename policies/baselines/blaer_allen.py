@@ -15,8 +15,9 @@ Phase 2: on a voxel grid, each next view maximises the number of visible "bounda
   reached through the candidate nearest to it.
 - Phase 2 counts, per candidate, the "boundary unseen" voxels (unknown voxels 6-adjacent to Empty
   ones, inside the room's dynamic workspace: the RoI and 0.5 m past its frontier faces, as for
-  the greedy's targets, :func:`~policies.baselines._maps.workspace`; phase 1's boundary is taken there too) that a line
-  of sight through the occupied voxels reaches (Embree, as the greedy's gain does).
+  the greedy's targets, :func:`~policies.baselines._maps.workspace`; phase 1's boundary is taken
+  there too) that a line of sight through the occupied voxels reaches (Embree, as the greedy's gain
+  does).
 - Both phases read the planner's view of the room (``belief.labels``): the blind zone under each
   stop is free, as for the greedy. Without it the surface of each stop's unseen cone was "boundary
   unseen" and drew the next view back beside it (every ``five_rooms`` room ran to the 12-scan cap).
