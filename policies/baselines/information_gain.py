@@ -39,8 +39,8 @@ reconstruction" (2016) compare such gains along rays:
   the formulation's own unit (nats, or P(visible)-weighted voxels; both are sums over the fixed
   ray pattern, so ε does not depend on the voxel size). No paper gives ε for our rooms;
   :data:`STOP_BELOW` was calibrated on generated training storeys (``python -m
-  train.calibrate_stops``, figures in ``benchmarks/README.md``): Potthast & Sukhatme's ends 53 of
-  56 training rooms at 2.1 points of coverage.
+  train.calibrate_stops``, figures in ``benchmarks/README.md``): Potthast & Sukhatme's ends 58 of
+  59 training rooms at 4.0 points of coverage.
 """
 
 from __future__ import annotations
