@@ -33,7 +33,7 @@ from nbs_env.planning.navigation import Geodesic, TraversabilityMap, geodesic
 from nbs_env.planning.planner import Plan, blocked_directions, plan, traversable_floor, unobservable_after
 from nbs_env.sensing.odometry import Odometry
 from nbs_env.sensing.pose import planar, pose_error, yaw_of
-from nbs_env.sensing.registration import AccumulatedCloud, RegistrationResult, register
+from nbs_env.sensing.registration import AccumulatedCloud, RegistrationResult, level_from_floor, register
 from nbs_env.sensing.scanner import Scan, Scanner
 from nbs_env.settings import RobotConfig
 from scenes import Scene
@@ -148,6 +148,9 @@ class Robot:
         if self.config.perfect_localisation:
             self.pose = self.true_pose.copy()
         else:
+            if not len(self.cloud):
+                # S(t)'s frame is the first scan's: level it by its floor (level_from_floor).
+                self.pose = level_from_floor(scan.points, self.pose, self.config.scanner.height)
             result = register(scan.points, self.pose, self.cloud, self.config.registration, travelled=path_length)
             self.pose = result.pose
         times["registration"] = time.perf_counter() - t

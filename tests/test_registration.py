@@ -9,7 +9,7 @@ from shapely.geometry import Point, Polygon
 from nbs_env.config import OdometryConfig, RegistrationConfig, ScannerConfig
 from nbs_env.sensing.odometry import Odometry, path_length
 from nbs_env.sensing.pose import planar, pose_error, pose_from_xyz_rpy, yaw_of
-from nbs_env.sensing.registration import AccumulatedCloud, register
+from nbs_env.sensing.registration import AccumulatedCloud, level_from_floor, register
 from nbs_env.sensing.scanner import Scanner
 from scenes import load_scene
 from scenes.geometry import STOREY_CLEARANCE, point_is_free
@@ -270,3 +270,28 @@ def test_a_refused_registration_is_reported_in_info_and_metrics():
     assert "S(t)'s planes" in info["registration_refused"], info["registration_refused"]
     steps = metrics_dict(env.storey, "l_room", "greedy", 0)["steps"]
     assert steps[0]["registration_refused"] == "" and "S(t)'s planes" in steps[-1]["registration_refused"]
+
+
+@pytest.mark.parametrize("scene_name", ["five_rooms", "generated:3"])
+def test_the_first_scan_is_levelled_by_the_floor_it_measured(scene_name):
+    """The map's frame is the first scan's; a stop out of level would tilt the whole map."""
+    scene = load_scene(scene_name)
+    cfg = ScannerConfig(angular_step=1.0)
+    scanner = Scanner(scene, cfg)
+    rng = np.random.default_rng(7)
+    x, y, z = scene.start
+    for roll, pitch in [(0.0, 0.0), (0.0114, 0.0), (-0.004, 0.009)]:  # up to 0.65°, as five_rooms seed 3
+        true = pose_from_xyz_rpy(x, y, z + cfg.height, roll, pitch, 0.3)
+        initial = planar(x, y, 0.3, z + cfg.height)
+        levelled = level_from_floor(scanner.scan(true, rng).points, initial, cfg.height)
+        _, rotation_deg = pose_error(levelled, true)
+        assert rotation_deg < 0.03, (roll, pitch, rotation_deg)
+        # Roll and pitch only: the heading and the position are the initial pose's.
+        assert np.allclose(levelled[:3, 3], initial[:3, 3])
+        assert abs(yaw_of(levelled) - 0.3) < np.radians(0.01)
+
+
+def test_levelling_keeps_the_pose_without_a_floor():
+    initial = planar(1.0, 2.0, 0.0, 1.5)
+    walls_only = np.random.default_rng(0).uniform(-5, 5, (5000, 3)) * [1, 1, 0.1]  # nothing 1.5 m below
+    assert np.array_equal(level_from_floor(walls_only, initial, 1.5), initial)
