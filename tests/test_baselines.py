@@ -9,7 +9,7 @@ import pytest
 from nbs_env.env import NBSEnv, make_config
 from policies import POLICIES, UnknownPolicyError, make_policy
 from policies.baselines import FORMULATIONS
-from policies.baselines._maps import march, visible_cells_2d
+from policies.baselines._maps import march, stop_value, visible_cells_2d
 from train.episode import config_for
 
 BASELINES = ["stachniss_burgard", "blaer_allen", "potthast_sukhatme", "nearest_frontier"] + [
@@ -127,7 +127,7 @@ def test_each_compared_method_ends_a_small_room_by_its_own_rule_before_the_cap(n
     # The rule, not chance: the last decision's statistic was below the method's calibrated ε and
     # every earlier one at or above it.
     def value(t):
-        return t["statistic"] / t["area_m2"] if policy.stop_per_m2 else t["statistic"]
+        return stop_value(t["statistic"], t["area_m2"], policy.stop_area_power)
 
     assert policy.trace[-1]["stop"] and value(policy.trace[-1]) < policy.stop_below
     assert all(value(t) >= policy.stop_below for t in policy.trace[:-1])

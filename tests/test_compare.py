@@ -209,6 +209,10 @@ def test_the_calibration_raises_epsilon_until_the_rule_ends_the_share_of_rooms()
     ]
     assert replay(logs[0], 0.15) == (2, pytest.approx(0.02))  # stops at its third decision (0.1 < 0.15)
     assert replay(logs[0], 6.0) == (3, pytest.approx(0.03))
+    # The forms: the statistic per (10 m²)^power. Per m², 5.0 is 0.5 (< 0.6): the second decision.
+    assert replay(logs[0], 0.6, 1.0) == (3, pytest.approx(0.03))
+    # Per √m², 5.0 is 1.58 (not below) and 0.1 is 0.032 (below): the third.
+    assert replay(logs[0], 0.6, 0.5) == (2, pytest.approx(0.02))
     grid = [0.0, 0.5, 1.05, 1.95, 2.05, 10.0]
     loose = sweep(logs, grid, max_loss=1.0, min_rule_share=0.5)
     strict = sweep(logs, grid, max_loss=1.0, min_rule_share=0.95)

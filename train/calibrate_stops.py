@@ -17,9 +17,10 @@ smallest that ends that share, and the coverage that costs is reported. The shar
 the rule must reach on storeys it was not calibrated on: an ε that ends just 90% of the training
 rooms sits at the edge of their statistics, and rooms of another kind fall past it (calibrated to
 90% on generated:0-9, Blaer & Allen's rule ended 12 of 15 of five_rooms' rooms, Potthast &
-Sukhatme's 3 of 5 in one seed). Two forms of the rule are swept: ε in the method's unit, and ε
-per m² of the RoI's floor (as the greedy's threshold is a share of its room's structural voxels);
-the form that loses less is chosen. The replay does not see what an earlier stop changes later
+Sukhatme's 3 of 5 in one seed). Three forms of the rule are swept: ε in the method's unit, ε per
+√m² of the RoI's floor (a room's walls grow with its side) and ε per m² (as the greedy's threshold
+is a share of its room's structural voxels); the form that loses least is chosen (more rooms ended
+by the rule on a tie). The replay does not see what an earlier stop changes later
 (a door found by a scan that is not taken); the verification runs of ``nbs compare`` do.
 
 Run ``python -m train.calibrate_stops --out DIR``: ``DIR/logs/*.json`` (one per method and storey),
@@ -86,18 +87,24 @@ def log_episode(scene: str, method: str, seed: int, preset: str, max_scans: int)
     }
 
 
-def _value(d: dict[str, Any], per_m2: bool) -> float:
-    return d["statistic"] / max(d["area_m2"], 1e-9) if per_m2 else d["statistic"]
+#: The forms swept, by name: the exponent of the RoI's floor area that divides the statistic.
+FORMS = {"absolute": 0.0, "per_sqrt_m2": 0.5, "per_m2": 1.0}
 
 
-def replay(log: dict[str, Any], epsilon: float, per_m2: bool = False) -> tuple[int, float]:
-    """(scans saved, coverage points lost) had the rule used ``epsilon`` (per m² of the RoI's floor
-    with ``per_m2``) on this logged episode."""
+def _value(d: dict[str, Any], power: float) -> float:
+    from policies.baselines._maps import stop_value
+
+    return stop_value(d["statistic"], d["area_m2"], power)
+
+
+def replay(log: dict[str, Any], epsilon: float, power: float = 0.0) -> tuple[int, float]:
+    """(scans saved, coverage points lost) had the rule used ``epsilon`` (per (m² of the RoI's
+    floor) to ``power``) on this logged episode."""
     saved, lost = 0, 0.0
     stopped: set[int] = set()
     for d in log["decisions"]:
         room = d["room"]
-        if room not in stopped and _value(d, per_m2) < epsilon:
+        if room not in stopped and _value(d, power) < epsilon:
             stopped.add(room)
         if room in stopped:
             saved += 1
@@ -109,7 +116,7 @@ def sweep(
     logs: Sequence[dict[str, Any]],
     grid: Sequence[float],
     max_loss: float,
-    per_m2: bool = False,
+    power: float = 0.0,
     min_rule_share: float = 0.95,
 ) -> dict[str, Any]:
     """Per ε: the mean scans saved and coverage lost per storey, and the rooms the rule ends.
@@ -119,14 +126,14 @@ def sweep(
     ends that many (a room ended by the per-room cap is a failure of the adaptation)."""
     rows = []
     for eps in grid:
-        per = [replay(log, eps, per_m2) for log in logs]
+        per = [replay(log, eps, power) for log in logs]
         rows.append(
             {
                 "epsilon": eps,
                 "scans_saved": float(np.mean([p[0] for p in per])),
                 "coverage_lost_pct": float(np.mean([p[1] for p in per])),
                 "rooms_ended_by_rule": int(
-                    sum(len({d["room"] for d in log["decisions"] if _value(d, per_m2) < eps}) for log in logs)
+                    sum(len({d["room"] for d in log["decisions"] if _value(d, power) < eps}) for log in logs)
                 ),
             }
         )
@@ -138,7 +145,7 @@ def sweep(
     floor = min(enough, key=lambda r: r["epsilon"]) if enough else rows[-1]
     chosen = max(knee, floor, key=lambda r: r["epsilon"])
     return {
-        "per_m2": per_m2,
+        "power": power,
         "rows": rows,
         "knee": knee,
         "chosen": chosen,
@@ -148,9 +155,9 @@ def sweep(
     }
 
 
-def _grid(logs: Sequence[dict[str, Any]], per_m2: bool = False, steps: int = 60) -> list[float]:
+def _grid(logs: Sequence[dict[str, Any]], power: float = 0.0, steps: int = 60) -> list[float]:
     """Log-spaced ε from the smallest to the largest positive statistic logged."""
-    values = np.array([_value(d, per_m2) for log in logs for d in log["decisions"] if d["statistic"] > 0])
+    values = np.array([_value(d, power) for log in logs for d in log["decisions"] if d["statistic"] > 0])
     if not len(values):
         return [0.0]
     lo, hi = float(values.min()), float(values.max())
@@ -167,15 +174,13 @@ def _markdown(results: dict[str, Any], args: argparse.Namespace) -> str:
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     units = {"stachniss_burgard": "nat·m²", "blaer_allen": "m²", "potthast_sukhatme": "nats"}
+    suffix = {"absolute": "", "per_sqrt_m2": " per √m² of floor", "per_m2": " per m² of floor"}
     for method, forms in results.items():
-        for r in (forms["absolute"], forms["per_m2"]):
+        for name in FORMS:
+            r = forms[name]
             c = r["chosen"]
-            unit = units.get(method, "") + (" per m² of floor" if r["per_m2"] else "")
-            form = (
-                ("**per m²**" if r["per_m2"] else "**absolute**")
-                if forms["choice"] == r["per_m2"]
-                else ("per m²" if r["per_m2"] else "absolute")
-            )
+            unit = units.get(method, "") + suffix[name]
+            form = f"**{name}**" if forms["choice"] == name else name
             lines.append(
                 f"| {method} | {form} | {unit} | {r['coverage_pct']:.1f} | {r['scans']:.1f} "
                 f"| {r['knee']['epsilon']:.4g} ({r['knee']['rooms_ended_by_rule']}) | {c['epsilon']:.4g} | "
@@ -252,15 +257,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     results = {}
     for method in methods:
         logs = [json.loads((out / "logs" / f"{method}_{s.replace(':', '_')}.json").read_text()) for s in scenes]
-        forms = {
-            "absolute": sweep(logs, _grid(logs), args.max_loss, min_rule_share=args.rule_share),
-            "per_m2": sweep(logs, _grid(logs, True), args.max_loss, per_m2=True, min_rule_share=args.rule_share),
+        forms: dict[str, Any] = {
+            name: sweep(logs, _grid(logs, power), args.max_loss, power=power, min_rule_share=args.rule_share)
+            for name, power in FORMS.items()
         }
-        # The form that gives up less coverage for its choice (more rooms ended by the rule on a tie).
-        a, b = (forms[k]["chosen"] for k in ("absolute", "per_m2"))
-        forms["choice"] = (b["coverage_lost_pct"], -b["rooms_ended_by_rule"]) < (
-            a["coverage_lost_pct"],
-            -a["rooms_ended_by_rule"],
+        # The form that gives up least coverage for its choice (more rooms ended by the rule on a tie).
+        forms["choice"] = min(
+            FORMS,
+            key=lambda k: (forms[k]["chosen"]["coverage_lost_pct"], -forms[k]["chosen"]["rooms_ended_by_rule"]),
         )
         results[method] = forms
     (out / "calibration.json").write_text(json.dumps({"args": vars(args), "methods": results}, indent=1))

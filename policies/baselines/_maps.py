@@ -27,9 +27,19 @@ __all__ = [
     "collapse",
     "march",
     "sphere_directions",
+    "stop_value",
     "visible_cells_2d",
     "workspace",
 ]
+
+
+#: The area exponents the stopping rule may take (:attr:`MappingPolicy.stop_area_power`).
+STOP_AREA_POWERS = (0.0, 0.5, 1.0)
+
+
+def stop_value(statistic: float, area_m2: float, power: float) -> float:
+    """A stop statistic in the rule's form: divided by the RoI's floor area (m²) to ``power``."""
+    return float(statistic) if power == 0 else float(statistic) / max(float(area_m2), 1e-9) ** power
 
 
 def collapse(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -202,8 +212,9 @@ class MappingPolicy:
 
     The stopping rule is the papers' "stop when no candidate's gain is above ε": a room ends when
     :meth:`stop_statistic`, the method's best gain in its own unit (made independent of the voxel
-    size where the gain counts voxels or cells), or that per m² of the RoI's floor where
-    :attr:`stop_per_m2` says so, falls below ``stop_below``. Each method's default
+    size where the gain counts voxels or cells), divided by the RoI's floor area to the power
+    :attr:`stop_area_power` (0: ε in the method's unit; 0.5: per √m²; 1: per m²), falls below
+    ``stop_below``. Each method's default
     ``stop_below`` was calibrated on generated training storeys (``python -m train.calibrate_stops``;
     the figures are in its module docstring and ``benchmarks/README.md``).
 
@@ -226,9 +237,10 @@ class MappingPolicy:
     structure_aware = False
     #: The calibrated ε (subclasses set theirs).
     default_stop_below: ClassVar[float] = 0.0
-    #: Whether ε is per m² of the RoI's floor (the greedy's threshold is a share of its room's
-    #: structural voxels); which form each method takes was chosen by the calibration.
-    stop_per_m2: ClassVar[bool] = False
+    #: ε is per (m² of the RoI's floor) to this power: 0 in the method's own unit, 1 per m² (as the
+    #: greedy's threshold is a share of its room's structural voxels), 0.5 between (a room's wall
+    #: length grows with √area); which form each method takes was chosen by the calibration.
+    stop_area_power: ClassVar[float] = 0.0
 
     def __init__(self, stop_below: float | None = None, controlled: bool = False) -> None:
         stop_below = self.default_stop_below if stop_below is None else float(stop_below)
@@ -283,7 +295,7 @@ class MappingPolicy:
         from shapely.geometry import Polygon
 
         area = float(shapely.area(Polygon(belief.roi.polygon))) if belief.roi is not None else 0.0
-        value = statistic / max(area, 1e-9) if self.stop_per_m2 else statistic
+        value = stop_value(statistic, area, self.stop_area_power)
         stop = not self.controlled and value < self.stop_below
         self.trace.append(
             {"room": int(belief.room), "statistic": float(statistic), "area_m2": area, "stop": bool(stop)}

@@ -54,7 +54,7 @@ class BlaerAllenPolicy(MappingPolicy):
 
     name = "blaer_allen"
     default_stop_below = STOP_BELOW
-    stop_per_m2 = True
+    stop_area_power = 1.0
 
     def __init__(
         self, max_grazing_deg: float = 70.0, stop_below: float | None = None, controlled: bool = False

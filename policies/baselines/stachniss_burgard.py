@@ -70,7 +70,7 @@ class StachnissBurgardPolicy(MappingPolicy):
 
     name = "stachniss_burgard"
     default_stop_below = STOP_BELOW
-    stop_per_m2 = True
+    stop_area_power = 1.0
 
     def __init__(
         self, alpha: float = 2.0, gain_voxels: float = 4.0, stop_below: float | None = None, controlled: bool = False
