@@ -31,10 +31,10 @@ reachable view has gain above ε. Structure-agnostic.
 - The stopping rule is the paper's, "no reachable view has gain above ε", with the gain Σ ΔH (no
   path cost) read in nat·m² (Σ ΔH times the cell's area, so that ε does not depend on the voxel
   size) per m² of the RoI's floor (the form the calibration chose: it lost less coverage than a
-  fixed ε for the same rooms ended). The paper gives no ε for our maps; :data:`STOP_BELOW` was
+  fixed ε or one per √m² for the same rooms ended). The paper gives no ε for our maps; :data:`STOP_BELOW` was
   calibrated on generated training storeys (``python -m train.calibrate_stops``, figures in
   ``benchmarks/README.md``). The 2-D gain does not fall while clutter shadows in the band stay
-  unseen, so the rule ends rooms only at an ε that gives up coverage: 5.3 points on the training
+  unseen, so the rule ends rooms only at an ε that gives up coverage: 4.3 points on the training
   storeys, where ending rooms within 1 point of their coverage at the cap left half of them to it.
 """
 
@@ -48,9 +48,10 @@ from policies.baselines._maps import MappingPolicy, band_columns, collapse, visi
 __all__ = ["STOP_BELOW", "StachnissBurgardPolicy"]
 
 #: ε of the stopping rule: nat·m² of expected entropy reduction per m² of the RoI's floor
-#: (``train.calibrate_stops`` on generated:0-9, fast preset: the rule ends 57 of 60 training rooms,
-#: at a cost of 5.6 points of coverage against running every room to the cap).
-STOP_BELOW = 0.00187
+#: (``train.calibrate_stops`` on generated:0-9, fast preset, at the commit that added the √m² form:
+#: the rule ends 57 of 60 training rooms, at a cost of 4.3 points of coverage against running every
+#: room to the cap).
+STOP_BELOW = 0.001152
 
 _BINS = np.linspace(0.0, 1.0, 11)
 
