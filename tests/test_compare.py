@@ -223,3 +223,18 @@ def test_the_calibration_raises_epsilon_until_the_rule_ends_the_share_of_rooms()
     assert tight["chosen"]["epsilon"] == 1.05 and tight["chosen"]["rooms_ended_by_rule"] == 10
     assert sweep(logs, grid, max_loss=0.0, min_rule_share=0.95)["chosen"]["epsilon"] == 1.95  # 19 of 20
     assert sweep(logs, grid, max_loss=0.0, min_rule_share=1.0)["chosen"]["epsilon"] == 2.05
+
+
+def test_methods_table_tells_the_rule_from_the_cap_and_from_no_nvp_left():
+    from train.compare import _methods_markdown
+
+    def run(reasons):
+        m = {"scans": 3, "structure_sensed_pct": 90.0, "processed_points": 10, "path_length_m": 5.0,
+             "processing_time_s": 1.0, "acquisition_time_s": 1.0, "travel_time_s": 1.0, "rooms": [],
+             "room_ends": [{"room": k, "scans": 1, "reason": r} for k, r in enumerate(reasons)]}  # fmt: skip
+        return {"spec": {"policy": "p", "scene": "s"}, "ok": True, "metrics": m}
+
+    text = _methods_markdown([run(["declared", "cap", "no NVP", "gain"])], {})
+    row = next(line for line in text.splitlines() if line.startswith("| p |"))
+    # 4 rooms: 2 by the rule (50%), 1 by the cap, 1 with no NVP left.
+    assert row.split(" | ")[2:6] == ["4", "50.0", "1", "1"], row
