@@ -28,9 +28,10 @@ Phase 2: on a voxel grid, each next view maximises the number of visible "bounda
   no longer counted.
 - The stopping rule is the paper's, phase 2's best count below a threshold, read in m² (the count
   times a voxel's face, so that it does not depend on the voxel size) per √m² of the RoI's floor
-  (the form the calibration chose: 6.4 points, per m² 6.6, a fixed ε 7.5). The paper gives no value for our rooms; :data:`STOP_BELOW` was
-  calibrated on generated training storeys (``python -m train.calibrate_stops``, figures in
-  ``benchmarks/README.md``): the rule ends all 59 training rooms at 6.4 points of coverage.
+  (the form the calibration chose). The paper gives no value for our rooms; :data:`STOP_BELOW`
+  was calibrated on generated training storeys (``python -m train.calibrate_stops``, figures in
+  ``benchmarks/README.md``): the rule ends all 59 training rooms at 6.4 points of coverage (per m²
+  6.6 points, a fixed ε 7.5).
 """
 
 from __future__ import annotations
