@@ -117,6 +117,9 @@ class Robot:
         self.visited: list[np.ndarray] = []
         self.stops: list[np.ndarray] = []
         self.path_length = 0.0
+        #: Metres driven since the last accepted registration: a refused scan keeps its odometry
+        #: pose, whose drift the next scan's correction gates must still allow for.
+        self.unregistered_m = 0.0
         start = np.asarray(scene.start[:2], dtype=float)
         self.true_pose = self._odometry.true_sensor_pose(start, 0.0, self._floor_z, self.config.scanner.height)
         # The robot knows where it starts (the origin of its map); it does not know its tilt.
@@ -151,8 +154,10 @@ class Robot:
             if not len(self.cloud):
                 # S(t)'s frame is the first scan's: level it by its floor (level_from_floor).
                 self.pose = level_from_floor(scan.points, self.pose, self.config.scanner.height)
-            result = register(scan.points, self.pose, self.cloud, self.config.registration, travelled=path_length)
+            travelled = self.unregistered_m + path_length
+            result = register(scan.points, self.pose, self.cloud, self.config.registration, travelled=travelled)
             self.pose = result.pose
+            self.unregistered_m = 0.0 if result.accepted else travelled
         times["registration"] = time.perf_counter() - t
         world = scan.to_world(self.pose)
         self.cloud.add(world, self.pose[:3, 3], room=self.room_index)

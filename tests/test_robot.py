@@ -96,3 +96,31 @@ def test_the_robot_finds_the_door_and_scans_the_next_room(tmp_path, plan_dict):
     assert rooms_entered == 2 and len(doors) == 1
     assert np.linalg.norm(doors[0].centre[:2] - [5.0, 2.0]) < 0.3  # the door between the rooms
     assert meter.percent(room=0) > 85.0 and meter.percent(room=1) > 85.0
+
+
+def test_a_refused_registration_leaves_its_leg_to_the_next_scans_gates(monkeypatch):
+    """A refused scan keeps its odometry pose, drift and all: the next scan's correction gates
+    must allow for every metre since the last accepted registration (corpus:example_level1 lost
+    three scans in a row to gates sized for one leg)."""
+    import dataclasses
+
+    import nbs_env.robot as robot_module
+    from nbs_env.sensing.registration import register as real
+
+    config = RobotConfig(scanner=ScannerConfig(angular_step=1.0), voxel_size=0.1)
+    robot = Robot(load_scene("office"), config, np.random.default_rng(0))
+    robot.scan()  # the first scan: S(t)'s frame, accepted
+    seen, verdicts = [], iter([False, False, True, True])
+
+    def register(points, initial, cloud, cfg, travelled=0.0):
+        seen.append(travelled)
+        result = real(points, initial, cloud, cfg, travelled=travelled)
+        accepted = next(verdicts)
+        return result if accepted else dataclasses.replace(result, pose=initial, accepted=False, reason="test")
+
+    monkeypatch.setattr(robot_module, "register", register)
+    for leg in (2.0, 3.0, 1.5, 4.0):
+        robot.scan(path_length=leg)
+    # Refused, refused, accepted, accepted: the legs add up until a scan is registered.
+    assert seen == [2.0, 5.0, 6.5, 4.0]
+    assert robot.unregistered_m == 0.0

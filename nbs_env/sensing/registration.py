@@ -519,7 +519,8 @@ def register(
         ICP's target.
     config : RegistrationConfig
     travelled : float
-        Metres driven since the last scan: the correction gates grow with it.
+        Metres driven since the last accepted registration (the robot counts a refused scan's leg
+        with the next one's, as its odometry pose kept the drift): the correction gates grow with it.
 
     Returns
     -------
