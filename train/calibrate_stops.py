@@ -39,6 +39,9 @@ from typing import Any
 
 import numpy as np
 
+from policies.baselines._maps import STOP_FORMS as FORMS
+from policies.baselines._maps import stop_value
+
 __all__ = ["log_episode", "main", "replay", "sweep"]
 
 #: The methods calibrated (policy names).
@@ -87,13 +90,7 @@ def log_episode(scene: str, method: str, seed: int, preset: str, max_scans: int)
     }
 
 
-#: The forms swept, by name: the exponent of the RoI's floor area that divides the statistic.
-FORMS = {"absolute": 0.0, "per_sqrt_m2": 0.5, "per_m2": 1.0}
-
-
 def _value(d: dict[str, Any], power: float) -> float:
-    from policies.baselines._maps import stop_value
-
     return stop_value(d["statistic"], d["area_m2"], power)
 
 

@@ -276,6 +276,9 @@ def _total_time(m: dict[str, Any]) -> float:
 TOTAL_KEYS = ("scans", "time_s", "structure_sensed_pct", "processed_points", "path_length_m",
               "of_oracle_pct", "vs_oracle_scans", "unscanned_rooms", "cap_ended", "rule_ended_pct", "abandoned",
               "exterior_doors", "reg_mean_cm", "reg_max_cm")  # fmt: skip
+#: The room ends (:attr:`nbs_env.storey.Storey.room_ends` reasons) that are a completion rule's: the
+#: greedy's ("gain") or the policy's "room done" ("declared"), not the cap's nor "no NVP".
+RULE_ENDS = ("gain", "declared")
 #: A room counts as one the oracle covers when it sees at least this share (%) of its surface.
 COVERABLE_ROOM_PCT = 10.0
 
@@ -296,7 +299,7 @@ def _run_quantities(m: dict[str, Any], oracle: dict[str, Any]) -> dict[str, floa
     }
     if ends:
         # Rooms the completion rule ended: not the per-room scan cap, nor having no NVP left.
-        q["rule_ended_pct"] = 100.0 * sum(1 for e in ends if e["reason"] in ("gain", "declared")) / len(ends)
+        q["rule_ended_pct"] = 100.0 * sum(1 for e in ends if e["reason"] in RULE_ENDS) / len(ends)
     if "registration_error" in m:
         q["reg_mean_cm"] = 100.0 * float(m["registration_error"]["mean_m"])
         q["reg_max_cm"] = 100.0 * float(m["registration_error"]["max_m"])
@@ -449,7 +452,7 @@ def _storeys_markdown(rows: list[dict[str, Any]]) -> str:
 
 def _methods_markdown(results: Sequence[dict[str, Any]], oracles: dict[str, dict[str, Any]]) -> str:
     """One line per policy over every scene and seed: how its rooms ended (its own rule, the
-    per-room cap) and what it left, the figures a fair comparison is judged by."""
+    per-room cap, no NVP left) and what it left, the figures a fair comparison is judged by."""
     head = ["policy", "runs", "rooms ended", "by its rule (%)", "by the cap", "no NVP left", "rooms unscanned",
             "scans / storey", "SE sensed (%)", "% of oracle max", "path (m) / storey"]  # fmt: skip
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -459,8 +462,7 @@ def _methods_markdown(results: Sequence[dict[str, Any]], oracles: dict[str, dict
             continue
         ends = [e for r in runs for e in r["metrics"].get("room_ends", [])]
         qs = [_run_quantities(r["metrics"], oracles.get(r["spec"]["scene"], {})) for r in runs]
-        # The room-completion rules: the greedy's ("gain") or the policy's "room done" ("declared").
-        rule = sum(1 for e in ends if e["reason"] in ("gain", "declared"))
+        rule = sum(1 for e in ends if e["reason"] in RULE_ENDS)
         cap = sum(1 for e in ends if e["reason"] == "cap")
 
         def mean(key: str, qs=qs) -> str:

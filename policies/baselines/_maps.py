@@ -21,6 +21,7 @@ from nbs_env.mapping.voxels import FRONTIER_REACH, frontier_strips
 from nbs_env.observation import BeliefView
 
 __all__ = [
+    "STOP_FORMS",
     "WORKSPACE_REACH",
     "MappingPolicy",
     "band_columns",
@@ -33,8 +34,9 @@ __all__ = [
 ]
 
 
-#: The area exponents the stopping rule may take (:attr:`MappingPolicy.stop_area_power`).
-STOP_AREA_POWERS = (0.0, 0.5, 1.0)
+#: The forms of the stopping rule, by name: the exponent of the RoI's floor area that divides the
+#: statistic (:attr:`MappingPolicy.stop_area_power`; ``train.calibrate_stops`` sweeps them all).
+STOP_FORMS = {"absolute": 0.0, "per_sqrt_m2": 0.5, "per_m2": 1.0}
 
 
 def stop_value(statistic: float, area_m2: float, power: float) -> float:

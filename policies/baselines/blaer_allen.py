@@ -36,6 +36,8 @@ Phase 2: on a voxel grid, each next view maximises the number of visible "bounda
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from scipy import ndimage
 
@@ -131,8 +133,6 @@ class BlaerAllenPolicy(MappingPolicy):
 
     def _sensing(self, belief: BeliefView):
         """The scanner as phase 2 counts with it: its range limited to where a scan resolves a voxel."""
-        import dataclasses
-
         reach = min(belief.scanner.max_range, max(self.dense_range(belief), belief.scanner.min_range))
         return dataclasses.replace(belief.scanner, max_range=reach)
 
