@@ -100,6 +100,16 @@ def test_roi_stays_out_of_the_next_room():
     assert roi_iou(roi.polygon, hall.polygon) > 0.8
 
 
+def test_a_scan_taken_again_from_a_door_frame_keeps_the_room_it_belongs_to():
+    # Three stops in the hall, then one standing in the frame of its door to the study (a visited
+    # door cell is a valid NVP): the RoI is still the hall's, the room most of its scans stand in,
+    # not whatever component the frame's own stop falls in (the study, before the vote).
+    scene = load_scene("five_rooms")
+    hall = scene.room_by_name("hall")
+    roi = roi_after(scene, [(8.0, 2.0), (6.0, 6.0), (8.5, 6.5), (9.5, 6.5)])
+    assert roi_iou(roi.polygon, hall.polygon) > 0.9
+
+
 def test_no_scans_is_an_error():
     with pytest.raises(RoIError, match="no scans"):
         compute_roi([])
