@@ -191,7 +191,7 @@ class RoomBelief:
             self.grid = VoxelGrid.covering(lo, hi, self.voxel_size)
         else:
             self.grid.ensure_covers(lo, hi)
-        stats = self.grid.integrate(new.points, labels, pose, scan.depth_image(), self.scanner)
+        stats = self.grid.integrate(new.points, labels, pose, scan.depth_image(), self.scanner, roi.floor_z)
         self._relabel_occupied(working, se_faces, roi)
         # Under the sky the floor goes on outdoors: no edge of the view says the room does.
         self.frontier = frontier_faces(roi.wall_faces, working) if roi.has_ceiling else []

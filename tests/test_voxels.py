@@ -8,8 +8,10 @@ from helpers import box_ranges, box_room
 
 from nbs_env.config import ScannerConfig
 from nbs_env.labels import VoxelLabel
-from nbs_env.mapping.voxels import VoxelGrid
+from nbs_env.mapping.voxels import TRACE_HEIGHT, VoxelGrid
 from nbs_env.perception.faces import WallFace
+from nbs_env.planning.navigation import NavigationConfig
+from nbs_env.planning.planner import traversable_floor
 from nbs_env.sensing.pose import pose_from_xyz_rpy
 from nbs_env.sensing.scanner import Scanner
 
@@ -165,3 +167,35 @@ def test_bad_grid_input():
         VoxelGrid([0, 0, 0], 0.1, np.zeros((2, 2, 2)))
     with pytest.raises(ValueError, match="no VoxelLabel"):
         VoxelGrid([0, 0, 0], 0.1, np.full((2, 2, 2), 9, np.uint8))
+
+
+def test_rays_down_to_the_floor_mark_the_voxels_they_crossed_and_navigation_reads_them_free():
+    # A long empty room at the fast preset's 1 degree and 10 cm: the carving's pooled windows leave
+    # voxels a hand's width above the floor unsensed in stripes, where rays that meet the floor in
+    # front of a voxel share its window; the rays that crossed them say they are free.
+    a, b, h = 9.0, 3.0, 2.5
+    scene = box_room(a, b, h)
+    cfg = ScannerConfig(angular_step=1.0, range_noise=0.0)
+    pose = pose_from_xyz_rpy(1.0, 1.5, 1.5, 0.0, 0.0, 0.0)
+    scan = Scanner(scene, cfg).scan(pose)
+    grid = VoxelGrid.covering([-0.3, -0.3, -0.3], [a + 0.3, b + 0.3, h + 0.3], 0.1)
+    grid.integrate(scan.to_world(pose), np.ones(len(scan), bool), pose, scan.depth_image(), cfg, floor_z=0.0)
+    layer = 4  # the voxels from 0.1 to 0.2 m, the lowest of navigation's height band
+    assert grid.origin[2] + layer * 0.1 == pytest.approx(0.1)
+    row = slice(round((3.0 + 0.3) / 0.1), round((6.0 + 0.3) / 0.1))  # 2-5 m from the scanner
+    centre = round((1.5 + 0.3) / 0.1)
+    along = grid.labels[row, centre - 5 : centre + 5, layer]
+    assert np.mean(along != VoxelLabel.EMPTY) > 0.1  # what the carving leaves
+    assert grid.crossed[row, centre - 5 : centre + 5, layer].all()
+    # Nothing crossed lies outside the room, at or below the floor, or above the traced height.
+    crossed = grid.centres(np.argwhere(grid.crossed))
+    assert np.all((crossed[:, :2] > 0) & (crossed[:, :2] < [a, b]))
+    assert crossed[:, 2].min() > 0 and crossed[:, 2].max() < TRACE_HEIGHT + 0.1
+    # Navigation reads them free: the room's middle is walkable from 1.5 m to 5 m out.
+    tmap = traversable_floor(grid, 0.0, [pose[:3, 3]], [pose[:2, 3]], cfg, NavigationConfig())
+    cells = tmap.cell_of(np.column_stack([np.arange(2.5, 6.0, 0.1), np.full(35, 1.5)]))
+    assert tmap.free[cells[:, 0], cells[:, 1]].all()
+    # Without the rays' evidence the same map is cut across.
+    grid.crossed[:] = False
+    cut = traversable_floor(grid, 0.0, [pose[:3, 3]], [pose[:2, 3]], cfg, NavigationConfig())
+    assert not cut.free[cells[:, 0], cells[:, 1]].all()

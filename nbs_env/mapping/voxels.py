@@ -9,6 +9,12 @@ estimate, its RoI. Labels are :class:`~nbs_env.labels.VoxelLabel` values.
   ray that could cross it went beyond it.
 - **Occupied** voxels take STRUCTURE or CLUTTER from the labels of their points (Structure wins).
   Occupied voxels are never carved again: a return is stronger evidence than a pass-through.
+- **Crossed** (navigation's evidence near the floor): the voxels within :data:`TRACE_HEIGHT` of the
+  floor that a measured ray crossed on its way down to its return. Projective carving cannot tell
+  these apart from the floor at grazing angles: a voxel a hand's width above the floor shares its
+  pooled window with rays that meet the floor in front of it, so it stays unsensed in stripes at the
+  spacing of the scanner's rings. Navigation reads them as free (``VoxelGrid.crossed``); V(t)'s
+  labels, and so the gains, keep the conservative carving.
 - **Occluded** labels are recomputed from the current RoI and its SE faces after each scan: an
   unsensed voxel inside the RoI prism is OCCLUDED_STRUCTURE when an SE face passes through it, else
   OCCLUDED_CLUTTER.
@@ -29,11 +35,16 @@ from nbs_env.labels import LABEL_COLOURS, VoxelLabel, is_occupied
 from nbs_env.perception.faces import WallFace
 from nbs_env.sensing.pose import check_pose
 
-__all__ = ["FRONTIER_REACH", "IntegrationStats", "VoxelGrid", "frontier_strips"]
+__all__ = ["FRONTIER_REACH", "TRACE_HEIGHT", "IntegrationStats", "VoxelGrid", "frontier_strips"]
 
 #: How far past a frontier face of the RoI (an edge where no wall was measured) the room's floor and
 #: ceiling are taken to go on, metres.
 FRONTIER_REACH = 0.5
+
+#: How far above the floor rays are traced voxel by voxel for :attr:`VoxelGrid.crossed`, metres. It
+#: spans the lowest voxels of navigation's height band (from 10 cm above the floor) at voxel sizes up
+#: to 10 cm, where the projective carving leaves them unsensed; higher voxels it carves reliably.
+TRACE_HEIGHT = 0.35
 
 
 def frontier_strips(frontier: Sequence[WallFace], reach: float = FRONTIER_REACH) -> list[Polygon]:
@@ -136,6 +147,8 @@ class VoxelGrid:
         self.origin = origin
         self.voxel_size = float(voxel_size)
         self.labels = labels
+        #: (nx, ny, nz) bool: voxels near the floor that a measured ray crossed (module docstring).
+        self.crossed = np.zeros(labels.shape, dtype=bool)
         # Flat indices of the voxels the last update_occlusion guessed past frontier faces.
         self._speculative = np.zeros(0, dtype=np.int64)
 
@@ -178,8 +191,12 @@ class VoxelGrid:
             return offset
         grown = np.zeros(tuple(last - first), dtype=np.uint8)
         nx, ny, nz = self.shape
-        grown[offset[0] : offset[0] + nx, offset[1] : offset[1] + ny, offset[2] : offset[2] + nz] = self.labels
+        inner = (slice(offset[0], offset[0] + nx), slice(offset[1], offset[1] + ny), slice(offset[2], offset[2] + nz))
+        grown[inner] = self.labels
         self.labels = grown
+        crossed = np.zeros(grown.shape, dtype=bool)
+        crossed[inner] = self.crossed
+        self.crossed = crossed
         self._speculative = np.zeros(0, dtype=np.int64)  # flat indices of the old shape
         self.origin = first * s
         return offset
@@ -209,6 +226,7 @@ class VoxelGrid:
         pose: np.ndarray,
         depth: np.ndarray,
         config: ScannerConfig,
+        floor_z: float | None = None,
     ) -> IntegrationStats:
         """Carve free space and mark occupied voxels from one registered scan.
 
@@ -224,6 +242,9 @@ class VoxelGrid:
             The scan's depth image (NaN where no return).
         config : ScannerConfig
             The scanner's pattern.
+        floor_z : float, optional
+            The floor's height as the robot measured it; when given, the rays that end within
+            :data:`TRACE_HEIGHT` of it mark what they crossed there (:attr:`crossed`).
         """
         points = np.asarray(points, dtype=float)
         structure = np.asarray(structure, dtype=bool)
@@ -235,6 +256,8 @@ class VoxelGrid:
         # The grid spans the RoI plus a margin (the caller grows it); points beyond it are not mapped.
         carved = self._carve(T, depth, config)
         occupied, new_structure = self._occupy(points, structure)
+        if floor_z is not None:
+            self._trace_low(points, T[:3, 3], float(floor_z))
         return IntegrationStats(carved=carved, occupied=occupied, structure=new_structure)
 
     def _carve(self, T: np.ndarray, depth: np.ndarray, config: ScannerConfig) -> int:
@@ -292,6 +315,34 @@ class VoxelGrid:
         newly = int(np.count_nonzero(carve & (block != VoxelLabel.EMPTY)))
         block[carve] = VoxelLabel.EMPTY
         return newly
+
+    def _trace_low(self, points: np.ndarray, centre: np.ndarray, floor_z: float) -> None:
+        """Mark in :attr:`crossed` the voxels that the rays to ``points`` cross below
+        ``floor_z + TRACE_HEIGHT``, sampled every half voxel along each ray and stopping a voxel's
+        half diagonal short of the return (its own voxel is not crossed)."""
+        s = self.voxel_size
+        top = floor_z + TRACE_HEIGHT
+        low = points[points[:, 2] < top]
+        d = low - centre
+        drop = -d[:, 2]
+        length = np.linalg.norm(d, axis=1)
+        ok = drop > 1e-6
+        d, drop, length = d[ok], drop[ok], length[ok]
+        # Distance along the ray where it comes down to ``top``, and where it stops short of its return.
+        enter = np.maximum((centre[2] - top) / drop, 0.0) * length
+        leave = length - s * np.sqrt(3) / 2
+        step = s / 2
+        count = np.maximum(np.floor((leave - enter) / step).astype(np.int64) + 1, 0)
+        total = int(count.sum())
+        if total == 0:
+            return
+        ray = np.repeat(np.arange(len(d)), count)
+        first = np.cumsum(count) - count
+        along = enter[ray] + (np.arange(total) - first[ray]) * step
+        samples = centre + d[ray] * (along / length[ray])[:, None]
+        idx = self.index_of(samples)
+        idx = idx[self.inside(idx)]
+        self.crossed[idx[:, 0], idx[:, 1], idx[:, 2]] = True
 
     def _occupy(self, points: np.ndarray, structure: np.ndarray) -> tuple[int, int]:
         if not len(points):

@@ -266,7 +266,8 @@ def traversable_floor(
     labels: np.ndarray | None = None,
 ) -> TraversabilityMap:
     """Where the robot may stand in the room: V(t) with each stop's blind zone free
-    (:func:`unseeable_free`), then the footprint's traversability test.
+    (:func:`unseeable_free`) and the unsensed voxels near the floor that a measured ray crossed
+    free (:attr:`VoxelGrid.crossed`), then the footprint's traversability test.
 
     Parameters
     ----------
@@ -286,6 +287,9 @@ def traversable_floor(
         :func:`unseeable_free`'s answer for these stops, when the caller has it already.
     """
     walkable = unseeable_free(grid, stops, scanner, blocked) if labels is None else labels
+    crossed = grid.crossed & ((walkable == VoxelLabel.UNKNOWN) | (walkable == VoxelLabel.OCCLUDED_CLUTTER))
+    if crossed.any():
+        walkable = np.where(crossed, np.uint8(VoxelLabel.EMPTY), walkable)
     return traversability(walkable, grid.origin, grid.voxel_size, floor_z, navigation, visited)
 
 
