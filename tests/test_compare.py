@@ -223,6 +223,20 @@ def test_the_calibration_raises_epsilon_until_the_rule_ends_the_share_of_rooms()
     assert tight["chosen"]["epsilon"] == 1.05 and tight["chosen"]["rooms_ended_by_rule"] == 10
     assert sweep(logs, grid, max_loss=0.0, min_rule_share=0.95)["chosen"]["epsilon"] == 1.95  # 19 of 20
     assert sweep(logs, grid, max_loss=0.0, min_rule_share=1.0)["chosen"]["epsilon"] == 2.05
+    # A room the session ended first ("no NVP") is not the rule's to end: its high gain sets no ε.
+    from train.calibrate_stops import rooms_to_end
+
+    stuck = {
+        "decisions": room(99, [50.0, 40.0], [10.0, 1.0]),
+        "scans": 2,
+        "coverage_pct": 10.0,
+        "room_ends": [{"room": 99, "scans": 2, "reason": "no NVP"}],
+    }
+    assert rooms_to_end(stuck) == set() and rooms_to_end(logs[0]) == {1}
+    with_stuck = sweep([*logs, stuck], grid, max_loss=0.0, min_rule_share=1.0)
+    assert with_stuck["chosen"]["epsilon"] == 2.05 and with_stuck["rooms"] == 20
+    stuck["room_ends"][0]["reason"] = "cap"  # ran to the cap: the rule must end it; no ε on the grid does
+    assert sweep([*logs, stuck], grid, max_loss=0.0, min_rule_share=1.0)["chosen"]["epsilon"] == 10.0
 
 
 def test_methods_table_tells_the_rule_from_the_cap_and_from_no_nvp_left():
