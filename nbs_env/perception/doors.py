@@ -12,7 +12,10 @@ Two things the robot's own scans do to a door, which the search allows for:
   is then seen only from farther scans, at grazing incidence, where consecutive azimuths land
   several pixels apart on the wall. Columns with no lintel point would cut the opening into pieces
   narrower than a door, so gaps of up to ``fill_gap`` in each row of the face image are filled
-  first (an opening itself is at least ``min_width`` wide and stays empty).
+  first (an opening itself is at least ``min_width`` wide and stays empty). Where the stripes do
+  not share a row (the lintel's lower edge seen a pixel higher or lower from column to column),
+  columns empty from the floor to above ``max_height`` may still split the opening: up to
+  ``fill_gap`` of them between columns with a lintel count as part of the opening.
   When no scan saw the lintel at all (every scan of the room in front of the face stood nearer
   than the minimum range to it), the empty run of a column goes on up through the pixels no scan
   could measure; the lintel may lie anywhere in them, so the column counts as tall enough when the
@@ -170,6 +173,16 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     padded = np.concatenate([[False], mask, [False]]).astype(np.int8)
     edges = np.flatnonzero(np.diff(padded))
     return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
+
+
+def _bridged(mask: np.ndarray, passable: np.ndarray, gap: int) -> np.ndarray:
+    """``mask`` with its runs of False of at most ``gap`` entries between two True ones set True,
+    where every entry of the run is ``passable`` (1-D boolean arrays)."""
+    out = mask.copy()
+    for a, b in _runs(~mask):
+        if a > 0 and b < len(mask) and b - a <= gap and passable[a:b].all():
+            out[a:b] = True
+    return out
 
 
 #: Faces shorter than this (metres) are not followed: their direction is too uncertain.
@@ -462,6 +475,7 @@ def detect_doors(
         hidden = (empty_height > cfg.max_height + px) & (lowest <= cfg.max_height + px)
         empty_height = np.where(hidden, lowest, empty_height)
         tall = (empty_height >= cfg.min_height) & (empty_height <= cfg.max_height + px) & lintel_seen
+        tall = _bridged(tall, empty_height >= cfg.min_height, gap)
         for a, b in _runs(tall):
             width = (b - a) * px
             if not (cfg.min_width <= width <= cfg.max_width + px):
