@@ -42,6 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
+from scipy.spatial import cKDTree
 
 from nbs_env.config import Config, _finite_fields, _integer, _require
 from nbs_env.perception.faces import WallFace
@@ -185,10 +186,23 @@ def _bridged(mask: np.ndarray, passable: np.ndarray, gap: int) -> np.ndarray:
     return out
 
 
+#: A ray that returned nothing passed this near (metres) to a measured point within the minimum range:
+#: it may have met that surface there and tells nothing of what lies beyond (:func:`_rising_rays`).
+#: One voxel of the default map; the points are the room's own, so a surface the scans sampled
+#: at their spacing lies within it.
+_CLEARANCE = 0.05
 #: Faces shorter than this (metres) are not followed: their direction is too uncertain.
 _MIN_LINE = 0.5
 #: Fewest points for refitting a face's line to its wall.
 _MIN_FIT = 20
+#: Most a face may be turned onto the line its points show (degrees): an outline's line fit is off
+#: its wall by a few degrees at most, while a steeper fit is drawn by what stands before the wall.
+_MAX_TURN = 5.0
+#: Points within this of a line (metres) lie on it: a wall's points scatter by the scanner's range
+#: noise and the registration error, both below a centimetre or two.
+_ON_LINE = 0.02
+#: Most points the search for a face's wall line looks at.
+_FIT_SAMPLE = 4000
 #: Half-thickness of the slab around a face whose points make its image (``face_image``'s default).
 _BAND = 0.10
 #: A face's line is followed over runs of columns with no point at all only when they are shorter than
@@ -212,22 +226,43 @@ def _fill_row_gaps(image: np.ndarray, gap: int) -> np.ndarray:
 
 
 def _refit(face: WallFace, points: np.ndarray, band: float, margin: float) -> WallFace:
-    """The face moved onto the wall its points show: the line fitted (least squares, then again on
-    the points near that fit) to the points within ``band`` of the face, over its length and
-    between ``margin`` above the floor and below the ceiling. The face itself when fewer than
-    :data:`_MIN_FIT` points are there or the fit leaves the band."""
+    """The face moved onto the wall its points show.
+
+    Of the points within ``band`` of the face, over its length and between ``margin`` above the
+    floor and below the ceiling, the wall is the line that most of them lie on: the line, turned
+    at most :data:`_MAX_TURN` from the face, with the most points within :data:`_ON_LINE` of it,
+    then fitted to those points by least squares. A plain fit to every point in the band is drawn
+    off the wall by the reveals of its openings and whatever stands against it (corpus:enfilade:
+    1.4° off, 10 cm at one end). The face itself when fewer than :data:`_MIN_FIT` points are on
+    the line, they cover less than half the face, or the line leaves the band at their middle.
+    """
     p0, p1 = np.asarray(face.p0, dtype=float), np.asarray(face.p1, dtype=float)
     lo, hi = np.minimum(p0, p1) - band, np.maximum(p0, p1) + band
     box = np.all((points[:, :2] >= lo) & (points[:, :2] <= hi), axis=1)  # a cheap first cut
     u, v, w = face.local(points[box]).T
     keep = (np.abs(w) <= band) & (u >= 0) & (u <= face.length) & (v > margin) & (v < face.height - margin)
-    a = b = 0.0
-    for width in (band, band / 3):
-        near = keep & (np.abs(w - (a + b * u)) <= width)
-        if np.count_nonzero(near) < _MIN_FIT or np.ptp(u[near]) < face.length / 2:
-            return face
-        b, a = np.polyfit(u[near], w[near], 1)
-    if max(abs(a), abs(a + b * face.length)) > band:
+    u, w = u[keep], w[keep]
+    if len(u) < _MIN_FIT:
+        return face
+    # The search runs on at most _FIT_SAMPLE points (an even stride: the same points every run).
+    step = max(1, len(u) // _FIT_SAMPLE)
+    su, sw = u[::step], w[::step]
+    turn = np.tan(np.radians(_MAX_TURN))
+    slopes = np.linspace(-turn, turn, 2 * int(np.ceil(turn * face.length / _ON_LINE)) + 1)
+    offsets = np.sort(sw[None, :] - slopes[:, None] * su[None, :], axis=1)
+    counts = np.stack([np.searchsorted(row, row + 2 * _ON_LINE, side="right") for row in offsets]) - np.arange(len(su))
+    best = np.unravel_index(np.argmax(counts - 1e-6 * np.abs(slopes)[:, None]), counts.shape)  # ties: least turn
+    b = slopes[best[0]]
+    a = offsets[best] + _ON_LINE
+    near = np.abs(w - (a + b * u)) <= _ON_LINE
+    if np.count_nonzero(near) < _MIN_FIT or np.ptp(u[near]) < face.length / 2:
+        return face
+    b, a = np.polyfit(u[near], w[near], 1)
+    # The line must pass within the band where its points are; at the face's ends it may leave the
+    # band when the face is turned off its wall (generated:10000005: a face 3.3° off, 0.2 m off
+    # the wall at one end, where the outline zig-zagged through another door of the same wall).
+    centre = (u[near].min() + u[near].max()) / 2
+    if abs(a + b * centre) > band or abs(b) > turn:
         return face
     n = face.normal
     return WallFace(p0 + a * n, p1 + (a + b * face.length) * n, face.z0, face.z1)
@@ -337,6 +372,35 @@ def _out_of_range(
     return unseen
 
 
+def _through_image(
+    face: WallFace,
+    scans: Sequence[tuple[np.ndarray, np.ndarray]],
+    shape: tuple[int, int],
+    pixel: float,
+    behind: float,
+) -> np.ndarray:
+    """Which pixels of the face image a measured ray passed through: the ray from a scan's origin (in
+    front of the face) to one of its points ``behind`` m or more beyond the face crosses the face
+    plane in the pixel. Such a pixel is open; an empty pixel no ray passed through may hide a wall
+    the scans did not reach (out of range, or behind something in the room)."""
+    rows, cols = shape
+    through = np.zeros(shape, dtype=bool)
+    for points, origin in scans:
+        o = face.local(np.asarray(origin, dtype=float).reshape(1, 3))[0]
+        if o[2] <= 0:
+            continue
+        local = face.local(np.asarray(points, dtype=float))
+        far = local[local[:, 2] < -behind]
+        if not len(far):
+            continue
+        t = o[2] / (o[2] - far[:, 2])
+        c = np.floor((o[0] + t * (far[:, 0] - o[0])) / pixel)
+        r = np.floor((o[1] + t * (far[:, 1] - o[1])) / pixel)
+        ok = (c >= 0) & (c < cols) & (r >= 0) & (r < rows)
+        through[r[ok].astype(np.intp), c[ok].astype(np.intp)] = True
+    return through
+
+
 def _seen_through(
     face: WallFace,
     scans: Sequence[tuple[np.ndarray, np.ndarray]],
@@ -370,6 +434,7 @@ def _rising_rays(
     height: float,
     min_range: float,
     blockers: Sequence[WallFace] = (),
+    measured: cKDTree | None = None,
 ) -> tuple[int, int]:
     """(returned, empty): the rising rays through [u0, u1] x [0, height] that crossed farther than
     ``min_range`` from their scanner, by whether they returned a point beyond the face.
@@ -377,7 +442,11 @@ def _rising_rays(
     A ray that returned nothing may have met something within the minimum range before it reached
     the opening: it tells of the sky beyond only when its way there crosses none of the room's
     ``blockers`` (its other faces; generated:10000019: from round a corner of an L room, 71 rays
-    toward a door 4 m off met the corner's wall 1.2 m out and made an interior door exterior)."""
+    toward a door 4 m off met the corner's wall 1.2 m out and made an interior door exterior) and,
+    given the ``measured`` points of the room, passes no nearer than :data:`_CLEARANCE` to one of
+    them within the minimum range (edge_8rooms_3: 392 rays toward a door 2.75 m off skimmed a box
+    whose top stood 1 cm above the scanner, 1.1 m out, and made an interior door exterior; a
+    scan in a door frame loses its rays to the frame's jambs in the same way)."""
     returned = empty = 0
     for (points, origin), directions in zip(scans, no_return, strict=True):
         o = face.local(np.asarray(origin, dtype=float).reshape(1, 3))[0]
@@ -404,8 +473,19 @@ def _rising_rays(
             start = np.asarray(origin, dtype=float)[:2]
             ends = start + t[through, None] * d[out][through, :2]
             through[np.flatnonzero(through)] = ~_blocked(start, ends, blockers)
+        if through.any() and measured is not None and min_range > 0:
+            through[np.flatnonzero(through)] = ~_near_measured(origin, d[out][through], min_range, measured)
         empty += int(np.count_nonzero(through))
     return returned, empty
+
+
+def _near_measured(origin: np.ndarray, directions: np.ndarray, reach: float, measured: cKDTree) -> np.ndarray:
+    """(m,) bool: whether the ray from ``origin`` along each of the (m, 3) unit ``directions`` passes
+    within :data:`_CLEARANCE` of a ``measured`` point in its first ``reach`` metres."""
+    steps = np.arange(_CLEARANCE, reach + _CLEARANCE / 2, _CLEARANCE)
+    samples = np.asarray(origin, dtype=float) + steps[None, :, None] * directions[:, None, :]
+    distance, _ = measured.query(samples.reshape(-1, 3), distance_upper_bound=_CLEARANCE)
+    return np.isfinite(distance).reshape(len(directions), len(steps)).any(axis=1)
 
 
 def _blocked(start: np.ndarray, ends: np.ndarray, faces: Sequence[WallFace], margin: float = 0.05) -> np.ndarray:
@@ -452,6 +532,7 @@ def detect_doors(
     cfg = config or DoorConfig()
     points = np.concatenate([np.asarray(p, dtype=float) for p, _ in scans]) if scans else np.zeros((0, 3))
     doors: list[DetectedDoor] = []
+    measured: cKDTree | None = None  # built for the first opening whose rays are counted
     px = cfg.pixel
     gap = int(np.floor(cfg.fill_gap / px + 1e-9))
     for k, given in enumerate(faces):
@@ -466,11 +547,21 @@ def detect_doors(
         first_white = np.where(above.any(axis=0), above.argmax(axis=0), rows - start)
         empty_height = (start + first_white) * px
         lintel_seen = above.any(axis=0)
-        # Where the empty run reaches into pixels no scan could measure (nearer than the minimum
-        # range), the lintel may lie unseen anywhere above the run's highest measurable pixel.
-        unseen = _out_of_range(face, scans, image.shape, px, min_range)[start:, :]
+        # An empty run too tall for a door may be a door whose lintel no scan reached: the lintel
+        # may lie anywhere above the run's highest pixel known to be open. Where rays were seen
+        # through the column, that is the highest pixel one passed through (above it the wall may
+        # have been out of range or hidden behind something in the room: edge_8rooms_3, a lintel
+        # 1.2 m from the two scans by the door and behind a box from the third); where none was,
+        # the highest pixel some scan could measure (not nearer than the minimum range to all).
         in_run = np.arange(rows - start)[:, None] < first_white
-        measurable = np.where(in_run & ~unseen, np.arange(1, rows - start + 1)[:, None], 0).max(axis=0, initial=0)
+        level = np.arange(1, rows - start + 1)[:, None]
+        open_run = _through_image(face, scans, image.shape, px, cfg.behind)[start:, :] & in_run
+        unseen = _out_of_range(face, scans, image.shape, px, min_range)[start:, :]
+        measurable = np.where(
+            open_run.any(axis=0),
+            np.where(open_run, level, 0).max(axis=0, initial=0),
+            np.where(in_run & ~unseen, level, 0).max(axis=0, initial=0),
+        )
         lowest = np.maximum((start + measurable) * px, cfg.min_height)
         hidden = (empty_height > cfg.max_height + px) & (lowest <= cfg.max_height + px)
         empty_height = np.where(hidden, lowest, empty_height)
@@ -487,7 +578,9 @@ def detect_doors(
                 continue
             covered = float("nan")
             if no_return is not None:
-                hits, misses = _rising_rays(face, scans, no_return, u0, u1, height, min_range, others)
+                if measured is None:
+                    measured = cKDTree(points)
+                hits, misses = _rising_rays(face, scans, no_return, u0, u1, height, min_range, others, measured)
                 if hits + misses >= cfg.min_rising_rays:
                     covered = hits / (hits + misses)
             width = width + px  # the run counts whole pixels; the opening's edges fall inside its end pixels
