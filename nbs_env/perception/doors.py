@@ -372,57 +372,38 @@ def _out_of_range(
     return unseen
 
 
-def _through_image(
-    face: WallFace,
-    scans: Sequence[tuple[np.ndarray, np.ndarray]],
-    shape: tuple[int, int],
-    pixel: float,
-    behind: float,
-) -> np.ndarray:
-    """Which pixels of the face image a measured ray passed through: the ray from a scan's origin (in
-    front of the face) to one of its points ``behind`` m or more beyond the face crosses the face
-    plane in the pixel. Such a pixel is open; an empty pixel no ray passed through may hide a wall
-    the scans did not reach (out of range, or behind something in the room)."""
-    rows, cols = shape
-    through = np.zeros(shape, dtype=bool)
+def _crossings(face: WallFace, scans: Sequence[tuple[np.ndarray, np.ndarray]], behind: float) -> np.ndarray:
+    """(k, 2) float: (u, v) where the face plane is crossed by the ray from each scan's origin (in
+    front of the face) to each of its points ``behind`` m or more beyond the face."""
+    crossings = [np.zeros((0, 2))]
     for points, origin in scans:
         o = face.local(np.asarray(origin, dtype=float).reshape(1, 3))[0]
         if o[2] <= 0:
             continue
         local = face.local(np.asarray(points, dtype=float))
         far = local[local[:, 2] < -behind]
-        if not len(far):
-            continue
         t = o[2] / (o[2] - far[:, 2])
-        c = np.floor((o[0] + t * (far[:, 0] - o[0])) / pixel)
-        r = np.floor((o[1] + t * (far[:, 1] - o[1])) / pixel)
-        ok = (c >= 0) & (c < cols) & (r >= 0) & (r < rows)
-        through[r[ok].astype(np.intp), c[ok].astype(np.intp)] = True
+        crossings.append(o[:2] + t[:, None] * (far[:, :2] - o[:2]))
+    return np.concatenate(crossings)
+
+
+def _through_image(crossings: np.ndarray, shape: tuple[int, int], pixel: float) -> np.ndarray:
+    """Which pixels of the face image a measured ray passed through (its ``crossings``, from
+    :func:`_crossings`). Such a pixel is open; an empty pixel no ray passed through may hide a wall
+    the scans did not reach (out of range, or behind something in the room)."""
+    rows, cols = shape
+    through = np.zeros(shape, dtype=bool)
+    c, r = np.floor(crossings[:, 0] / pixel), np.floor(crossings[:, 1] / pixel)
+    ok = (c >= 0) & (c < cols) & (r >= 0) & (r < rows)
+    through[r[ok].astype(np.intp), c[ok].astype(np.intp)] = True
     return through
 
 
-def _seen_through(
-    face: WallFace,
-    scans: Sequence[tuple[np.ndarray, np.ndarray]],
-    u0: float,
-    u1: float,
-    height: float,
-    behind: float,
-) -> int:
-    """How many points lie ``behind`` m beyond the face and were seen through [u0, u1] x [0, height]."""
-    count = 0
-    for points, origin in scans:
-        local = face.local(np.asarray(points, dtype=float))
-        o = face.local(np.asarray(origin, dtype=float).reshape(1, 3))[0]
-        far = local[local[:, 2] < -behind]
-        if not len(far) or o[2] <= 0:
-            continue
-        # Where the ray from the scanner to the point crosses the face plane (w = 0).
-        t = o[2] / (o[2] - far[:, 2])
-        u = o[0] + t * (far[:, 0] - o[0])
-        v = o[1] + t * (far[:, 1] - o[1])
-        count += int(np.count_nonzero((u > u0) & (u < u1) & (v > 0.0) & (v < height)))
-    return count
+def _seen_through(crossings: np.ndarray, u0: float, u1: float, height: float) -> int:
+    """How many of the rays to points beyond the face (their ``crossings``) passed through
+    [u0, u1] x [0, height]."""
+    u, v = crossings[:, 0], crossings[:, 1]
+    return int(np.count_nonzero((u > u0) & (u < u1) & (v > 0.0) & (v < height)))
 
 
 def _rising_rays(
@@ -555,7 +536,8 @@ def detect_doors(
         # the highest pixel some scan could measure (not nearer than the minimum range to all).
         in_run = np.arange(rows - start)[:, None] < first_white
         level = np.arange(1, rows - start + 1)[:, None]
-        open_run = _through_image(face, scans, image.shape, px, cfg.behind)[start:, :] & in_run
+        crossings = _crossings(face, scans, cfg.behind)
+        open_run = _through_image(crossings, image.shape, px)[start:, :] & in_run
         unseen = _out_of_range(face, scans, image.shape, px, min_range)[start:, :]
         measurable = np.where(
             open_run.any(axis=0),
@@ -573,7 +555,7 @@ def detect_doors(
                 continue
             height = float(np.median(empty_height[a:b]))
             u0, u1 = a * px, b * px
-            behind = _seen_through(face, scans, u0, u1, height, cfg.behind)
+            behind = _seen_through(crossings, u0, u1, height)
             if behind < cfg.min_behind_points:
                 continue
             covered = float("nan")
