@@ -469,6 +469,15 @@ def _near_measured(origin: np.ndarray, directions: np.ndarray, reach: float, mea
     return np.isfinite(distance).reshape(len(directions), len(steps)).any(axis=1)
 
 
+def _within(points: np.ndarray, origins: Sequence[np.ndarray], reach: float) -> np.ndarray:
+    """The (n, 3) ``points`` within ``reach`` of one of the ``origins``: all :func:`_near_measured`
+    can meet, so its tree holds a few thousand points instead of the room's hundreds of thousands."""
+    keep = np.zeros(len(points), dtype=bool)
+    for origin in origins:
+        keep |= np.sum((points - np.asarray(origin, dtype=float)) ** 2, axis=1) <= reach**2
+    return points[keep]
+
+
 def _blocked(start: np.ndarray, ends: np.ndarray, faces: Sequence[WallFace], margin: float = 0.05) -> np.ndarray:
     """(m,) bool: whether the plan segment from ``start`` to each of ``ends`` crosses one of the
     ``faces`` more than ``margin`` before its end (a face that touches the end does not count)."""
@@ -561,7 +570,7 @@ def detect_doors(
             covered = float("nan")
             if no_return is not None:
                 if measured is None:
-                    measured = cKDTree(points)
+                    measured = cKDTree(_within(points, [o for _, o in scans], min_range + 2 * _CLEARANCE))
                 hits, misses = _rising_rays(face, scans, no_return, u0, u1, height, min_range, others, measured)
                 if hits + misses >= cfg.min_rising_rays:
                     covered = hits / (hits + misses)
