@@ -431,3 +431,25 @@ def test_low_rays_with_no_return_keep_their_columns_unknown():
     assert column_free(free, -1.0, 0.0) and column_free(free, 0.0, 1.0)
     with pytest.raises(ValueError, match="blocked"):
         assume_blind_zone_free(labels, origin, s, [sensor, sensor], -40.0, 1.5, blocked=[toward_wall])
+
+
+@pytest.mark.parametrize(("elevation_min", "min_range"), [(-40.0, 1.5), (-60.0, 0.5), (-45.0, 0.6)])
+def test_every_voxel_the_carving_cannot_see_below_the_field_is_assumed_free(elevation_min, min_range):
+    """The blind zone is what the voxel carving leaves: a voxel whose lower angular edge lies below
+    the lowest elevation is never carved (VoxelGrid's field-of-view test), so it must be assumed
+    free. Under a steep scanner (-60°, a Leica RTC360's or a FARO Focus's) the old vertical margin
+    left a ring of such voxels around the stop, and the robot could not leave its first stop."""
+    s, n = 0.1, 40
+    labels = np.full((n, n, 20), VoxelLabel.UNKNOWN, dtype=np.uint8)
+    origin = np.array([-2.0, -2.0, 0.0])
+    sensor = np.array([0.0, 0.0, 1.5])
+    free = assume_blind_zone_free(labels, origin, s, [sensor], elevation_min, min_range)
+    centres = origin + (np.stack(np.meshgrid(*[np.arange(k) for k in labels.shape], indexing="ij"), -1) + 0.5) * s
+    offset = centres - sensor
+    r = np.linalg.norm(offset, axis=-1)
+    elevation = np.degrees(np.arctan2(offset[..., 2], np.hypot(offset[..., 0], offset[..., 1])))
+    half_angle = np.degrees(s * np.sqrt(3) / 2 / np.maximum(r, 1e-3))
+    uncarvable = (elevation - half_angle < elevation_min) | (r < min_range)
+    assert np.all(free[uncarvable] == VoxelLabel.EMPTY)
+    # ... and nothing the carving can see is assumed.
+    assert np.all(free[~uncarvable] == VoxelLabel.UNKNOWN)

@@ -783,19 +783,22 @@ def assume_blind_zone_free(
     xs = origin[0] + (np.arange(nx) + 0.5) * s
     ys = origin[1] + (np.arange(ny) + 0.5) * s
     zs = origin[2] + (np.arange(nz) + 0.5) * s
-    slope = np.tan(np.radians(-elevation_min))
+    lowest = np.radians(elevation_min)
+    half_diagonal = s * np.sqrt(3) / 2
     sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
     if blocked is not None and len(blocked) != len(sensors):
         raise ValueError(f"{len(blocked)} blocked-direction sets for {len(sensors)} stops")
     for k, sensor in enumerate(sensors):
-        d = np.hypot(xs[:, None] - sensor[0], ys[None, :] - sensor[1])  # (nx, ny)
-        # Partly below the lowest ray (z < sensor_z - d * tan(-elevation_min)): carving needs the
-        # whole voxel in view, so a voxel that straddles the cone is never carved either.
-        ceiling = sensor[2] - d * slope + s * np.sqrt(3) / 2
-        below = zs[None, None, :] < ceiling[:, :, None]
+        d = np.hypot(xs[:, None] - sensor[0], ys[None, :] - sensor[1])[:, :, None]  # (nx, ny, 1)
+        dz = (zs - sensor[2])[None, None, :]
+        r = np.hypot(d, dz)
+        # Partly below the lowest ray: carving needs the whole voxel in view (its centre's elevation
+        # less the angle its half diagonal subtends above the lowest elevation, the test of
+        # VoxelGrid's carving), so a voxel that straddles the cone is never carved either. Near a
+        # steep cone (a -60° scanner) that angle exceeds the voxel's height measured vertically.
+        below = np.arctan2(dz, d) - half_diagonal / np.maximum(r, 1e-3) < lowest
         if min_range > 0:
-            near = np.hypot(d[:, :, None], zs[None, None, :] - sensor[2]) < min_range
-            below |= near
+            below |= r < min_range
         if blocked is not None and min_range > 0 and len(blocked[k]):
             below &= ~_blocked_columns(blocked[k], sensor, min_range, origin, s, (nx, ny))[:, :, None]
         unsensed = (out == VoxelLabel.UNKNOWN) | (out == VoxelLabel.OCCLUDED_CLUTTER)
