@@ -29,10 +29,24 @@ scene's ground truth (true positions, true rooms), which the robot never sees.
     processing_time_s       float   registration, RoI, classification, voxels, planning, and the
                                     policy's own decision time
     policy_time_s           float   the policy's decision time alone
-    acquisition_time_s      float   simulated scanner time
+    acquisition_time_s      float   scanner time: the scanner preset's station time per scan, else
+                                    the points over the configured acquisition rate
     travel_time_s           float   path_length_m / config.travel_speed
     registration_error      {mean_m, max_m, mean_deg, max_deg}: pose estimate vs true pose,
                             over the scans
+    quality                 the scan-quality figures (:meth:`CoverageMeter.quality`):
+        min_density_per_m2, max_incidence_deg, density_radius_m   the thresholds (config.quality)
+        dense_pct           float   % of the structural samples with a point density >= the least
+        incidence_pct       float   % seen at least once at an incidence <= the largest
+        quality_pct         float   % meeting both
+        median_density_per_m2, median_incidence_deg, median_range_m   over the samples sensed
+                                    (null when none): the density around them, the best incidence
+                                    angle and the shortest range each was seen at
+    registrability          {scans, mean_overlap, min_overlap, mean_fitness, min_fitness,
+                            refused}: over the scans registered to the cloud before them (all but
+                            the first; none without registration, then null): overlap is the
+                            share of the scan the cloud before it explains, fitness ICP's, refused
+                            the count of poses refused
     rooms                   list, one per TRUE room of the scene, in scene order:
         id                  int     the scene's room id
         name                str
@@ -41,11 +55,14 @@ scene's ground truth (true positions, true rooms), which the robot never sees.
         path_length_m       float   the legs driven to the room's scans
         processed_points    int
         processing_time_s   float
+        quality_pct         float   the room's structural samples meeting both quality thresholds, %
     steps                   list, one per scan, in order:
         scan                int     0, 1, ...
         room                int | null  the true room of the scan (see below)
         position            [x, y, z]   true scanner position
         estimated_position  [x, y, z]   the robot's estimate
+        estimated_rotation  [w, x, y, z]   the robot's estimate of the scanner's orientation, a unit
+                            quaternion (scanner frame to map frame, as an E57 pose)
         predicted_gain      int     predicted Occluded-structure→Structure conversions (0: first scan
                                     of a room)
         structure_sensed_pct float  cumulative
@@ -58,6 +75,9 @@ scene's ground truth (true positions, true rooms), which the robot never sees.
                             planning, evaluation
         registration_refused str    why ICP's pose was refused and the odometry's kept ("" when
                             accepted)
+        registration_overlap, registration_fitness   float | null   the scan's overlap with the
+                            cloud before it and ICP's fitness (null for the first scan)
+        dense_pct, incidence_pct, quality_pct   float   the quality shares after this scan
     door_events             list of the env's door events: detected (with exterior, covered),
                             crossed, abandoned (with reason)
     room_ends               list, one per room the robot completed: {room (the robot's number),
@@ -79,6 +99,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -87,13 +108,23 @@ import shapely
 from scipy.spatial import cKDTree
 from shapely.geometry import Point, Polygon
 
+from nbs_env.config import Config, _finite, _require
 from scenes import Scene, SurfaceClass
 from scenes.interior import interior_samples
 
 if TYPE_CHECKING:
     from nbs_env.storey import Storey
 
-__all__ = ["ROOM_TOLERANCE", "SCHEMA", "CoverageMeter", "json_safe", "metrics_dict", "true_rooms_of"]
+__all__ = [
+    "ROOM_TOLERANCE",
+    "SCHEMA",
+    "CoverageMeter",
+    "QualityConfig",
+    "QualityReport",
+    "json_safe",
+    "metrics_dict",
+    "true_rooms_of",
+]
 
 #: The version tag of :func:`metrics_dict`'s output.
 SCHEMA = "nbs-metrics/1"
@@ -102,11 +133,85 @@ SCHEMA = "nbs-metrics/1"
 ROOM_TOLERANCE = 0.5
 
 
+@dataclass(frozen=True)
+class QualityConfig(Config):
+    """The scan-quality thresholds of the evaluation (:meth:`CoverageMeter.quality`).
+
+    Coverage counts a structural sample as sensed once one point lies within 5 cm of it, whether
+    that point came head-on from 3 m or at a grazing 85° from 20 m. Scan-to-BIM work judges a scan
+    plan also by how densely and how squarely each surface was sampled; these thresholds say when a
+    sample counts as well sensed.
+
+    Attributes
+    ----------
+    min_density : float
+        Least point density around a sample, points per m² of surface, over all scans. Default
+        400 per m², one point per 5 cm × 5 cm: the scale at which the method works (its 5 cm
+        working copies and voxels, RegistrationConfig.voxel_size, RobotConfig.voxel_size), so a
+        surface below it is one the structural model rests on single points for. For context, the
+        US GSA's BIM Guide for 3D Imaging (Series 03, v1.0, 2009; figures as recalled, not checked
+        against a stored copy) asks for a 152 mm grid (about 43 per m²) at its level 1 and 25 mm
+        (1,600 per m²) at its level 2. The env's 0.5° pattern puts 400 per m² on a wall seen head-on
+        from at most 6.5 m; the fast preset's 1° pattern from 3.3 m.
+    max_incidence : float
+        Largest incidence angle, in degrees from the surface normal, at which a sample must have
+        been seen at least once. Default 70°: there the laser footprint is 2.9 times as long as
+        head-on, and the incidence angle's share of the range noise grows steeply (Soudarissanane
+        et al. 2011, "Scanning geometry: influencing factor on the quality of terrestrial laser
+        scanning points", ISPRS J. Photogramm. 66(4)), the range where scan planners set their limit.
+    density_radius : float
+        The density around a sample is the points attributed to the samples within this distance of
+        it, over their area (the samples' count times the sample spacing squared), metres. 0.1 m
+        holds about 12 samples at the default 5 cm spacing, so that one sample's share of a sparse
+        pattern does not decide it.
+    """
+
+    min_density: float = 400.0
+    max_incidence: float = 70.0
+    density_radius: float = 0.1
+
+    def __post_init__(self) -> None:
+        _finite(min_density=self.min_density, max_incidence=self.max_incidence, density_radius=self.density_radius)
+        _require(self.min_density >= 0, f"min_density must be >= 0 points per m², got {self.min_density}")
+        _require(0 < self.max_incidence <= 90, f"max_incidence must be in (0, 90] degrees, got {self.max_incidence}")
+        _require(self.density_radius > 0, f"density_radius must be > 0 m, got {self.density_radius}")
+
+
+@dataclass(frozen=True)
+class QualityReport:
+    """What :meth:`CoverageMeter.quality` measured.
+
+    Attributes
+    ----------
+    density : (n,) float
+        Points per m² around each sample, over all scans (``QualityConfig.density_radius``).
+    incidence : (n,) float
+        The smallest incidence angle (degrees from the normal) each sample was seen at; NaN when no
+        point was attributed to it.
+    range : (n,) float
+        The shortest range (metres) each sample was seen from; NaN when never.
+    dense_pct, incidence_pct, quality_pct : (k,) float
+        After each of the ``k`` scans: % of the structural samples with density >= ``min_density``,
+        seen at <= ``max_incidence``, and both.
+    """
+
+    density: np.ndarray
+    incidence: np.ndarray
+    range: np.ndarray
+    dense_pct: np.ndarray
+    incidence_pct: np.ndarray
+    quality_pct: np.ndarray
+
+
 class CoverageMeter:
-    """Share of the true structural surface sensed, overall and per room.
+    """Share of the true structural surface sensed, overall and per room, and how well.
 
     A ground-truth sample (one per ``spacing``² of floor, ceiling and wall) counts as sensed when a
     registered point lies within ``radius`` of it. The denominator is always the full surface.
+
+    Given the scan's origin, :meth:`add` also attributes every point to its nearest sample within
+    ``radius`` and notes, per sample, how many points it got and the incidence angle and range it
+    was seen at: the scan-quality figures of :meth:`quality`.
 
     Parameters
     ----------
@@ -124,30 +229,127 @@ class CoverageMeter:
 
     def __init__(self, scene: Scene, spacing: float = 0.05, radius: float = 0.05, interior_only: bool = True) -> None:
         self.samples = interior_samples(scene, spacing) if interior_only else scene.structure_samples(spacing)
+        self.spacing = float(spacing)
         self.radius = radius
         self.sensed = np.zeros(len(self.samples), dtype=bool)
         self.room_ids = sorted({int(r) for r in self.samples.rooms})
+        self.normals = np.asarray(scene.mesh.face_normals, dtype=float)[self.samples.faces].reshape(-1, 3)
+        # Per scan: (sample indices, points attributed, incidence degrees, range m, samples newly sensed).
+        self.observations: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._tree: cKDTree | None = None
+        self._neighbours: tuple[float, tuple[Any, np.ndarray]] | None = None
 
-    def add(self, points: np.ndarray) -> int:
-        """Mark the samples the (n, 3) registered points sense; returns how many were newly sensed."""
+    def add(self, points: np.ndarray, origin: np.ndarray | None = None) -> int:
+        """Mark the samples the (n, 3) registered points sense; returns how many were newly sensed.
+
+        ``origin`` (3,): where the scan was taken from; when given, the scan's quality figures are
+        noted too (:meth:`quality`)."""
         points = np.asarray(points, dtype=float)
         todo = np.flatnonzero(~self.sensed)
-        if not len(points) or not len(todo):
-            return 0
-        distance, _ = cKDTree(points).query(self.samples.points[todo], distance_upper_bound=self.radius)
-        hit = todo[np.isfinite(distance)]
-        self.sensed[hit] = True
+        hit = np.zeros(0, dtype=np.int64)
+        if len(points) and len(todo):
+            distance, _ = cKDTree(points).query(self.samples.points[todo], distance_upper_bound=self.radius)
+            hit = todo[np.isfinite(distance)]
+            self.sensed[hit] = True
+        if origin is not None:
+            self._observe(points, np.asarray(origin, dtype=float).reshape(3), hit)
         return len(hit)
+
+    def _observe(self, points: np.ndarray, origin: np.ndarray, newly: np.ndarray) -> None:
+        if self._tree is None:
+            self._tree = cKDTree(self.samples.points)
+        if len(points) and len(self.samples):
+            distance, nearest = self._tree.query(points, distance_upper_bound=self.radius)
+            index, count = np.unique(nearest[np.isfinite(distance)], return_counts=True)
+        else:
+            index, count = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        ray = origin - self.samples.points[index]
+        rng = np.linalg.norm(ray, axis=1)
+        cos = np.abs(np.einsum("ij,ij->i", ray, self.normals[index])) / np.maximum(rng, 1e-9)
+        incidence = np.degrees(np.arccos(np.clip(cos, 0.0, 1.0)))
+        self.observations.append(
+            (
+                index.astype(np.int32),
+                count.astype(np.int32),
+                incidence.astype(np.float32),
+                rng.astype(np.float32),
+                newly.astype(np.int32),
+            )
+        )
+
+    def _neighbourhoods(self, radius: float) -> tuple[Any, np.ndarray]:
+        """The (n, n) sparse 0/1 matrix of samples within ``radius`` of each other (self included),
+        and each sample's count of them; built once per meter."""
+        from scipy.sparse import csr_matrix, identity
+
+        if self._neighbours is None or self._neighbours[0] != radius:
+            n = len(self.samples)
+            tree = self._tree if self._tree is not None else cKDTree(self.samples.points)
+            pairs = tree.query_pairs(radius, output_type="ndarray")
+            rows = np.concatenate([pairs[:, 0], pairs[:, 1]])
+            cols = np.concatenate([pairs[:, 1], pairs[:, 0]])
+            near = csr_matrix((np.ones(len(rows), dtype=np.float32), (rows, cols)), shape=(n, n))
+            near = (near + identity(n, dtype=np.float32, format="csr")).tocsr()
+            self._neighbours = (radius, (near, np.asarray(near.sum(axis=1)).ravel()))
+        return self._neighbours[1]
+
+    def quality(self, config: QualityConfig | None = None) -> QualityReport:
+        """The scan-quality figures of the scans added with their origin (:class:`QualityReport`).
+
+        Every point is attributed to its nearest sample within ``radius``. A sample's density is the
+        points attributed around it (``config.density_radius``), over all scans. Its incidence and
+        range are the smallest of the samples around it that a scan's points were attributed to, so
+        that a sample between the points of a sparse pattern, sensed but attributed none, takes its
+        neighbours' angle. Only sensed samples (:meth:`percent`) count, so the shares never exceed
+        the coverage; like it, they are shares of all samples.
+        """
+        config = config or QualityConfig()
+        n = len(self.samples)
+        near, size = self._neighbourhoods(config.density_radius)
+        counts = np.zeros(n)
+        seen = np.full(n, np.inf, dtype=np.float32)
+        closest = np.full(n, np.inf, dtype=np.float32)
+        sensed = np.zeros(n, dtype=bool)
+        area = size * self.spacing**2
+        curves = np.zeros((len(self.observations), 3))
+        density, incidence, rng = np.zeros(n), np.full(n, np.inf), np.full(n, np.inf)
+        for k, (index, count, angle, distance, newly) in enumerate(self.observations):
+            counts[index] += count
+            np.minimum.at(seen, index, angle)
+            np.minimum.at(closest, index, distance)
+            sensed[newly] = True
+            if not n:
+                continue
+            density = np.where(sensed, near @ counts / area, 0.0)
+            incidence = np.where(sensed, _neighbourhood_min(near, seen), np.inf)
+            dense = density >= max(config.min_density, 1e-12)
+            square = incidence <= config.max_incidence
+            curves[k] = [dense.mean(), square.mean(), (dense & square).mean()]
+        if n:
+            rng = np.where(sensed, _neighbourhood_min(near, closest), np.inf)
+        incidence = np.where(np.isfinite(incidence), incidence, np.nan)
+        rng = np.where(np.isfinite(rng), rng, np.nan)
+        return QualityReport(density, incidence, rng, *(100.0 * curves.T))
 
     def percent(self, room: int | None = None, label: SurfaceClass | None = None) -> float:
         """Sensed share in % of all samples, of one room's, and/or of one class's."""
+        mask = self._mask(room, label)
+        total = int(mask.sum())
+        return 100.0 * float(self.sensed[mask].sum()) / total if total else 0.0
+
+    def _mask(self, room: int | None = None, label: SurfaceClass | None = None) -> np.ndarray:
         mask = np.ones(len(self.samples), dtype=bool)
         if room is not None:
             mask &= self.samples.rooms == room
         if label is not None:
             mask &= self.samples.labels == label
-        total = int(mask.sum())
-        return 100.0 * float(self.sensed[mask].sum()) / total if total else 0.0
+        return mask
+
+
+def _neighbourhood_min(near: Any, values: np.ndarray) -> np.ndarray:
+    """(n,) float: the smallest of ``values`` over each row's neighbours of the sparse matrix ``near``
+    (every row holds at least its own sample)."""
+    return np.minimum.reduceat(values[near.indices], near.indptr[:-1]).astype(float)
 
 
 def json_safe(value: Any) -> Any:
@@ -213,6 +415,21 @@ def true_rooms_of(storey: Storey) -> list[int | None]:
     return out
 
 
+def _share(flags: np.ndarray, mask: np.ndarray | None = None) -> float:
+    """% of the samples (of ``mask``'s) whose flag is set; 0 with none."""
+    flags = flags if mask is None else flags[mask]
+    return 100.0 * float(np.count_nonzero(flags)) / len(flags) if len(flags) else 0.0
+
+
+def quaternion_wxyz(pose: np.ndarray) -> np.ndarray:
+    """The rotation of a (4, 4) pose as a unit quaternion ``[w, x, y, z]`` (E57's order), w >= 0."""
+    from scipy.spatial.transform import Rotation
+
+    x, y, z, w = Rotation.from_matrix(np.asarray(pose, dtype=float)[:3, :3]).as_quat()
+    q = np.array([w, x, y, z])
+    return -q if w < 0 else q
+
+
 def metrics_dict(
     storey: Storey,
     scene_name: str,
@@ -267,6 +484,25 @@ def metrics_dict(
     path_length = float(cumulative[-1])
     reg = np.array([s.registration_error for s in steps], dtype=float).reshape(-1, 2)
 
+    quality_config = storey.config.quality
+    quality = meter.quality(quality_config)
+    good = (quality.density >= quality_config.min_density) & (quality.incidence <= quality_config.max_incidence)
+    if len(quality.dense_pct) != len(steps):  # scans added without their origin: no curves
+        quality_rows = [{"dense_pct": None, "incidence_pct": None, "quality_pct": None} for _ in steps]
+    else:
+        quality_rows = [
+            {"dense_pct": float(d), "incidence_pct": float(a), "quality_pct": float(q)}
+            for d, a, q in zip(quality.dense_pct, quality.incidence_pct, quality.quality_pct, strict=True)
+        ]
+    seen = np.isfinite(quality.incidence)
+
+    def median(values: np.ndarray) -> float | None:
+        return float(np.median(values[seen])) if seen.any() else None
+
+    registered = [s for s in steps if s.registration_overlap is not None]
+    overlaps = np.array([s.registration_overlap for s in registered], dtype=float)
+    fitness = np.array([s.registration_fitness for s in registered], dtype=float)
+
     rooms = []
     for room in storey.scene.rooms:
         mine = [i for i, r in enumerate(true_rooms) if r == room.id]
@@ -279,6 +515,7 @@ def metrics_dict(
                 "path_length_m": float(sum(legs[i] for i in mine)),
                 "processed_points": int(sum(processed(steps[i]) for i in mine)),
                 "processing_time_s": float(sum(processing(i) for i in mine)),
+                "quality_pct": _share(good, meter.samples.rooms == room.id),
             }
         )
 
@@ -288,6 +525,7 @@ def metrics_dict(
             "room": room,
             "position": [float(v) for v in s.true_position[:3]],
             "estimated_position": [float(v) for v in s.estimated_position[:3]],
+            "estimated_rotation": quaternion_wxyz(s.estimated_pose).tolist(),
             "predicted_gain": int(s.predicted_gain),
             "structure_sensed_pct": float(s.structure_sensed_pct),
             "path_length_m": float(s.path_length),
@@ -297,6 +535,9 @@ def metrics_dict(
             "door": bool(s.door),
             "times": {str(k): float(v) for k, v in s.times.items()},
             "registration_refused": str(s.registration_refused),
+            "registration_overlap": s.registration_overlap,
+            "registration_fitness": s.registration_fitness,
+            **quality_rows[k],
         }
         for k, (s, room) in enumerate(zip(steps, true_rooms, strict=True))
     ]
@@ -321,6 +562,25 @@ def metrics_dict(
             "max_m": float(reg[:, 0].max()),
             "mean_deg": float(reg[:, 1].mean()),
             "max_deg": float(reg[:, 1].max()),
+        },
+        "quality": {
+            "min_density_per_m2": float(quality_config.min_density),
+            "max_incidence_deg": float(quality_config.max_incidence),
+            "density_radius_m": float(quality_config.density_radius),
+            "dense_pct": _share(quality.density >= quality_config.min_density),
+            "incidence_pct": _share(quality.incidence <= quality_config.max_incidence),
+            "quality_pct": _share(good),
+            "median_density_per_m2": median(quality.density),
+            "median_incidence_deg": median(quality.incidence),
+            "median_range_m": median(quality.range),
+        },
+        "registrability": {
+            "scans": len(registered),
+            "mean_overlap": float(overlaps.mean()) if len(overlaps) else None,
+            "min_overlap": float(overlaps.min()) if len(overlaps) else None,
+            "mean_fitness": float(fitness.mean()) if len(fitness) else None,
+            "min_fitness": float(fitness.min()) if len(fitness) else None,
+            "refused": sum(1 for s in steps if s.registration_refused),
         },
         "rooms": rooms,
         "steps": step_rows,

@@ -4,21 +4,34 @@
 
 ================  ====================================================================================
 ``metrics.json``  :func:`nbs_env.evaluation.metrics_dict` (its schema is documented there)
+``scans.e57``     every scan as measured, one E57 data3D record per station (:func:`write_e57`):
+                  points in the scanner frame, the robot's estimated pose as the record's pose;
+                  written when the env kept its scans (``EnvConfig.keep_scans``, as ``nbs scan`` does)
+``cloud.laz``     the registered room models' points, classified (:func:`write_las`): wall, floor,
+                  ceiling, clutter, as the robot's perception labelled them
 ``structure.ply`` the registered points labelled Structure, of every room model
 ``cloud.ply``     every registered point of the room models, with a ``label`` (1 Structure, 0 Clutter)
 ``model.obj``     the recovered structural model (:func:`structural_model`): SE walls, floors, ceilings
+``samples.npz``   the evaluation's structural samples with their scan-quality figures
+                  (:func:`write_samples`)
 ``topdown.png``   the env's top-down picture of the end of the episode
 ================  ====================================================================================
 
-The point clouds are the rooms' 5 cm working copies (the voxel-downsampled clouds that perception
-works on, :attr:`nbs_env.belief.RoomModel.points`), not the full-resolution scans, placed with the
-robot's own pose estimates.
+The merged point clouds (LAZ, PLY) are the rooms' 5 cm working copies (the voxel-downsampled clouds
+that perception works on, :attr:`nbs_env.belief.RoomModel.points`), placed with the robot's own
+pose estimates; the E57 holds the full-resolution scans.
+
+E57 (ASTM E2807) is what scan-to-BIM tools open as a registered scan project (CloudCompare, Autodesk
+ReCap, Leica Cyclone, Trimble RealWorks); it is written with pye57 (libE57Format). LAS 1.4 with
+LAZ compression is written with laspy (and its lazrs backend).
 """
 
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
+from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -26,25 +39,49 @@ import trimesh
 from shapely.geometry import MultiPolygon, Polygon
 
 from nbs_env.belief import RoomModel
-from nbs_env.evaluation import metrics_dict
+from nbs_env.evaluation import metrics_dict, quaternion_wxyz
 
 if TYPE_CHECKING:
     from nbs_env.env import NBSEnv
+    from nbs_env.storey import ScanPoints
 
 __all__ = [
     "FACE_KINDS",
+    "LAS_CLASSES",
     "REPORT_FILES",
+    "classify_points",
     "structural_model",
+    "write_e57",
+    "write_las",
     "write_model_obj",
     "write_points_ply",
     "write_report",
+    "write_samples",
 ]
 
 #: Face kinds of :func:`structural_model`, indexed by its ``face_attributes["kind"]``.
 FACE_KINDS = ("wall", "floor", "ceiling")
 
-#: The files :func:`write_report` writes, in its output folder.
-REPORT_FILES = ("metrics.json", "structure.ply", "cloud.ply", "model.obj", "topdown.png")
+#: The files :func:`write_report` writes, in its output folder (``scans.e57`` only when the env kept
+#: its scans).
+REPORT_FILES = (
+    "metrics.json",
+    "scans.e57",
+    "cloud.laz",
+    "structure.ply",
+    "cloud.ply",
+    "model.obj",
+    "samples.npz",
+    "topdown.png",
+)
+
+#: The classification codes of :func:`write_las`, in LAS 1.4's user-definable range (64-255), with
+#: the names its Classification Lookup record carries.
+LAS_CLASSES = {64: "wall", 65: "floor", 66: "ceiling", 67: "clutter"}
+
+# GPS time (E57's dateTimeValue) counts from 1980-01-06 and runs 18 leap seconds ahead of UTC.
+_GPS_EPOCH_UNIX = 315_964_800.0
+_GPS_LEAP_SECONDS = 18.0
 
 
 # ---------------------------------------------------------------------- point clouds
@@ -229,6 +266,203 @@ def write_model_obj(path: str | Path, rooms: list[RoomModel]) -> Path:
     return path
 
 
+# ---------------------------------------------------------------------- scan projects: E57, LAS
+def write_e57(
+    path: str | Path,
+    scans: list[ScanPoints],
+    names: list[str] | None = None,
+    times: list[tuple[float, float]] | None = None,
+) -> Path:
+    """Write scans as an E57 file: one data3D record per station.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write (overwritten); its folder must exist.
+    scans : list of ScanPoints
+        Each station's measured points in the scanner frame (float32), their pattern ``rows`` and
+        ``cols``, and the estimated scanner ``pose`` (4, 4).
+    names : list of str, optional
+        Record names (default ``scan_000``, ``scan_001``, ...).
+    times : list of (float, float), optional
+        Each record's acquisition start and end, GPS seconds (E57's ``dateTimeValue``).
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Notes
+    -----
+    Each record stores ``cartesianX/Y/Z`` in the scanner frame, ``rowIndex`` and ``columnIndex``
+    (the scan pattern's grid, so that tools can rebuild the panorama), and the pose as the record's
+    ``pose`` (rotation quaternion w, x, y, z and translation, scanner frame to the robot's map
+    frame). The simulator has no intensity and one return per ray, so neither is written. Its
+    ``cartesianBounds`` are in the scanner frame, as the E57 standard defines them.
+    """
+    import pye57
+
+    path = Path(path)
+    names = names or [f"scan_{k:03d}" for k in range(len(scans))]
+    if len(names) != len(scans) or (times is not None and len(times) != len(scans)):
+        raise ValueError(f"{len(scans)} scans need as many names and times, got {len(names)} and {len(times or [])}")
+    if path.exists():
+        path.unlink()  # libE57 refuses to open an existing file for writing
+    e57 = pye57.E57(str(path), mode="w")
+    try:
+        for k, scan in enumerate(scans):
+            points = np.asarray(scan.points, dtype=np.float32).reshape(-1, 3)
+            pose = np.asarray(scan.pose, dtype=float)
+            low = points.min(axis=0) if len(points) else np.zeros(3)
+            high = points.max(axis=0) if len(points) else np.zeros(3)
+            start, end = times[k] if times is not None else (0.0, 0.0)
+            header = SimpleNamespace(
+                name=names[k],
+                rotation=quaternion_wxyz(pose),
+                translation=pose[:3, 3].copy(),
+                xMinimum=float(low[0]),
+                xMaximum=float(high[0]),
+                yMinimum=float(low[1]),
+                yMaximum=float(high[1]),
+                zMinimum=float(low[2]),
+                zMaximum=float(high[2]),
+                acquisitionStart_dateTimeValue=float(start),
+                acquisitionEnd_dateTimeValue=float(end),
+            )
+            data = {
+                "cartesianX": points[:, 0].astype(np.float64),
+                "cartesianY": points[:, 1].astype(np.float64),
+                "cartesianZ": points[:, 2].astype(np.float64),
+                "rowIndex": np.asarray(scan.rows, dtype=np.int32),
+                "columnIndex": np.asarray(scan.cols, dtype=np.int32),
+            }
+            e57.write_scan_raw(data, scan_header=header)
+    finally:
+        e57.close()
+    return path
+
+
+def classify_points(room: RoomModel, distance: float = 0.10) -> np.ndarray:
+    """The :data:`LAS_CLASSES` code of each of a room model's points.
+
+    A point labelled Structure is floor or ceiling when it lies within ``distance`` of the room's
+    floor or ceiling height (the distance :func:`nbs_env.perception.structure.label_points` used
+    to label it), else wall; every other point is clutter. Perception's labels, not the truth.
+
+    Returns
+    -------
+    (m,) uint8
+    """
+    points = np.asarray(room.points, dtype=float).reshape(-1, 3)
+    structure = np.asarray(room.structure, dtype=bool).reshape(-1)
+    z = points[:, 2]
+    codes = np.full(len(points), 67, dtype=np.uint8)
+    codes[structure] = 64
+    codes[structure & (np.abs(z - room.floor_z) <= distance)] = 65
+    if room.has_ceiling:
+        codes[structure & (np.abs(z - room.ceiling_z) <= distance)] = 66
+    return codes
+
+
+def _classification_lookup() -> Any:
+    """LAS 1.4's Classification Lookup VLR (LASF_Spec, record 0) naming :data:`LAS_CLASSES`."""
+    from laspy.vlrs.known import ClassificationLookupVlr
+
+    lookup = ClassificationLookupVlr()
+    for code, name in LAS_CLASSES.items():
+        lookup[code] = name
+    return lookup
+
+
+def write_las(path: str | Path, points: np.ndarray, classes: np.ndarray, rooms: np.ndarray | None = None) -> Path:
+    """Write classified points as LAS 1.4 (point format 6); a ``.laz`` path is LAZ-compressed.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write; ``.laz`` compresses (laspy's lazrs backend), ``.las`` does not.
+    points : (n, 3) float
+        Coordinates, stored at millimetre scale.
+    classes : (n,) uint8
+        Classification codes (:data:`LAS_CLASSES`; the header's Classification Lookup names them).
+    rooms : (n,) int, optional
+        The robot's room number of each point, as the extra byte dimension ``room`` (uint16).
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    ValueError
+        Shapes that do not match, or non-finite points.
+    """
+    import laspy
+
+    path = Path(path)
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    classes = np.asarray(classes)
+    if classes.shape != (len(pts),):
+        raise ValueError(f"classes must have shape ({len(pts)},), got {classes.shape}")
+    if not np.all(np.isfinite(pts)):
+        raise ValueError("points must be finite")
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.scales = np.array([0.001, 0.001, 0.001])
+    header.offsets = np.floor(pts.min(axis=0)) if len(pts) else np.zeros(3)
+    header.generating_software = "nbs-env"
+    if rooms is not None:
+        header.add_extra_dim(laspy.ExtraBytesParams(name="room", type=np.uint16, description="robot's room number"))
+    header.vlrs.append(_classification_lookup())
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = pts[:, 0], pts[:, 1], pts[:, 2]
+    las.classification = classes.astype(np.uint8)
+    if rooms is not None:
+        rooms = np.asarray(rooms)
+        if rooms.shape != (len(pts),):
+            raise ValueError(f"rooms must have shape ({len(pts)},), got {rooms.shape}")
+        las.room = rooms.astype(np.uint16)
+    las.write(str(path))
+    return path
+
+
+def write_samples(path: str | Path, env: NBSEnv) -> Path:
+    """Write the evaluation's structural samples and their scan-quality figures as NPZ.
+
+    Arrays: ``points`` (n, 3) float32, ``labels`` (n,) uint8 (SurfaceClass), ``rooms`` (n,) int32
+    (true room id), ``sensed`` (n,) bool, ``density`` (n,) float32 (points per m²),
+    ``incidence`` (n,) float32 (best incidence angle, degrees; NaN when never seen) and ``range``
+    (n,) float32 (shortest range, metres; NaN when never seen); see
+    :meth:`nbs_env.evaluation.CoverageMeter.quality`. Ground truth: for evaluation only.
+    """
+    meter = env.storey.meter
+    quality = meter.quality(env.storey.config.quality)
+    np.savez_compressed(
+        Path(path),
+        points=meter.samples.points.astype(np.float32),
+        labels=meter.samples.labels.astype(np.uint8),
+        rooms=meter.samples.rooms.astype(np.int32),
+        sensed=meter.sensed.copy(),
+        density=quality.density.astype(np.float32),
+        incidence=quality.incidence.astype(np.float32),
+        range=quality.range.astype(np.float32),
+    )
+    return Path(path)
+
+
+def _station_times(env: NBSEnv, start: float) -> list[tuple[float, float]]:
+    """Each scan's acquisition start and end on the simulated clock, GPS seconds from ``start``
+    (Unix time): the processing and acquisition of the scans before it and the travel to it."""
+    config = env.storey.config
+    clock, out = 0.0, []
+    gps = start - _GPS_EPOCH_UNIX + _GPS_LEAP_SECONDS
+    for record in env.storey.scans:
+        begin = clock + record.path_length / config.travel_speed
+        out.append((gps + begin, gps + begin + record.acquisition_time))
+        clock += record.processing_time + record.acquisition_time
+    return out
+
+
 # ---------------------------------------------------------------------- the report
 def write_report(
     env: NBSEnv,
@@ -237,6 +471,7 @@ def write_report(
     policy: str,
     seed: int | None,
     policy_times: dict[int, float] | None = None,
+    run_started: float | None = None,
 ) -> dict[str, Any]:
     """Write the episode's report files (:data:`REPORT_FILES`) into ``out_dir``.
 
@@ -249,6 +484,9 @@ def write_report(
         Created if missing; existing report files are overwritten.
     scene_name, policy, seed, policy_times
         As for :func:`nbs_env.evaluation.metrics_dict`.
+    run_started : float, optional
+        Unix time the episode started, the origin of the E57 records' acquisition times (default:
+        now).
 
     Returns
     -------
@@ -263,6 +501,7 @@ def write_report(
     """
     import matplotlib.pyplot as plt
 
+    run_started = time.time() if run_started is None else float(run_started)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     metrics = metrics_dict(env.storey, scene_name, policy, seed, policy_times)
@@ -277,6 +516,17 @@ def write_report(
     write_points_ply(out / "structure.ply", points[structure])
     write_points_ply(out / "cloud.ply", points, structure.astype(np.uint8))
     write_model_obj(out / "model.obj", models)
+    codes = [classify_points(m) for m in models]
+    write_las(
+        out / "cloud.laz",
+        points,
+        np.concatenate(codes) if codes else np.zeros(0, dtype=np.uint8),
+        np.concatenate([np.full(len(c), m.index) for m, c in zip(models, codes, strict=True)]) if codes else None,
+    )
+    write_samples(out / "samples.npz", env)
+    log = env.storey.scan_log
+    if log:
+        write_e57(out / "scans.e57", log, times=_station_times(env, run_started))
 
     mode = env.render_mode
     env.render_mode = "rgb_array"

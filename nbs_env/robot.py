@@ -72,6 +72,8 @@ class StepReport:
     ``path``: the planned (p, 2) polyline :meth:`Robot.move_to` drove (empty for other scans).
     ``conversions``: the voxels that were Occluded-structure before the move and are Structure
     after its scan (counted when :meth:`Robot.move_to` is asked to; 0 otherwise).
+    ``scan``: the scan itself (its measured points in the scanner frame; its ``truth`` is the
+    simulator's).
     """
 
     scan_index: int
@@ -85,6 +87,7 @@ class StepReport:
     acquisition_time: float
     times: dict[str, float]
     world_points: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 3)))
+    scan: Scan | None = field(repr=False, default=None)
     path: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 2)))
     conversions: int = 0
 
@@ -181,6 +184,7 @@ class Robot:
             acquisition_time=scan.acquisition_time,
             times=times,
             world_points=world,
+            scan=scan,
         )
 
     def plan(self) -> Plan:

@@ -15,6 +15,7 @@ from typing import Any
 
 from nbs_env.config import Config, OdometryConfig, RegistrationConfig, ScannerConfig, _finite, _integer, _require
 from nbs_env.errors import ConfigError
+from nbs_env.evaluation import QualityConfig
 from nbs_env.observation import ObservationConfig
 from nbs_env.perception.doors import DoorConfig
 from nbs_env.perception.roi import RoIConfig
@@ -160,6 +161,12 @@ class EnvConfig(Config):
         not copies: use it in-process only (it does not pickle).
     coverage_spacing, coverage_radius : float
         Ground-truth sample spacing and sensing radius of the evaluation, metres.
+    quality : QualityConfig
+        The evaluation's scan-quality thresholds (point density, incidence angle).
+    keep_scans : bool
+        Keep every scan's measured points in the scanner frame with its estimated pose
+        (:attr:`Storey.scan_log`), for the E57 export of ``nbs scan``: about 1.7 MB a scan at the
+        default 0.5° pattern.
     travel_speed : float
         Driving speed for the travel time, m/s.
     """
@@ -175,6 +182,8 @@ class EnvConfig(Config):
     expose_belief: bool = False
     coverage_spacing: float = 0.05
     coverage_radius: float = 0.05
+    quality: QualityConfig = field(default_factory=QualityConfig)
+    keep_scans: bool = False
     travel_speed: float = 0.5
 
     def __post_init__(self) -> None:

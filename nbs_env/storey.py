@@ -40,7 +40,7 @@ from scenes import FloorPlan, Scene, load_scene
 from scenes.generator import generate_plan
 from scenes.geometry import point_is_free
 
-__all__ = ["STAGES", "ScanRecord", "StageTimes", "StepOutcome", "Storey", "resolve_scene"]
+__all__ = ["STAGES", "ScanPoints", "ScanRecord", "StageTimes", "StepOutcome", "Storey", "resolve_scene"]
 
 #: Stage names of a scan's ``times``, in the order a step runs them.
 STAGES = ("scan", "registration", "roi", "classification", "voxels", "planning")
@@ -89,6 +89,32 @@ class ScanRecord:
     registration_error: tuple[float, float]
     times: dict[str, float]
     registration_refused: str = ""
+    #: (4, 4) float: the robot's estimate of the scanner pose.
+    estimated_pose: np.ndarray = field(repr=False, default_factory=lambda: np.eye(4))
+    #: Registration's share of the scan that S(t) explains (its overlap with the cloud before it)
+    #: and ICP's fitness; None for the first scan and without registration.
+    registration_overlap: float | None = None
+    registration_fitness: float | None = None
+
+
+@dataclass(frozen=True)
+class ScanPoints:
+    """One scan as measured, for export: points in the scanner frame and the robot's pose of it.
+
+    Attributes
+    ----------
+    points : (n, 3) float32
+        Measured points in the scanner frame.
+    rows, cols : (n,) int32
+        Each point's row (elevation) and column (azimuth) in the scan pattern.
+    pose : (4, 4) float
+        The estimated scanner pose (scanner frame to the robot's map frame).
+    """
+
+    points: np.ndarray = field(repr=False)
+    rows: np.ndarray = field(repr=False)
+    cols: np.ndarray = field(repr=False)
+    pose: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -203,6 +229,8 @@ class Storey:
         ``reason`` it ended (``"gain"``, ``"declared"``, ``"cap"`` or ``"no NVP"``).
     paths : list of (p, 2) float
         The planned paths driven.
+    scan_log : list of ScanPoints
+        Every scan as measured, when ``config.keep_scans`` (else empty).
     complete : bool
         The storey is done: the current room is complete and no detected door is left to reach.
     """
@@ -222,6 +250,7 @@ class Storey:
         self.complete = False
         self.new_room = True
         self.step_scans: list[tuple[np.ndarray, np.ndarray]] = []
+        self.scan_log: list[ScanPoints] = []
         self._record(self.robot.scan(), door=False)
         self.advance()
 
@@ -416,12 +445,14 @@ class Storey:
         robot = self.robot
         self.step_scans.append((report.world_points, report.estimated_pose[:3, 3].copy()))
         t = time.perf_counter()
-        self.meter.add(report.world_points)
+        self.meter.add(report.world_points, report.estimated_pose[:3, 3])
         evaluation = time.perf_counter() - t
         # Planning for the next decision belongs to this step: it runs now, not at the next call.
         planned = robot.plan()
         times = {**{s: 0.0 for s in STAGES}, **report.times, "planning": planned.seconds, "evaluation": evaluation}
         processing = sum(times[s] for s in STAGES if s != "scan")
+        # The first scan has no S(t) to register to: registration then reports no overlap.
+        reg = report.registration if report.registration is not None and len(self.scans) else None
         self.scans.append(
             ScanRecord(
                 scan=len(self.scans),
@@ -441,8 +472,21 @@ class Storey:
                 registration_refused=report.registration.reason
                 if report.registration is not None and not report.registration.accepted
                 else "",
+                estimated_pose=report.estimated_pose.copy(),
+                registration_overlap=None if reg is None else float(reg.overlap),
+                registration_fitness=None if reg is None else float(reg.fitness),
             )
         )
+        if self.config.keep_scans and report.scan is not None:
+            scan = report.scan
+            self.scan_log.append(
+                ScanPoints(
+                    np.asarray(scan.points, dtype=np.float32),
+                    np.asarray(scan.rows, dtype=np.int32),
+                    np.asarray(scan.cols, dtype=np.int32),
+                    report.estimated_pose.copy(),
+                )
+            )
 
     def _check_open(self) -> None:
         if not self.open:

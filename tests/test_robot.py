@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from nbs_env.config import ScannerConfig
-from nbs_env.evaluation import CoverageMeter
+from nbs_env.evaluation import CoverageMeter, QualityConfig
 from nbs_env.robot import Robot
 from nbs_env.settings import EnvConfig, RobotConfig
 from nbs_env.storey import Storey
@@ -31,6 +31,41 @@ def test_coverage_meter_counts_against_the_full_surface():
     assert meter.percent(label=SurfaceClass.CEILING) == 0.0
     meter.add(meter.samples.points)
     assert meter.percent(room=0) == pytest.approx(100.0)
+
+
+def test_quality_measures_density_incidence_and_range_of_each_sample():
+    """One point on each floor sample, seen from 1.5 m above a point of the floor: the density is one
+    point per sample's area, and the incidence and range are the geometry's."""
+    scene = load_scene("office")
+    meter = CoverageMeter(scene, spacing=0.1)
+    floor = meter.samples.labels == SurfaceClass.FLOOR
+    points = meter.samples.points[floor]
+    origin = points[len(points) // 2] + [0.0, 0.0, 1.5]
+    meter.add(points, origin)
+    loose = QualityConfig(min_density=90.0, max_incidence=90.0, density_radius=0.25)
+    report = meter.quality(loose)
+    # 100 points per m² where every neighbour is a floor sample; less along the walls, whose
+    # samples within 25 cm got no point.
+    assert np.median(report.density[floor]) == pytest.approx(100.0, rel=1e-6)
+    assert np.all(report.density <= 100.0 * (1 + 1e-5)) and np.all(report.density[~meter.sensed] == 0)
+    # The incidence and range are the smallest within 25 cm: never above the sample's own, and
+    # no more than 25 cm of floor away from it.
+    d = np.linalg.norm(points[:, :2] - origin[:2], axis=1)
+    own = np.degrees(np.arctan2(d, 1.5))
+    inc, rng = report.incidence[floor], report.range[floor]
+    assert np.all(inc <= own + 1e-3) and np.all(inc >= np.degrees(np.arctan2(np.maximum(d - 0.25, 0), 1.5)) - 1e-3)
+    assert np.all(rng <= np.hypot(d, 1.5) + 1e-3) and np.all(rng >= 1.5 - 1e-3)
+    # The shares: every sensed sample is square at 90°; at 60° only the floor within about 1.5·tan(60°).
+    assert report.incidence_pct[-1] == pytest.approx(meter.percent())
+    strict = meter.quality(QualityConfig(min_density=90.0, max_incidence=60.0, density_radius=0.25))
+    share = 100.0 * np.count_nonzero(floor & (np.nan_to_num(strict.incidence, nan=90.0) <= 60.0)) / len(floor)
+    assert share < 100.0 and np.all(d[inc <= 60.0 - 1e-3] <= 1.5 * np.tan(np.radians(60.0)) + 0.25 + 1e-6)
+    # Density and incidence together never exceed either, nor the coverage.
+    assert strict.quality_pct[-1] <= min(strict.dense_pct[-1], strict.incidence_pct[-1]) <= meter.percent() + 1e-9
+    # A second pass doubles the density; the curves have one entry per scan.
+    meter.add(points, origin)
+    again = meter.quality(loose)
+    assert np.median(again.density[floor]) == pytest.approx(200.0, rel=1e-6) and len(again.dense_pct) == 2
 
 
 def greedy_run(scene_name: str, seed: int, config: RobotConfig | None = None, max_scans: int = 10):

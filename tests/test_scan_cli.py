@@ -16,7 +16,7 @@ import pytest
 import trimesh
 
 from nbs_env.belief import RoomModel
-from nbs_env.evaluation import SCHEMA, metrics_dict
+from nbs_env.evaluation import SCHEMA, QualityConfig, QualityReport, metrics_dict
 from nbs_env.export import FACE_KINDS, structural_model, write_model_obj, write_points_ply
 from nbs_env.perception.faces import WallFace
 from scenes import Room, load_scene
@@ -85,6 +85,8 @@ TOP_LEVEL = {
     "acquisition_time_s": float,
     "travel_time_s": float,
     "registration_error": dict,
+    "quality": dict,
+    "registrability": dict,
     "rooms": list,
     "steps": list,
     "door_events": list,
@@ -99,12 +101,14 @@ ROOM_KEYS = {
     "path_length_m": float,
     "processed_points": int,
     "processing_time_s": float,
+    "quality_pct": float,
 }
 STEP_KEYS = {
     "scan": int,
     "room": (int, type(None)),
     "position": list,
     "estimated_position": list,
+    "estimated_rotation": list,
     "predicted_gain": int,
     "structure_sensed_pct": float,
     "path_length_m": float,
@@ -114,6 +118,11 @@ STEP_KEYS = {
     "door": bool,
     "times": dict,
     "registration_refused": str,
+    "registration_overlap": (float, type(None)),
+    "registration_fitness": (float, type(None)),
+    "dense_pct": float,
+    "incidence_pct": float,
+    "quality_pct": float,
 }
 
 
@@ -199,6 +208,93 @@ def test_model_obj_loads_inside_the_scene(report):
     # The recovered floor (faces facing up) lies within the L's 45.6 m² of clear floor, and covers most of it.
     floor = mesh.area_faces[mesh.face_normals[:, 2] > 0.99].sum()
     assert 30.0 < floor < 45.6 * 1.1
+
+
+def test_scans_e57_holds_every_station_with_the_poses_of_metrics_json(report):
+    import pye57
+
+    steps = report.metrics["steps"]
+    e57 = pye57.E57(str(report.out / "scans.e57"))
+    try:
+        assert e57.scan_count == len(steps) == 3
+        registered = []
+        for k, step in enumerate(steps):
+            header = e57.get_header(k)
+            assert header["name"].value() == f"scan_{k:03d}"
+            assert header.point_count == step["points"] > 0
+            np.testing.assert_allclose(header.translation, step["estimated_position"], atol=1e-9)
+            np.testing.assert_allclose(header.rotation, step["estimated_rotation"], atol=1e-9)
+            assert abs(np.linalg.norm(header.rotation) - 1.0) < 1e-9
+            local = e57.read_scan_raw(k)
+            assert set(local) >= {"cartesianX", "rowIndex", "columnIndex"}
+            # The points are stored in the scanner frame: within the scanner's range of its origin.
+            ranges = np.linalg.norm(
+                np.column_stack([local[c] for c in ("cartesianX", "cartesianY", "cartesianZ")]), axis=1
+            )
+            scanner = report.metrics["config"]["robot"]["scanner"]
+            assert ranges.min() >= scanner["min_range"] - 0.05 and ranges.max() <= scanner["max_range"]
+            placed = e57.read_scan(k, transform=True, ignore_missing_fields=True)
+            registered.append(np.column_stack([placed[c] for c in ("cartesianX", "cartesianY", "cartesianZ")]))
+            # The station's time: its acquisition after the start of the one before.
+            start = header.acquisitionStart["dateTimeValue"].value()
+            end = header.acquisitionEnd["dateTimeValue"].value()
+            assert end > start > 1e9  # GPS seconds of this century
+    finally:
+        e57.close()
+    # Placed with their poses, the stations are the registered cloud that cloud.laz downsamples.
+    import laspy
+    from scipy.spatial import cKDTree
+
+    cloud = laspy.read(report.out / "cloud.laz").xyz
+    distance, _ = cKDTree(np.concatenate(registered)).query(cloud)
+    assert np.median(distance) < 0.03 and np.quantile(distance, 0.99) < 0.1
+
+
+def test_cloud_laz_is_the_classified_cloud(report):
+    import laspy
+
+    from nbs_env.export import LAS_CLASSES
+
+    las = laspy.read(report.out / "cloud.laz")
+    labels = read_ply(report.out / "cloud.ply")
+    assert las.header.version.minor == 4 and las.header.point_format.id == 6
+    assert len(las.points) == len(labels)
+    np.testing.assert_allclose(las.x, labels["x"], atol=2e-3)
+    classes = np.asarray(las.classification)
+    assert set(np.unique(classes)) <= set(LAS_CLASSES)
+    # Structure (cloud.ply's label 1) is wall, floor or ceiling; the rest is clutter.
+    np.testing.assert_array_equal(classes != 67, labels["label"] == 1)
+    floor, ceiling = np.asarray(las.z)[classes == 65], np.asarray(las.z)[classes == 66]
+    assert len(floor) and len(ceiling) and floor.max() < ceiling.min()
+    assert set(np.unique(las.room)) == {0}
+    (lookup,) = [v for v in las.header.vlrs if v.user_id == "LASF_Spec" and v.record_id == 0]
+    assert lookup.lookups == LAS_CLASSES
+
+
+def test_quality_figures_are_bounded_by_the_coverage(report):
+    m = report.metrics
+    q = m["quality"]
+    assert q["min_density_per_m2"] == 400.0 and q["max_incidence_deg"] == 70.0
+    assert 0 < q["quality_pct"] <= min(q["dense_pct"], q["incidence_pct"]) <= m["structure_sensed_pct"]
+    assert 0 <= q["median_incidence_deg"] <= 90 and q["median_range_m"] > 1.0 and q["median_density_per_m2"] > 0
+    steps = m["steps"]
+    for key in ("dense_pct", "incidence_pct", "quality_pct"):
+        values = [s[key] for s in steps]
+        assert all(b >= a for a, b in itertools.pairwise(values)), (key, values)
+        assert values[-1] == pytest.approx(q[key])
+    assert all(s["quality_pct"] <= s["structure_sensed_pct"] + 1e-9 for s in steps)
+    # Registrability: every scan after the first was registered to the cloud before it.
+    reg = m["registrability"]
+    assert reg["scans"] == 2 and steps[0]["registration_overlap"] is None
+    assert 0 < reg["min_overlap"] <= reg["mean_overlap"] <= 1 and 0 < reg["min_fitness"] <= 1
+    samples = np.load(report.out / "samples.npz")
+    n = len(samples["points"])
+    assert all(len(samples[k]) == n for k in ("labels", "rooms", "sensed", "density", "incidence", "range"))
+    sensed = samples["sensed"]
+    assert 100.0 * sensed.mean() == pytest.approx(m["structure_sensed_pct"])
+    seen = np.isfinite(samples["incidence"])
+    assert not np.any(seen & ~sensed) and np.all(samples["density"][~sensed] == 0)
+    assert np.all((samples["incidence"][seen] >= 0) & (samples["incidence"][seen] <= 90))
 
 
 def test_pictures_and_table(report):
@@ -378,7 +474,8 @@ def test_door_frame_scans_belong_to_the_room_entered():
             estimated_position=np.array([*xy, 1.5]), predicted_gain=np.int64(3), path_length=path,
             structure_sensed_pct=10.0 * (k + 1), processing_time=0.5, acquisition_time=0.2,
             points=1000 + k, structure_points=500 + k, registration_error=(0.01 * k, 0.1 * k), times={"scan": 0.1},
-            registration_refused="",
+            registration_refused="", estimated_pose=np.eye(4), registration_overlap=None if k == 0 else 0.8,
+            registration_fitness=None if k == 0 else 0.7,
         )  # fmt: skip
 
     steps = [
@@ -389,8 +486,24 @@ def test_door_frame_scans_belong_to_the_room_entered():
         step(4, 1, (5.1, 2), 7.5),  # in the wall (drift), not a door scan: b, by the robot's room
         step(5, 2, (2, 4.9), 12.0, door=True),  # entering c, the budget ran out: the room no scan was in
     ]
-    config = SimpleNamespace(travel_speed=0.5, to_dict=lambda: {"max_scans": 10, "shape": (1, 2)})
-    meter = SimpleNamespace(percent=lambda room=None: {None: 40.0, 0: 60.0, 1: 30.0, 2: 0.0}[room])
+    config = SimpleNamespace(
+        travel_speed=0.5, quality=QualityConfig(), to_dict=lambda: {"max_scans": 10, "shape": (1, 2)}
+    )
+    # One sample per room; the first dense and seen squarely after the second scan.
+    curve = np.array([0.0, 100 / 3, 100 / 3, 100 / 3, 100 / 3, 100 / 3])
+    quality = QualityReport(
+        np.array([500.0, 0.0, 0.0]),
+        np.array([10.0, np.nan, np.nan]),
+        np.array([2.0, np.nan, np.nan]),
+        curve,
+        curve,
+        curve,
+    )
+    meter = SimpleNamespace(
+        percent=lambda room=None: {None: 40.0, 0: 60.0, 1: 30.0, 2: 0.0}[room],
+        quality=lambda config: quality,
+        samples=SimpleNamespace(rooms=np.array([0, 1, 2])),
+    )
     storey = SimpleNamespace(
         scans=steps,
         scene=SimpleNamespace(rooms=rooms),
@@ -402,6 +515,13 @@ def test_door_frame_scans_belong_to_the_room_entered():
     )
     m = metrics_dict(storey, "fake", "stachniss_burgard", 0, structure_aware=False)
     json.dumps(m)  # plain JSON types only
+    assert [r["quality_pct"] for r in m["rooms"]] == [100.0, 0.0, 0.0]
+    assert m["quality"]["quality_pct"] == pytest.approx(100 / 3) and m["steps"][1]["quality_pct"] == pytest.approx(
+        100 / 3
+    )
+    assert m["registrability"] == {
+        "scans": 5, "mean_overlap": 0.8, "min_overlap": 0.8, "mean_fitness": 0.7, "min_fitness": 0.7, "refused": 0
+    }  # fmt: skip
     assert [s["room"] for s in m["steps"]] == [0, 0, 1, 1, 1, 2]
     a, b, c = m["rooms"]
     assert (a["scans"], b["scans"], c["scans"]) == (2, 3, 1)

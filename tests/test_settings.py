@@ -7,7 +7,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from nbs_env.config import ScannerConfig
 from nbs_env.errors import ConfigError
+from nbs_env.evaluation import QualityConfig
 from nbs_env.labels import LABEL_COLOURS, VoxelLabel
 from nbs_env.perception.doors import DoorConfig
 from nbs_env.perception.roi import RoIConfig
@@ -30,6 +32,10 @@ from scenes import load_scene
         (lambda: GainConfig(tolerance_voxels=-1.0), "tolerance_voxels"),
         (lambda: GainConfig(occluded_clutter_blocks="yes"), "occluded_clutter_blocks"),
         (lambda: RobotConfig(max_scans_per_room=0), "max_scans_per_room must be an integer >= 1"),
+        (lambda: QualityConfig(min_density=-1.0), "min_density must be >= 0"),
+        (lambda: QualityConfig(max_incidence=95.0), "max_incidence must be in"),
+        (lambda: QualityConfig(density_radius=float("inf")), "density_radius must be a finite number"),
+        (lambda: ScannerConfig(station_time=0.0), "station_time must be > 0"),
         (lambda: EnvConfig(max_scans=True), "max_scans must be an integer"),
     ],
 )

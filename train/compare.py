@@ -18,7 +18,11 @@ Each run plays one policy on one scene with one seed (:func:`run_one`) and retur
 - ``methods.md``: per policy over every scene and seed, how its rooms ended (its own rule, the
   per-room cap, or no NVP left: the storey session's end, neither the rule's nor the cap's), the
   rooms it left unscanned, its mean scans, coverage and path;
-- ``coverage_vs_scans.png`` (one curve per policy, a band over runs) and ``path_time.png``.
+- ``quality.md``: per scene and policy, the scan-quality figures (``metrics.json``'s ``quality`` and
+  ``registrability``): the share of the structural surface sensed densely enough, squarely enough
+  and both, and each scan's overlap with the cloud before it and ICP's fitness;
+- ``coverage_vs_scans.png`` (one curve per policy, a band over runs), ``quality_vs_scans.png`` (the
+  coverage at the density and at the incidence threshold, against scans) and ``path_time.png``.
 
 Runs are deterministic: the same seeds give the same table, times aside.
 """
@@ -275,7 +279,8 @@ def _total_time(m: dict[str, Any]) -> float:
 
 TOTAL_KEYS = ("scans", "time_s", "structure_sensed_pct", "processed_points", "path_length_m",
               "of_oracle_pct", "vs_oracle_scans", "unscanned_rooms", "cap_ended", "rule_ended_pct", "abandoned",
-              "exterior_doors", "reg_mean_cm", "reg_max_cm")  # fmt: skip
+              "exterior_doors", "reg_mean_cm", "reg_max_cm", "dense_pct", "incidence_pct", "quality_pct",
+              "mean_overlap", "min_overlap", "min_fitness", "refused")  # fmt: skip
 #: The room ends (:attr:`nbs_env.storey.Storey.room_ends` reasons) that are a completion rule's: the
 #: greedy's ("gain") or the policy's "room done" ("declared"), not the cap's nor "no NVP".
 RULE_ENDS = ("gain", "declared")
@@ -303,6 +308,16 @@ def _run_quantities(m: dict[str, Any], oracle: dict[str, Any]) -> dict[str, floa
     if "registration_error" in m:
         q["reg_mean_cm"] = 100.0 * float(m["registration_error"]["mean_m"])
         q["reg_max_cm"] = 100.0 * float(m["registration_error"]["max_m"])
+    quality = m.get("quality") or {}
+    for key in ("dense_pct", "incidence_pct", "quality_pct"):
+        if quality.get(key) is not None:
+            q[key] = float(quality[key])
+    registrability = m.get("registrability") or {}
+    for key in ("mean_overlap", "min_overlap", "min_fitness"):
+        if registrability.get(key) is not None:
+            q[key] = 100.0 * float(registrability[key])
+    if "refused" in registrability:
+        q["refused"] = float(registrability["refused"])
     if oracle.get("ok") and "room_max_pct" in oracle:
         room_max = oracle["room_max_pct"]
         q["unscanned_rooms"] = float(
@@ -450,6 +465,35 @@ def _storeys_markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _quality_markdown(rows: list[dict[str, Any]], thresholds: dict[str, float] | None) -> str:
+    """One line per scene and policy: the scan-quality figures (mean ± std over seeds)."""
+    head = ["scene", "policy", "scans", "SE sensed (%)", "dense (%)", "square (%)", "both (%)",
+            "overlap mean / min (%)", "ICP fitness min (%)", "poses refused"]  # fmt: skip
+    lines = []
+    if thresholds:
+        lines += [
+            f"dense: at least {thresholds['min_density_per_m2']:g} points per m² around the sample "
+            f"(within {thresholds['density_radius_m']:g} m); square: seen at least once at an incidence of at most "
+            f"{thresholds['max_incidence_deg']:g}°; overlap: the share of each scan the cloud before it explains.",
+            "",
+        ]
+    lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        if r["room"] != "total":
+            continue
+        cells = [
+            r["scene"],
+            r["policy"],
+            _cell(r.get("scans"), "{:.1f}"),
+            _cell(r.get("structure_sensed_pct"), "{:.1f}"),
+        ]
+        cells += [_cell(r.get(k), "{:.1f}") for k in ("dense_pct", "incidence_pct", "quality_pct")]
+        cells.append(" / ".join(_cell(r.get(k), "{:.0f}") for k in ("mean_overlap", "min_overlap")))
+        cells += [_cell(r.get("min_fitness"), "{:.0f}"), _cell(r.get("refused"), "{:.1f}")]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def _methods_markdown(results: Sequence[dict[str, Any]], oracles: dict[str, dict[str, Any]]) -> str:
     """One line per policy over every scene and seed: how its rooms ended (its own rule, the
     per-room cap, no NVP left) and what it left, the figures a fair comparison is judged by."""
@@ -524,6 +568,7 @@ def _plots(results: list[dict[str, Any]], oracles: dict[str, dict[str, Any]], ou
     ax.legend(fontsize=8, loc="lower right")
     ax.set_title("Coverage against scans (mean over runs; band: min to max)")
     fig.savefig(out / "coverage_vs_scans.png")
+    _quality_plot(ok, policies, out)
 
     fig = Figure(figsize=(9, 4), dpi=110)
     FigureCanvasAgg(fig)
@@ -542,6 +587,53 @@ def _plots(results: list[dict[str, Any]], oracles: dict[str, dict[str, Any]], ou
     fig.suptitle("Path length and time per run (mean ± std)")
     fig.tight_layout()
     fig.savefig(out / "path_time.png")
+
+
+def _padded(curves: list[list[float]]) -> np.ndarray:
+    """(runs, n) the curves, each held at its last value up to the longest: a finished run keeps it."""
+    n = max(len(c) for c in curves)
+    return np.array([c + [c[-1]] * (n - len(c)) for c in curves], dtype=float)
+
+
+def _quality_plot(ok: list[dict[str, Any]], policies: list[str], out: Path) -> None:
+    """``quality_vs_scans.png``: per policy, the coverage at the density threshold and at the
+    incidence threshold against scans, beside the plain coverage (dotted)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    thresholds = next((r["metrics"]["quality"] for r in ok if "quality" in r["metrics"]), None)
+    fig = Figure(figsize=(11, 4.5), dpi=110)
+    FigureCanvasAgg(fig)
+    panels = (
+        ("dense_pct", f"at least {thresholds['min_density_per_m2']:g} points per m²" if thresholds else "dense"),
+        (
+            "incidence_pct",
+            f"seen at an incidence of at most {thresholds['max_incidence_deg']:g}°" if thresholds else "",
+        ),
+    )
+    for k, (key, title) in enumerate(panels):
+        ax = fig.add_subplot(1, 2, k + 1)
+        for policy in policies:
+            runs = [r["metrics"]["steps"] for r in ok if r["spec"]["policy"] == policy]
+            runs = [steps for steps in runs if steps and steps[0].get(key) is not None]
+            if not runs:
+                continue
+            x = np.arange(1, max(len(s) for s in runs) + 1)
+            quality = _padded([[s[key] for s in steps] for steps in runs])
+            coverage = _padded([[s["structure_sensed_pct"] for s in steps] for steps in runs])
+            (line,) = ax.plot(x, quality.mean(axis=0), label=f"{policy} ({len(runs)} runs)")
+            ax.fill_between(x, quality.min(axis=0), quality.max(axis=0), color=line.get_color(), alpha=0.15)
+            ax.plot(x, coverage.mean(axis=0), ":", color=line.get_color(), linewidth=1)
+        ax.set_xlabel("scan")
+        ax.set_ylabel("structural surface (%)")
+        ax.set_ylim(0, 100)
+        ax.grid(alpha=0.3)
+        ax.set_title(title, fontsize=9)
+        if k == 0:
+            ax.legend(fontsize=8, loc="lower right")
+    fig.suptitle("Coverage meeting the quality thresholds against scans (dotted: all coverage)")
+    fig.tight_layout()
+    fig.savefig(out / "quality_vs_scans.png")
 
 
 def write_outputs(
@@ -564,6 +656,8 @@ def write_outputs(
         (out / "table.md").write_text(_markdown(rows))
         (out / "storeys.md").write_text(_storeys_markdown(rows))
         (out / "methods.md").write_text(_methods_markdown(results, oracles))
+        thresholds = next((r["metrics"].get("quality") for r in results if r["ok"] and "quality" in r["metrics"]), None)
+        (out / "quality.md").write_text(_quality_markdown(rows, thresholds))
         _plots(results, oracles, out)
     except Exception as exc:  # the runs are on disk; say what failed and where they are
         (out / "summary_error.txt").write_text(f"{type(exc).__name__}: {exc}\n\n{traceback.format_exc()}")
