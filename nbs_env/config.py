@@ -69,7 +69,12 @@ class ScannerConfig(Config):
     height : float
         Optical centre above the floor the robot stands on, in metres.
     points_per_second : float
-        Acquisition rate, for the simulated acquisition time.
+        Acquisition rate, for the simulated acquisition time when ``station_time`` is None.
+    station_time : float or None
+        Seconds a station takes on the real instrument at its chosen resolution and quality setting
+        (a scanner preset's datasheet figure, :mod:`nbs_env.scanners`). None: the acquisition time
+        is the returned points over ``points_per_second``, the time the simulated pattern alone
+        would take.
     """
 
     angular_step: float = 0.5
@@ -80,6 +85,7 @@ class ScannerConfig(Config):
     range_noise: float = 0.005
     height: float = 1.5
     points_per_second: float = 122_000.0
+    station_time: float | None = None
 
     def __post_init__(self) -> None:
         _finite(
@@ -104,6 +110,9 @@ class ScannerConfig(Config):
         )
         _require(self.range_noise >= 0, f"range_noise must be >= 0, got {self.range_noise}")
         _require(self.points_per_second > 0, f"points_per_second must be > 0, got {self.points_per_second}")
+        if self.station_time is not None:
+            _finite(station_time=self.station_time)
+            _require(self.station_time > 0, f"station_time must be > 0 seconds or None, got {self.station_time}")
         rays = self.n_rows * self.n_cols
         _require(
             rays <= MAX_RAYS,

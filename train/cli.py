@@ -103,6 +103,15 @@ def _number(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
 
 
+def _scanner_help() -> str:
+    from nbs_env.scanners import SCANNERS
+
+    return "; ".join(
+        f"{name} ({model.title}: {', '.join(s.name for s in model.settings)}, default {model.default_setting})"
+        for name, model in SCANNERS.items()
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="nbs", description="nbs-env: next-best-scan planning of building interiors.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -138,7 +147,8 @@ def build_parser() -> argparse.ArgumentParser:
         "scan",
         help="scan a storey autonomously and write a report",
         description="Scan a storey with a policy (the paper's greedy NBS by default) and write metrics.json, "
-        "structure.ply, cloud.ply, model.obj, topdown.png and steps/step_NNN.png into --out.",
+        "scans.e57, cloud.laz, structure.ply, cloud.ply, model.obj, samples.npz, topdown.png and "
+        "steps/step_NNN.png into --out.",
     )
     scan.add_argument(
         "--scene", required=True, help="bundled name, .json/.obj/.glb/.gltf/.ply/.ifc path, or generated:SEED"
@@ -147,7 +157,20 @@ def build_parser() -> argparse.ArgumentParser:
     scan.add_argument("--seed", type=_seed, default=0, help="seed of the episode, >= 0 (default 0)")
     scan.add_argument("--out", type=Path, default=None, help="report folder (default: ./scan-<scene>)")
     scan.add_argument("--max-scans", type=_positive_int, default=80, help="scan budget (default 80)")
-    scan.add_argument("--resolution", type=_number, default=None, help="scanner angular step in degrees (default 0.5)")
+    scan.add_argument(
+        "--resolution", type=_number, default=None, help="simulated scanner angular step in degrees (default 0.5)"
+    )
+    scan.add_argument(
+        "--scanner",
+        default=None,
+        metavar="NAME[:SETTING]",
+        help="a scanner preset from its datasheet: " + _scanner_help() + " (default: METHOD's simulated VZ-400, "
+        "acquisition time = points / 122,000 per s)",
+    )
+    scan.add_argument("--min-density", type=_number, default=None, help="quality: least points per m² (default 400)")
+    scan.add_argument(
+        "--max-incidence", type=_number, default=None, help="quality: largest incidence angle in degrees (default 70)"
+    )
     scan.add_argument("--voxel", type=_number, default=None, help="voxel size of V(t) in metres (default 0.05)")
     scan.add_argument("--storey", type=_storey, default=None, help="IFC storey name or index (IFC files only)")
     scan.add_argument("--ifc-doors", choices=("open", "closed"), default=None, help=IFC_DOORS_HELP)
@@ -366,14 +389,25 @@ def _scan_config(args: argparse.Namespace):
     from nbs_env.errors import ConfigError
     from nbs_env.settings import make_config
 
-    overrides: dict = {"scene": args.scene, "max_scans": args.max_scans}
+    # The scans are kept for scans.e57, the report's scan project.
+    overrides: dict = {"scene": args.scene, "max_scans": args.max_scans, "keep_scans": True}
     options = {"storey": args.storey, "doors": args.ifc_doors}
     if any(v is not None for v in options.values()):
         overrides["scene_options"] = {k: v for k, v in options.items() if v is not None}
     cfg = make_config("default", **overrides)
     robot = cfg.robot
-    if args.resolution is not None:
+    if args.scanner is not None:
+        from nbs_env.scanners import scanner_config
+
+        scanner = scanner_config(args.scanner, simulated_step=args.resolution, height=robot.scanner.height)
+        robot = replace(robot, scanner=scanner)
+    elif args.resolution is not None:
         robot = replace(robot, scanner=replace(robot.scanner, angular_step=args.resolution))
+    quality = {"min_density": args.min_density, "max_incidence": args.max_incidence}
+    if any(v is not None for v in quality.values()):
+        from nbs_env.evaluation import QualityConfig
+
+        cfg = replace(cfg, quality=QualityConfig(**{k: v for k, v in quality.items() if v is not None}))
     if args.voxel is not None:
         if not (math.isfinite(args.voxel) and 0.01 <= args.voxel <= 1.0):
             raise ConfigError(f"--voxel must be a voxel size in metres within 0.01..1, got {args.voxel}")
@@ -431,14 +465,31 @@ def scan_summary(metrics: dict, out: Path, files: Sequence[str]) -> str:
     else:
         state = "no"
     reg = metrics["registration_error"]
+    scanner = metrics["config"]["robot"]["scanner"]
+    if scanner.get("station_time") is not None:
+        acquisition = f" ({metrics['scans']} stations at {scanner['station_time']:g} s, the scanner preset's)"
+    else:
+        acquisition = f" (points at {scanner['points_per_second']:,.0f} per s)"
+    quality = metrics["quality"]
+    reach = metrics["registrability"]
+    overlap = (
+        f"; overlap with the cloud before each scan: mean {100 * reach['mean_overlap']:.0f}%,"
+        f" least {100 * reach['min_overlap']:.0f}%"
+        if reach.get("mean_overlap") is not None
+        else ""
+    )
     lines = [
         f"{metrics['scene']}: policy {metrics['policy']}, seed {metrics['seed']}",
         "",
         _table(rows, right={1, 2, 3, 4, 5, 6}),
         "",
         f"time {total_time:.1f} s = processing {metrics['processing_time_s']:.1f} s"
-        f" + acquisition {metrics['acquisition_time_s']:.1f} s + travel {metrics['travel_time_s']:.1f} s"
-        f" ({metrics['path_length_m']:.1f} m at {metrics['config']['travel_speed']} m/s)",
+        f" + acquisition {metrics['acquisition_time_s']:.1f} s + travel {metrics['travel_time_s']:.1f} s",
+        f"  acquisition{acquisition}; travel {metrics['path_length_m']:.1f} m at"
+        f" {metrics['config']['travel_speed']} m/s",
+        f"scan quality: {quality['quality_pct']:.1f}% of the structural surface at >= {quality['min_density_per_m2']:g}"
+        f" points/m² and seen at <= {quality['max_incidence_deg']:g}° (dense {quality['dense_pct']:.1f}%,"
+        f" square {quality['incidence_pct']:.1f}%){overlap}",
         f"registration error: mean {reg['mean_m'] * 100:.1f} cm / {reg['mean_deg']:.2f}°,"
         f" max {reg['max_m'] * 100:.1f} cm / {reg['max_deg']:.2f}°",
         f"storey complete: {state}",

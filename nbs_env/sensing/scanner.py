@@ -122,7 +122,9 @@ class Scan:
 
     @property
     def acquisition_time(self) -> float:
-        """Simulated acquisition time in seconds: points / points-per-second."""
+        """Simulated acquisition time in seconds: the configured station time, else points / points-per-second."""
+        if self.config.station_time is not None:
+            return float(self.config.station_time)
         return len(self) / self.config.points_per_second
 
     def depth_image(self) -> np.ndarray:
