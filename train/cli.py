@@ -167,6 +167,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="a scanner preset from its datasheet: " + _scanner_help() + " (default: METHOD's simulated VZ-400, "
         "acquisition time = points / 122,000 per s)",
     )
+    scan.add_argument(
+        "--record",
+        type=Path,
+        default=None,
+        metavar="RUN.rrd",
+        help="also log the run as a rerun recording, for nbs view (needs the viz extra)",
+    )
     scan.add_argument("--min-density", type=_number, default=None, help="quality: least points per m² (default 400)")
     scan.add_argument(
         "--max-incidence", type=_number, default=None, help="quality: largest incidence angle in degrees (default 70)"
@@ -183,6 +190,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     scan.add_argument("--no-steps", action="store_true", help="do not save a picture per step")
     scan.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    view = sub.add_parser("view", help="replay a run recorded with `nbs scan --record` in rerun's viewer")
+    view.add_argument("recording", type=Path, help="a .rrd file")
 
     sub.add_parser("train", help="train a masked PPO agent (see `nbs train --help`)", add_help=False)
 
@@ -515,6 +525,15 @@ def run_scan(args: argparse.Namespace) -> int:
         return _scan_error(detail, EXIT_USAGE)
     except ModelFileError as exc:
         return _scan_error(exc, EXIT_SCENE_ERROR)
+    if args.record is not None:
+        try:
+            from nbs_env.replay import _import_rerun
+
+            _import_rerun()
+        except ImportError as exc:
+            return _scan_error(f"--record: {exc}", EXIT_USAGE)
+        if args.record.suffix != ".rrd":
+            return _scan_error(f"--record {args.record}: a rerun recording ends in .rrd", EXIT_USAGE)
     out = args.out if args.out is not None else _default_out(args.scene)
     from train.arguments import output_folder_problem
 
@@ -565,16 +584,49 @@ def _scan(args: argparse.Namespace, policy, out: Path) -> int:
         bar.set_postfix(room=info["room"] + 1, se=f"{info['structure_sensed_pct']:.1f}%", refresh=False)
         bar.update(info["scans"] - bar.n)
 
+    recorder = None
+    if args.record is not None:
+        from nbs_env.replay import RunRecorder
+
+        recorder = RunRecorder(args.record, args.scene)
+
+    def on_step_recorded(info: dict) -> None:
+        on_step(info)
+        if recorder is not None:
+            recorder.log_step(env)
+
+    started = time.time()
     with bar:
         try:
-            policy_times = run_episode(env, policy, args.seed, options, on_step)
+            policy_times = run_episode(env, policy, args.seed, options, on_step_recorded)
         except RuntimeError as exc:
             bar.close()
             return _scan_error(exc, EXIT_SCENE_ERROR)
-    metrics = write_report(env, out, args.scene, policy, args.seed, policy_times)
+        finally:
+            if recorder is not None:
+                recorder.close()  # what was recorded stays readable, whatever ended the run
+    metrics = write_report(env, out, args.scene, policy, args.seed, policy_times, run_started=started)
     files = [*REPORT_FILES, *([] if args.no_steps else [f"steps/ ({k + 1} pictures)"])]
+    if not env.storey.scan_log:
+        files.remove("scans.e57")
+    if recorder is not None:
+        files.append(f"{args.record} (nbs view {args.record})")
     print(scan_summary(metrics, out, files))
     return 0
+
+
+def run_view(args: argparse.Namespace) -> int:
+    """``nbs view RUN.rrd``: open a recording in rerun's viewer."""
+    from nbs_env.replay import NotARecordingError, view
+
+    try:
+        return view(args.recording)
+    except ImportError as exc:
+        print(f"nbs view: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except (FileNotFoundError, NotARecordingError) as exc:
+        print(f"nbs view: error: {exc}", file=sys.stderr)
+        return EXIT_SCENE_ERROR
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -590,6 +642,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return run_scan(args)
     if args.command == "compare":
         return run_compare(args)
+    if args.command == "view":
+        return run_view(args)
     try:
         return run(args)
     except SceneError as exc:
