@@ -105,7 +105,7 @@ class ScanPoints:
     ----------
     points : (n, 3) float32
         Measured points in the scanner frame.
-    rows, cols : (n,) int32
+    rows, cols : (n,) uint16 (int32 for a pattern over 65,535 rows or columns)
         Each point's row (elevation) and column (azimuth) in the scan pattern.
     pose : (4, 4) float
         The estimated scanner pose (scanner frame to the robot's map frame).
@@ -479,11 +479,13 @@ class Storey:
         )
         if self.config.keep_scans and report.scan is not None:
             scan = report.scan
+            # uint16 indices where the pattern fits (any step above 0.0055°): 10 bytes a point.
+            index = np.uint16 if max(scan.config.n_rows, scan.config.n_cols) <= 65535 else np.int32
             self.scan_log.append(
                 ScanPoints(
                     np.asarray(scan.points, dtype=np.float32),
-                    np.asarray(scan.rows, dtype=np.int32),
-                    np.asarray(scan.cols, dtype=np.int32),
+                    np.asarray(scan.rows, dtype=index),
+                    np.asarray(scan.cols, dtype=index),
                     report.estimated_pose.copy(),
                 )
             )
