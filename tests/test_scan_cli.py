@@ -359,6 +359,11 @@ def test_bad_start_is_refused(tmp_path, capsys, start, message):
         (["--voxel", "0"], "--voxel must be"),
         (["--storey", "Erdgeschoss"], "--storey applies to .ifc files only"),
         (["--max-scans", "0"], "expected an integer >= 1"),
+        (["--scanner", "vz-400"], "unknown scanner 'vz-400'"),
+        (["--scanner", "rtc360:1mm"], "valid settings: 3mm, 6mm, 12mm"),
+        (["--min-density", "-1"], "min_density must be >= 0"),
+        (["--max-incidence", "120"], "max_incidence must be in"),
+        (["--record", "run.txt"], "a rerun recording ends in .rrd"),
     ],
 )
 def test_bad_options_are_usage_errors(tmp_path, capsys, args, message):
@@ -538,3 +543,20 @@ def test_door_frame_scans_belong_to_the_room_entered():
     assert m["travel_time_s"] == pytest.approx(24.0) and m["config"]["shape"] == [1, 2]
     assert m["registration_error"]["max_m"] == pytest.approx(0.05)
     assert type(m["steps"][0]["predicted_gain"]) is int
+
+
+@pytest.mark.parametrize("spec", ["vz400", "rtc360", "focus:1/8", "blk360:fast+"])
+def test_nbs_scan_with_each_scanner_preset_times_its_stations(tmp_path, spec):
+    """Each preset drives a run (a steep -60° field with a 0.5 m minimum range once left the robot no
+    way off its first stop), and the acquisition time is the preset's station time per scan."""
+    from nbs_env.scanners import scanner_config
+
+    out = tmp_path / "report"
+    with contextlib.redirect_stdout(io.StringIO()) as stdout:
+        assert nbs(*FAST, "--scanner", spec, "--out", str(out), "--no-steps", "--quiet") == 0
+    m = json.loads((out / "metrics.json").read_text())
+    expected = scanner_config(spec, simulated_step=1.0)
+    assert m["config"]["robot"]["scanner"] == json.loads(json.dumps(expected.to_dict()))
+    assert m["scans"] == 3 and m["path_length_m"] > 0  # the robot moved
+    assert m["acquisition_time_s"] == pytest.approx(3 * expected.station_time)
+    assert f"3 stations at {expected.station_time:g} s" in stdout.getvalue()
