@@ -483,10 +483,12 @@ def scan_summary(metrics: dict, out: Path, files: Sequence[str]) -> str:
     quality = metrics["quality"]
     reach = metrics["registrability"]
     overlap = (
-        f"; overlap with the cloud before each scan: mean {100 * reach['mean_overlap']:.0f}%,"
-        f" least {100 * reach['min_overlap']:.0f}%"
+        [
+            f"registrability: each scan's overlap with the cloud before it mean {100 * reach['mean_overlap']:.0f}%,"
+            f" least {100 * reach['min_overlap']:.0f}%; poses refused {reach['refused']}"
+        ]
         if reach.get("mean_overlap") is not None
-        else ""
+        else []
     )
     lines = [
         f"{metrics['scene']}: policy {metrics['policy']}, seed {metrics['seed']}",
@@ -497,9 +499,10 @@ def scan_summary(metrics: dict, out: Path, files: Sequence[str]) -> str:
         f" + acquisition {metrics['acquisition_time_s']:.1f} s + travel {metrics['travel_time_s']:.1f} s",
         f"  acquisition{acquisition}; travel {metrics['path_length_m']:.1f} m at"
         f" {metrics['config']['travel_speed']} m/s",
-        f"scan quality: {quality['quality_pct']:.1f}% of the structural surface at >= {quality['min_density_per_m2']:g}"
-        f" points/m² and seen at <= {quality['max_incidence_deg']:g}° (dense {quality['dense_pct']:.1f}%,"
-        f" square {quality['incidence_pct']:.1f}%){overlap}",
+        f"scan quality: {quality['quality_pct']:.1f}% of the structural surface dense and square (dense: >="
+        f" {quality['min_density_per_m2']:g} points/m², {quality['dense_pct']:.1f}%; square: seen at <="
+        f" {quality['max_incidence_deg']:g}°, {quality['incidence_pct']:.1f}%)",
+        *overlap,
         f"registration error: mean {reg['mean_m'] * 100:.1f} cm / {reg['mean_deg']:.2f}°,"
         f" max {reg['max_m'] * 100:.1f} cm / {reg['max_deg']:.2f}°",
         f"storey complete: {state}",
