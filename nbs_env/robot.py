@@ -29,6 +29,7 @@ from nbs_env.config import OdometryConfig
 from nbs_env.errors import UnreachableDoorError
 from nbs_env.labels import VoxelLabel
 from nbs_env.perception.doors import detect_doors
+from nbs_env.perception.roi import RoIError
 from nbs_env.planning.navigation import Geodesic, TraversabilityMap, geodesic
 from nbs_env.planning.planner import Plan, blocked_directions, plan, traversable_floor, unobservable_after
 from nbs_env.sensing.odometry import Odometry
@@ -425,7 +426,16 @@ class Robot:
         )
         self.visited = [self.pose[:2, 3].copy()]
         self.stops = []
-        return self.scan(length, 0, keep_direction=into)
+        try:
+            return self.scan(length, 0, keep_direction=into)
+        except RoIError as exc:
+            # The frame scan measured no floor or ceiling beyond the door (a false door onto a wall
+            # just behind it, a shaft): there is no room to scan there. The door is given up and the
+            # storey goes on to the next one; the scan, taken, is in S(t) but not in the episode log.
+            door.failed, door.reason = True, f"no room measured beyond it ({exc})"
+            raise UnreachableDoorError(
+                f"door {k} at {door.centre[:2].round(2).tolist()}: no room measured beyond it ({exc})"
+            ) from exc
 
     def registration_error(self) -> tuple[float, float]:
         """(m, degrees) between the pose estimate and the true pose: evaluation only."""

@@ -57,3 +57,27 @@ def test_an_exterior_door_is_recorded_and_not_crossed():
     crossed = [tuple(e["centre"]) for e in _events(env, "crossed")]
     assert any(abs(c[0] - 4.9) < 0.4 for c in crossed) and not any(c[1] < 0.4 for c in crossed), crossed
     assert all(s.true_position[1] > 0.1 for s in env.storey.scans)
+
+
+def test_a_door_with_no_room_measured_beyond_it_is_given_up_and_the_storey_goes_on(monkeypatch):
+    """A door-frame scan whose RoI has nothing to stand on (RoIError: no floor or ceiling beyond the
+    frame) once ended the episode with an exception; the door is abandoned with its reason and the
+    storey session finishes its run."""
+    import nbs_env.belief as belief_module
+    from nbs_env.perception.roi import RoIError
+
+    original = belief_module.compute_roi
+
+    def no_room_behind_doors(scans, *args, **kwargs):
+        if len(scans) == 1 and scans[0].keep_direction is not None:  # a door-frame scan
+            raise RoIError("the top projection is empty")
+        return original(scans, *args, **kwargs)
+
+    monkeypatch.setattr(belief_module, "compute_roi", no_room_behind_doors)
+    walls = [(a, b, []) for a, b in OUTLINE] + [PARTITION]
+    scene = boxed_storey(walls, [BUILDING], [BUILDING], start=(1.5, 2.0), name="no room behind")
+    env = _episode(scene)
+    abandoned = _events(env, "abandoned")
+    assert abandoned and "no room measured beyond it" in abandoned[0]["reason"], env.storey.door_events
+    assert not _events(env, "crossed") and env.storey.complete
+    assert all(s.room == 0 for s in env.storey.scans)  # room B was never scanned
