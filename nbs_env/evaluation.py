@@ -238,6 +238,7 @@ class CoverageMeter:
         self.observations: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         self._tree: cKDTree | None = None
         self._neighbours: tuple[float, tuple[Any, np.ndarray]] | None = None
+        self._quality: tuple[tuple[QualityConfig, int], QualityReport] | None = None
 
     def add(self, points: np.ndarray, origin: np.ndarray | None = None) -> int:
         """Mark the samples the (n, 3) registered points sense; returns how many were newly sensed.
@@ -304,6 +305,10 @@ class CoverageMeter:
         the coverage; like it, they are shares of all samples.
         """
         config = config or QualityConfig()
+        # metrics.json and the report's samples.npz both ask at the run's end: computed once.
+        key = (config, len(self.observations))
+        if self._quality is not None and self._quality[0] == key:
+            return self._quality[1]
         n = len(self.samples)
         near, size = self._neighbourhoods(config.density_radius)
         counts = np.zeros(n)
@@ -329,7 +334,9 @@ class CoverageMeter:
             rng = np.where(sensed, _neighbourhood_min(near, closest), np.inf)
         incidence = np.where(np.isfinite(incidence), incidence, np.nan)
         rng = np.where(np.isfinite(rng), rng, np.nan)
-        return QualityReport(density, incidence, rng, *(100.0 * curves.T))
+        report = QualityReport(density, incidence, rng, *(100.0 * curves.T))
+        self._quality = (key, report)
+        return report
 
     def percent(self, room: int | None = None, label: SurfaceClass | None = None) -> float:
         """Sensed share in % of all samples, of one room's, and/or of one class's."""

@@ -85,6 +85,16 @@ _GPS_LEAP_SECONDS = 18.0
 
 
 # ---------------------------------------------------------------------- point clouds
+def _checked_points(points: np.ndarray) -> np.ndarray:
+    """``points`` as an (n, 3) float64 array, or ValueError when it is not one or not finite."""
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"points must be an (n, 3) array, got shape {pts.shape}")
+    if not np.all(np.isfinite(pts)):
+        raise ValueError("points must be finite")
+    return pts
+
+
 def write_points_ply(path: str | Path, points: np.ndarray, labels: np.ndarray | None = None) -> Path:
     """Write points as a binary little-endian PLY file.
 
@@ -108,11 +118,7 @@ def write_points_ply(path: str | Path, points: np.ndarray, labels: np.ndarray | 
         ``points`` is not (n, 3) or not finite, or ``labels`` does not match it or is out of 0..255.
     """
     path = Path(path)
-    pts = np.asarray(points, dtype=np.float64)
-    if pts.ndim != 2 or pts.shape[1] != 3:
-        raise ValueError(f"points must be an (n, 3) array, got shape {pts.shape}")
-    if not np.all(np.isfinite(pts)):
-        raise ValueError("points must be finite")
+    pts = _checked_points(points)
     fields: list[tuple[str, str]] = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
     lab = None
     if labels is not None:
@@ -396,17 +402,19 @@ def write_las(path: str | Path, points: np.ndarray, classes: np.ndarray, rooms: 
     Raises
     ------
     ValueError
-        Shapes that do not match, or non-finite points.
+        ``points`` is not (n, 3) or not finite, or ``classes`` or ``rooms`` does not match it.
     """
     import laspy
 
     path = Path(path)
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    pts = _checked_points(points)
     classes = np.asarray(classes)
     if classes.shape != (len(pts),):
         raise ValueError(f"classes must have shape ({len(pts)},), got {classes.shape}")
-    if not np.all(np.isfinite(pts)):
-        raise ValueError("points must be finite")
+    if rooms is not None:
+        rooms = np.asarray(rooms)
+        if rooms.shape != (len(pts),):
+            raise ValueError(f"rooms must have shape ({len(pts)},), got {rooms.shape}")
     header = laspy.LasHeader(point_format=6, version="1.4")
     header.scales = np.array([0.001, 0.001, 0.001])
     header.offsets = np.floor(pts.min(axis=0)) if len(pts) else np.zeros(3)
@@ -418,9 +426,6 @@ def write_las(path: str | Path, points: np.ndarray, classes: np.ndarray, rooms: 
     las.x, las.y, las.z = pts[:, 0], pts[:, 1], pts[:, 2]
     las.classification = classes.astype(np.uint8)
     if rooms is not None:
-        rooms = np.asarray(rooms)
-        if rooms.shape != (len(pts),):
-            raise ValueError(f"rooms must have shape ({len(pts)},), got {rooms.shape}")
         las.room = rooms.astype(np.uint16)
     las.write(str(path))
     return path

@@ -73,7 +73,7 @@ if TYPE_CHECKING:
     from nbs_env.storey import Storey
     from scenes import Scene
 
-__all__ = ["APPLICATION_ID", "INSTALL_HINT", "TIMELINE", "NotARecordingError", "RunRecorder", "view"]
+__all__ = ["APPLICATION_ID", "INSTALL_HINT", "TIMELINE", "NotARecordingError", "RunRecorder", "require_rerun", "view"]
 
 #: The application id of every recording (the viewer keeps one blueprint per application id).
 APPLICATION_ID = "nbs-env"
@@ -139,7 +139,7 @@ _LIFT = 0.05
 CEILING_CUT = 0.25
 
 
-def _import_rerun() -> tuple[ModuleType, ModuleType]:
+def require_rerun() -> tuple[ModuleType, ModuleType]:
     """``rerun`` and ``rerun.blueprint``, or an ImportError that says how to install them."""
     try:
         import rerun as rr
@@ -263,7 +263,7 @@ class RunRecorder:
     def __init__(self, path: str | Path, scene_name: str, *, max_points_per_scan: int = 50_000) -> None:
         if int(max_points_per_scan) < 1:
             raise ValueError(f"max_points_per_scan must be at least 1, got {max_points_per_scan}")
-        rr, rrb = _import_rerun()
+        rr, rrb = require_rerun()
         self._rr, self._rrb = rr, rrb
         self.path = Path(path)
         self.scene_name = str(scene_name)
@@ -662,7 +662,7 @@ def view(path: str | Path) -> int:
     # Every version of the .rrd format starts with "RRF" and a version character.
     if not magic.startswith(b"RRF"):
         raise NotARecordingError(f"{path} is not a rerun recording (.rrd): it starts with {magic!r}, not b'RRF'")
-    _import_rerun()
+    require_rerun()
     # rerun_cli is the package of the viewer binary that rerun-sdk ships; running it through this
     # interpreter finds the binary of the rerun-sdk installed here, not another one on PATH.
     return subprocess.call([sys.executable, "-m", "rerun_cli", str(path)])

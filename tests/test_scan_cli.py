@@ -560,3 +560,20 @@ def test_nbs_scan_with_each_scanner_preset_times_its_stations(tmp_path, spec):
     assert m["scans"] == 3 and m["path_length_m"] > 0  # the robot moved
     assert m["acquisition_time_s"] == pytest.approx(3 * expected.station_time)
     assert f"3 stations at {expected.station_time:g} s" in stdout.getvalue()
+
+
+@pytest.mark.parametrize(
+    ("points", "classes", "rooms", "message"),
+    [
+        (np.zeros(6), np.zeros(2, dtype=np.uint8), None, r"\(n, 3\)"),
+        (np.full((2, 3), np.nan), np.zeros(2, dtype=np.uint8), None, "finite"),
+        (np.zeros((2, 3)), np.zeros(3, dtype=np.uint8), None, "classes must have shape"),
+        (np.zeros((2, 3)), np.zeros(2, dtype=np.uint8), np.zeros(3), "rooms must have shape"),
+    ],
+)
+def test_write_las_refuses_bad_input_and_writes_nothing(tmp_path, points, classes, rooms, message):
+    from nbs_env.export import write_las
+
+    with pytest.raises(ValueError, match=message):
+        write_las(tmp_path / "c.laz", points, classes, rooms)
+    assert not (tmp_path / "c.laz").exists()

@@ -530,9 +530,9 @@ def run_scan(args: argparse.Namespace) -> int:
         return _scan_error(exc, EXIT_SCENE_ERROR)
     if args.record is not None:
         try:
-            from nbs_env.replay import _import_rerun
+            from nbs_env.replay import require_rerun
 
-            _import_rerun()
+            require_rerun()
         except ImportError as exc:
             return _scan_error(f"--record: {exc}", EXIT_USAGE)
         if args.record.suffix != ".rrd":
