@@ -30,7 +30,7 @@ from nbs_env.errors import UnreachableDoorError
 from nbs_env.labels import VoxelLabel
 from nbs_env.perception.doors import detect_doors
 from nbs_env.perception.roi import RoIError
-from nbs_env.planning.navigation import Geodesic, TraversabilityMap, geodesic
+from nbs_env.planning.navigation import Geodesic, Passage, TraversabilityMap, geodesic
 from nbs_env.planning.planner import Plan, blocked_directions, plan, traversable_floor, unobservable_after
 from nbs_env.sensing.odometry import Odometry
 from nbs_env.sensing.pose import planar, pose_error, yaw_of
@@ -130,6 +130,8 @@ class Robot:
         self.pose = planar(start[0], start[1], 0.0, self._floor_z + self.config.scanner.height)
         self._plan: Plan | None = None
         self._door_map: tuple[TraversabilityMap, Geodesic] | None = None
+        #: The door the robot came into the current room by (None in the first room).
+        self.entrance: Passage | None = None
         self.doors: list[KnownDoor] = []
         self.room_index = 0
         self.rooms_done: list[int] = []
@@ -192,7 +194,8 @@ class Robot:
         """The next decision's NVPs and predicted gains, from the robot's own belief (kept until the
         next scan)."""
         if self._plan is None:
-            self._plan = plan(self.belief, self.pose, self.stops, self.visited, self.config.planning)
+            passages = () if self.entrance is None else (self.entrance,)
+            self._plan = plan(self.belief, self.pose, self.stops, self.visited, self.config.planning, passages)
         return self._plan
 
     def move_to(self, index: int, count_conversions: bool = False) -> StepReport:
@@ -426,6 +429,8 @@ class Robot:
         )
         self.visited = [self.pose[:2, 3].copy()]
         self.stops = []
+        unit = np.asarray(into[:2], dtype=float) / np.hypot(*into[:2])
+        self.entrance = Passage(tuple(door.centre[:2]), tuple(unit), door.width, APPROACH_DEPTH)
         try:
             return self.scan(length, 0, keep_direction=into)
         except RoIError as exc:

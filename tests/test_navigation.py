@@ -12,6 +12,7 @@ from nbs_env.errors import ConfigError
 from nbs_env.labels import VoxelLabel, is_occupied
 from nbs_env.planning.navigation import (
     NavigationConfig,
+    Passage,
     assume_blind_zone_free,
     candidates,
     geodesic,
@@ -453,3 +454,61 @@ def test_every_voxel_the_carving_cannot_see_below_the_field_is_assumed_free(elev
     assert np.all(free[uncarvable] == VoxelLabel.EMPTY)
     # ... and nothing the carving can see is assumed.
     assert np.all(free[~uncarvable] == VoxelLabel.UNKNOWN)
+
+
+# --------------------------------------------------------------------------------------------------
+# The door the robot came in by
+
+
+def door_room() -> tuple[np.ndarray, Passage]:
+    """A 4 x 3 m room entered by a 0.8 m door in its 0.2 m thick wall at y = 0.2..0.4; the robot
+    stands under the frame at (2.0, 0.3). Behind the door wall (the room it came from) is Unknown."""
+    labels = box_room(82, 62)
+    labels[:, 1:4, 1:39] = VoxelLabel.UNKNOWN  # the room behind
+    labels[1:-1, 4:8, 1:39] = VoxelLabel.STRUCTURE  # the door wall, y in [0.2, 0.4)
+    labels[32:48, 4:8, 1:39] = VoxelLabel.EMPTY  # the opening, x in [1.6, 2.4)
+    labels[32:48, 4:8, 37:39] = VoxelLabel.STRUCTURE  # the lintel, above the robot's height band
+    return labels, Passage((2.0, 0.3), (0.0, 1.0), 0.8)
+
+
+def test_the_robot_leaves_the_door_it_came_in_by_with_its_radius_of_clearance():
+    labels, door = door_room()
+    start = (2.0, 0.3)
+    # The full clearance (0.45 m) closes a 0.8 m door: the robot's own disc is cut off from the room.
+    closed = traversability(labels, np.zeros(3), VS, VS, CFG, visited_xy=[start])
+    assert not reachable(closed, start)[40, 40]
+    assert candidates(closed, start, CFG).count == 0
+
+    tmap = traversability(labels, np.zeros(3), VS, VS, CFG, visited_xy=[start], passages=[door])
+    assert reachable(tmap, start)[40, 40]
+    c = candidates(tmap, start, CFG)
+    assert c.count > 10
+    # The relaxed cells carry paths, not scans: every NVP keeps the full clearance.
+    assert (tmap.clearance_at(real(c)) >= NEED - 1e-9).all()
+    relaxed = tmap.free & ~closed.free
+    assert relaxed.any()
+    # Only in front of the opening, within its depth and half its width less the robot's radius ...
+    centres = tmap.centre_of(np.argwhere(relaxed))
+    assert (np.abs(centres[:, 0] - 2.0) <= 0.4 - CFG.robot_radius + 1e-9).all()
+    assert (centres[:, 1] >= 0.3).all() and (centres[:, 1] <= 0.3 + door.depth).all()
+    # ... and never closer to an obstacle than the robot's radius.
+    assert (tmap.clearance[relaxed] >= CFG.robot_radius - 1e-9).all()
+    # Unknown columns stay closed there too.
+    labels[38:42, 12:14, 20] = VoxelLabel.UNKNOWN
+    blind = traversability(labels, np.zeros(3), VS, VS, CFG, visited_xy=[start], passages=[door])
+    assert not blind.free[38:42, 12:14].any()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"direction": (1.0, 1.0)}, "unit"),
+        ({"width": 0.0}, "width"),
+        ({"depth": float("nan")}, "depth"),
+        ({"centre": (1.0,)}, "centre"),
+    ],
+)
+def test_passage_is_checked(kwargs, match):
+    args = {"centre": (0.0, 0.0), "direction": (0.0, 1.0), "width": 0.8} | kwargs
+    with pytest.raises(ConfigError, match=match):
+        Passage(**args)

@@ -81,3 +81,24 @@ def test_a_door_with_no_room_measured_beyond_it_is_given_up_and_the_storey_goes_
     assert abandoned and "no room measured beyond it" in abandoned[0]["reason"], env.storey.door_events
     assert not _events(env, "crossed") and env.storey.complete
     assert all(s.room == 0 for s in env.storey.scans)  # room B was never scanned
+
+
+def test_a_scanner_that_sees_the_jambs_leaves_the_door_frame_it_scanned_from():
+    """A 0.5 m minimum range measures the jambs beside a door-frame stop; the robot's full clearance
+    (0.45 m) then closes a 0.8 m door, and room B once ended "no NVP" after its door-frame scan. The
+    robot leaves the door it came in by with its radius of clearance (navigation.Passage)."""
+    from dataclasses import replace
+
+    from nbs_env.scanners import scanner_config
+
+    narrow = ((5, 0), (5, 4), [(1.6, 2.4, 2.0)])
+    walls = [(a, b, []) for a, b in OUTLINE] + [narrow]
+    scene = boxed_storey(walls, [BUILDING], [BUILDING], start=(1.5, 2.0), name="narrow door")
+    config = make_config("fast", max_scans=40)
+    config = replace(config, robot=replace(config.robot, scanner=scanner_config("rtc360", simulated_step=1.0)))
+    env = NBSEnv(config)
+    run_episode(env, make_policy("greedy", 0), seed=0, options={"scene": scene})
+    ends = env.storey.room_ends
+    assert len(ends) == 2 and all(e["reason"] == "gain" for e in ends), ends
+    # Room B was scanned from inside, not only from its door frame.
+    assert any(s.true_position[0] > 5.6 for s in env.storey.scans)

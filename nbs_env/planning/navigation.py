@@ -43,6 +43,7 @@ __all__ = [
     "Candidates",
     "Geodesic",
     "NavigationConfig",
+    "Passage",
     "TraversabilityMap",
     "assume_blind_zone_free",
     "candidates",
@@ -123,6 +124,61 @@ class NavigationConfig(Config):
     def required_clearance(self) -> float:
         """Least distance from a traversable cell to an occupied voxel: radius plus safety distance."""
         return self.robot_radius + self.safety_distance
+
+
+@dataclass(frozen=True)
+class Passage:
+    """A door the robot drove through into the room, as it measured the door.
+
+    A door is narrower than the robot's footprint plus its safety distance (a 0.8 m door, a 0.5 m
+    robot, 20 cm each side), so the clearance rule alone would close it. The robot crossed it with
+    its radius only (the approach of the door memory does the same on the other side), and it may
+    leave it the same way: in front of the opening, cells that keep the robot's radius clear of
+    every obstacle and whose column is Empty are traversable.
+
+    Attributes
+    ----------
+    centre : (2,) float
+        The door's centre on the floor, world xy (the robot's estimate).
+    direction : (2,) float
+        Unit horizontal direction through the door into the room.
+    width : float
+        The door's width as measured, metres.
+    depth : float
+        How far in front of the frame the relaxed rule holds, metres.
+    """
+
+    centre: tuple[float, float]
+    direction: tuple[float, float]
+    width: float
+    depth: float = 1.5
+
+    def __post_init__(self) -> None:
+        centre = np.asarray(self.centre, dtype=float)
+        direction = np.asarray(self.direction, dtype=float)
+        _require(
+            centre.shape == (2,) and np.isfinite(centre).all(), f"centre must be 2 finite numbers, got {self.centre}"
+        )
+        _require(
+            direction.shape == (2,) and np.isfinite(direction).all() and abs(np.hypot(*direction) - 1) < 1e-6,
+            f"direction must be a unit 2-vector, got {self.direction}",
+        )
+        _finite(width=self.width, depth=self.depth)
+        _require(self.width > 0, f"width must be > 0, got {self.width}")
+        _require(self.depth > 0, f"depth must be > 0, got {self.depth}")
+
+    def cells(self, origin: np.ndarray, voxel_size: float, shape: tuple[int, int], robot_radius: float) -> np.ndarray:
+        """(nx, ny) bool: the cells whose centre lies in front of the opening, within ``depth`` of the
+        frame and ``width / 2 - robot_radius`` of its axis (at least half a cell: a door barely wider
+        than the robot still has its axis)."""
+        nx, ny = shape
+        xs = origin[0] + (np.arange(nx) + 0.5) * voxel_size - self.centre[0]
+        ys = origin[1] + (np.arange(ny) + 0.5) * voxel_size - self.centre[1]
+        d, n = self.direction
+        along = xs[:, None] * d + ys[None, :] * n
+        across = -xs[:, None] * n + ys[None, :] * d
+        half = max(self.width / 2 - robot_radius, voxel_size / 2)
+        return (along >= 0) & (along <= self.depth) & (np.abs(across) <= half + _DIST_EPS)
 
 
 @dataclass(frozen=True, eq=False)
@@ -327,6 +383,7 @@ def traversability(
     floor_z: float,
     config: NavigationConfig | None = None,
     visited_xy: np.ndarray | Sequence[Sequence[float]] = (),
+    passages: Sequence[Passage] = (),
 ) -> TraversabilityMap:
     """Which floor cells the robot may stand on, METHOD §6.
 
@@ -347,6 +404,10 @@ def traversability(
     position) are traversable whatever their labels: the robot stood there, and the scanner cannot
     see the floor right below itself.
 
+    In front of each of ``passages`` (the door the robot came in by) the clearance needed is the
+    robot's radius alone (:class:`Passage`). NVPs still need the full clearance
+    (:func:`candidates`): the relaxed cells carry paths out of the door, not scans.
+
     Parameters
     ----------
     labels : (nx, ny, nz) uint8
@@ -362,6 +423,8 @@ def traversability(
     visited_xy : (m, 2) float, optional
         World xy of the positions the robot has physically occupied. Points outside the grid only
         mark the part of their disc that lies inside.
+    passages : sequence of Passage, optional
+        Doors the robot drove through into the room.
 
     Returns
     -------
@@ -401,6 +464,9 @@ def traversability(
 
     visited = _visited_mask(visited_xy, origin[:2], voxel_size, (nx, ny), config.robot_radius)
     free = (column_empty & (clearance >= config.required_clearance - _DIST_EPS)) | visited
+    for passage in passages:
+        narrow = passage.cells(origin, voxel_size, (nx, ny), config.robot_radius)
+        free |= narrow & column_empty & (clearance >= config.robot_radius - _DIST_EPS)
 
     arrays = [free, clearance, obstacle, column_empty, visited]
     for array in arrays:

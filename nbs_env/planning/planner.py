@@ -43,6 +43,7 @@ from nbs_env.mapping.voxels import VoxelGrid
 from nbs_env.planning.navigation import (
     Candidates,
     NavigationConfig,
+    Passage,
     TraversabilityMap,
     assume_blind_zone_free,
     candidates,
@@ -264,6 +265,7 @@ def traversable_floor(
     navigation: NavigationConfig,
     blocked: Sequence[np.ndarray] | None = None,
     labels: np.ndarray | None = None,
+    passages: Sequence[Passage] = (),
 ) -> TraversabilityMap:
     """Where the robot may stand in the room: V(t) with each stop's blind zone free
     (:func:`unseeable_free`) and the unsensed voxels near the floor that a measured ray crossed
@@ -285,12 +287,14 @@ def traversable_floor(
         Per stop, its low no-return directions (:attr:`~nbs_env.perception.roi.RoIScan.low_directions`).
     labels : (nx, ny, nz) uint8, optional
         :func:`unseeable_free`'s answer for these stops, when the caller has it already.
+    passages : sequence of Passage, optional
+        The door the robot came in by (:class:`~nbs_env.planning.navigation.Passage`).
     """
     walkable = unseeable_free(grid, stops, scanner, blocked) if labels is None else labels
     crossed = grid.crossed & ((walkable == VoxelLabel.UNKNOWN) | (walkable == VoxelLabel.OCCLUDED_CLUTTER))
     if crossed.any():
         walkable = np.where(crossed, np.uint8(VoxelLabel.EMPTY), walkable)
-    return traversability(walkable, grid.origin, grid.voxel_size, floor_z, navigation, visited)
+    return traversability(walkable, grid.origin, grid.voxel_size, floor_z, navigation, visited, passages)
 
 
 def within_roi(tmap: TraversabilityMap, polygon: np.ndarray) -> TraversabilityMap:
@@ -353,6 +357,7 @@ def plan(
     stops: np.ndarray | Sequence[Sequence[float]],
     visited: np.ndarray | Sequence[Sequence[float]],
     config: PlanningConfig,
+    passages: Sequence[Passage] = (),
 ) -> Plan:
     """Plan the next decision from the robot's belief (module docstring).
 
@@ -367,6 +372,8 @@ def plan(
     visited : (v, 2) float
         Floor points the robot stood on in the room.
     config : PlanningConfig
+    passages : sequence of Passage, optional
+        The door the robot came in by: paths may leave it with the robot's radius of clearance.
 
     Raises
     ------
@@ -379,7 +386,9 @@ def plan(
         raise ValueError("plan needs a belief with at least one scan")
     xy = np.asarray(pose, dtype=float)[:2, 3]
     view = unseeable_free(grid, stops, config.scanner, blocked_directions(belief, stops))
-    tmap = traversable_floor(grid, roi.floor_z, stops, visited, config.scanner, config.navigation, labels=view)
+    tmap = traversable_floor(
+        grid, roi.floor_z, stops, visited, config.scanner, config.navigation, labels=view, passages=passages
+    )
     cands = candidates(within_roi(tmap, roi.polygon), xy, config.navigation)
     gains = np.zeros(config.navigation.max_candidates, dtype=np.int64)
     model = None
