@@ -132,6 +132,10 @@ SCHEMA = "nbs-metrics/1"
 #: How far (m) a scan outside every room polygon may lie from a room to be counted in it.
 ROOM_TOLERANCE = 0.5
 
+#: Samples asked for per point at first (the sensing radius reaches at most 5 samples of a plane at
+#: the default spacing, more at a corner); points with this many within reach are asked again.
+_NEIGHBOURS = 8
+
 
 @dataclass(frozen=True)
 class QualityConfig(Config):
@@ -246,24 +250,46 @@ class CoverageMeter:
         ``origin`` (3,): where the scan was taken from; when given, the scan's quality figures are
         noted too (:meth:`quality`)."""
         points = np.asarray(points, dtype=float)
-        todo = np.flatnonzero(~self.sensed)
-        hit = np.zeros(0, dtype=np.int64)
-        if len(points) and len(todo):
-            distance, _ = cKDTree(points).query(self.samples.points[todo], distance_upper_bound=self.radius)
-            hit = todo[np.isfinite(distance)]
-            self.sensed[hit] = True
+        near, nearest, distance = self._query(points)
+        hit = np.flatnonzero(near & ~self.sensed)
+        self.sensed[hit] = True
         if origin is not None:
-            self._observe(points, np.asarray(origin, dtype=float).reshape(3), hit)
+            self._observe(np.asarray(origin, dtype=float).reshape(3), nearest[np.isfinite(distance)], hit)
         return len(hit)
 
-    def _observe(self, points: np.ndarray, origin: np.ndarray, newly: np.ndarray) -> None:
+    def _sample_tree(self) -> cKDTree:
+        # The samples are indexed once per scene; each scan's points are queried against them.
         if self._tree is None:
             self._tree = cKDTree(self.samples.points)
-        if len(points) and len(self.samples):
-            distance, nearest = self._tree.query(points, distance_upper_bound=self.radius)
-            index, count = np.unique(nearest[np.isfinite(distance)], return_counts=True)
-        else:
-            index, count = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        return self._tree
+
+    def _query(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(n_samples,) bool: the samples within ``radius`` of some point; and per point its nearest
+        sample and the distance to it (``inf`` where none is within ``radius``)."""
+        n = len(self.samples)
+        near = np.zeros(n + 1, dtype=bool)  # the last entry takes the tree's "no neighbour" index n
+        if not len(points) or not n:
+            return near[:n], np.full(len(points), n, dtype=np.int64), np.full(len(points), np.inf)
+        tree = self._sample_tree()
+        k = min(_NEIGHBOURS, n)
+        distance, index = tree.query(points, k=k, distance_upper_bound=self.radius)
+        distance, index = distance.reshape(len(points), k), index.reshape(len(points), k)
+        near[index.ravel()] = True
+        # A point with k samples within reach may have more: ask again with more, the same query.
+        full = np.flatnonzero(np.isfinite(distance[:, -1]))
+        more = k
+        while len(full) and more < n:
+            more = min(4 * more, n)
+            d, i = tree.query(points[full], k=more, distance_upper_bound=self.radius)
+            near[i.ravel()] = True
+            full = full[np.isfinite(d[:, -1])]
+        return near[:n], index[:, 0], distance[:, 0]
+
+    def _observe(self, origin: np.ndarray, nearest: np.ndarray, newly: np.ndarray) -> None:
+        """Note one scan's quality figures; ``nearest`` holds each attributed point's sample."""
+        count = np.bincount(nearest, minlength=len(self.samples))
+        index = np.flatnonzero(count)
+        count = count[index]
         ray = origin - self.samples.points[index]
         rng = np.linalg.norm(ray, axis=1)
         cos = np.abs(np.einsum("ij,ij->i", ray, self.normals[index])) / np.maximum(rng, 1e-9)
@@ -285,8 +311,7 @@ class CoverageMeter:
 
         if self._neighbours is None or self._neighbours[0] != radius:
             n = len(self.samples)
-            tree = self._tree if self._tree is not None else cKDTree(self.samples.points)
-            pairs = tree.query_pairs(radius, output_type="ndarray")
+            pairs = self._sample_tree().query_pairs(radius, output_type="ndarray")
             rows = np.concatenate([pairs[:, 0], pairs[:, 1]])
             cols = np.concatenate([pairs[:, 1], pairs[:, 0]])
             near = csr_matrix((np.ones(len(rows), dtype=np.float32), (rows, cols)), shape=(n, n))

@@ -33,6 +33,35 @@ def test_coverage_meter_counts_against_the_full_surface():
     assert meter.percent(room=0) == pytest.approx(100.0)
 
 
+@pytest.mark.parametrize("radius", [0.05, 0.16])
+def test_coverage_meter_senses_what_a_tree_over_each_scan_senses(radius):
+    """The meter indexes the samples once and queries each scan's points against them; the samples
+    it marks are exactly those with a point within reach (the direct query from every sample into a
+    tree of the scan's points), and each point goes to its nearest sample. At 16 cm a point has
+    dozens of samples within reach, past the first query's eight."""
+    from scipy.spatial import cKDTree
+
+    scene = load_scene("office")
+    meter = CoverageMeter(scene, spacing=0.05, radius=radius)
+    rng = np.random.default_rng(3)
+    samples = meter.samples.points
+    scans = [samples[rng.choice(len(samples), 4000)] + rng.normal(scale=0.03, size=(4000, 3)) for _ in range(3)]
+    sensed = np.zeros(len(samples), dtype=bool)
+    for k, points in enumerate(scans):
+        origin = np.array([2.0, 2.0, 1.5])
+        newly = meter.add(points, origin)
+        distance, _ = cKDTree(points).query(samples, distance_upper_bound=radius)
+        want = np.isfinite(distance)
+        assert newly == np.count_nonzero(want & ~sensed)
+        sensed |= want
+        np.testing.assert_array_equal(meter.sensed, sensed)
+        d, nearest = cKDTree(samples).query(points, distance_upper_bound=radius)
+        index, count = np.unique(nearest[np.isfinite(d)], return_counts=True)
+        np.testing.assert_array_equal(meter.observations[k][0], index)
+        np.testing.assert_array_equal(meter.observations[k][1], count)
+    assert meter.add(np.zeros((0, 3)), np.zeros(3)) == 0 and len(meter.observations[-1][0]) == 0
+
+
 def test_quality_measures_density_incidence_and_range_of_each_sample():
     """One point on each floor sample, seen from 1.5 m above a point of the floor: the density is one
     point per sample's area, and the incidence and range are the geometry's."""

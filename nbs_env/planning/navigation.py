@@ -854,8 +854,23 @@ def assume_blind_zone_free(
     sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
     if blocked is not None and len(blocked) != len(sensors):
         raise ValueError(f"{len(blocked)} blocked-direction sets for {len(sensors)} stops")
+    # Freeing a voxel never makes another one unsensed, so the stops may share one mask.
+    unsensed = (out == VoxelLabel.UNKNOWN) | (out == VoxelLabel.OCCLUDED_CLUTTER)
     for k, sensor in enumerate(sensors):
-        d = np.hypot(xs[:, None] - sensor[0], ys[None, :] - sensor[1])[:, :, None]  # (nx, ny, 1)
+        plan_distance = np.hypot(xs[:, None] - sensor[0], ys[None, :] - sensor[1])  # (nx, ny)
+        # Only columns whose lowest voxel could pass the test below are looked at: the elevation
+        # grows with the height and the half-diagonal's angle shrinks with the range, which is at
+        # least the column's plan distance. The window is the stop's cone, not the whole room.
+        possible = (
+            np.arctan2(zs[0] - sensor[2], plan_distance) - half_diagonal / np.maximum(plan_distance, 1e-3) < lowest
+        )
+        if min_range > 0:
+            possible |= plan_distance < min_range
+        rows, cols = np.flatnonzero(possible.any(axis=1)), np.flatnonzero(possible.any(axis=0))
+        if not len(rows):
+            continue
+        window = np.s_[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1]
+        d = plan_distance[window][:, :, None]
         dz = (zs - sensor[2])[None, None, :]
         r = np.hypot(d, dz)
         # Partly below the lowest ray: carving needs the whole voxel in view (its centre's elevation
@@ -866,9 +881,8 @@ def assume_blind_zone_free(
         if min_range > 0:
             below |= r < min_range
         if blocked is not None and min_range > 0 and len(blocked[k]):
-            below &= ~_blocked_columns(blocked[k], sensor, min_range, origin, s, (nx, ny))[:, :, None]
-        unsensed = (out == VoxelLabel.UNKNOWN) | (out == VoxelLabel.OCCLUDED_CLUTTER)
-        out[below & unsensed] = VoxelLabel.EMPTY
+            below &= ~_blocked_columns(blocked[k], sensor, min_range, origin, s, (nx, ny))[window][:, :, None]
+        out[window][below & unsensed[window]] = VoxelLabel.EMPTY
     return out
 
 
