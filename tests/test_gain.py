@@ -32,6 +32,27 @@ def test_exposed_faces_of_a_single_voxel_and_a_block():
     assert len(triangles) == 6 * 4 * 2  # inner faces are not exposed
 
 
+@pytest.mark.parametrize("group", [1, 2, 3])
+def test_target_groups_are_the_voxels_sharing_their_index_over_group(group):
+    """The groups are those of np.unique over the rows of index // group (the oracle), in its order,
+    with its counts and the mean centres of their members."""
+    rng = np.random.default_rng(5)
+    labels = rng.choice(
+        np.array([VoxelLabel.EMPTY, VoxelLabel.OCCLUDED_STRUCTURE, VoxelLabel.CLUTTER], dtype=np.uint8),
+        p=[0.6, 0.3, 0.1],
+        size=(37, 23, 11),
+    )
+    origin = np.array([1.25, -3.5, 0.05])
+    model = VisibilityModel(labels, origin, S, GainConfig(group=group))
+    idx = np.argwhere(labels == VoxelLabel.OCCLUDED_STRUCTURE)
+    _, inverse, counts = np.unique(idx // group, axis=0, return_inverse=True, return_counts=True)
+    centres = origin + (idx + 0.5) * S
+    sums = np.zeros((len(counts), 3))
+    np.add.at(sums, inverse.reshape(-1), centres)
+    np.testing.assert_array_equal(model.group_counts, counts)
+    np.testing.assert_array_equal(model.group_centres, sums / counts[:, None])
+
+
 def test_a_wall_hidden_behind_a_cabinet_favours_the_far_side():
     labels, origin = room_with_cabinet()
     model = VisibilityModel(labels, origin, S)

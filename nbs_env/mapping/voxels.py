@@ -274,11 +274,19 @@ class VoxelGrid:
             return 0
         gi = [np.arange(first[a], last[a]) for a in range(3)]
         axes = [(self.origin[a] + (gi[a] + 0.5) * s - centre[a]).astype(np.float32) for a in range(3)]
+        block = self.labels[first[0] : last[0], first[1] : last[1], first[2] : last[2]]
+        # Only unsensed voxels can change: EMPTY stays EMPTY, and occupied voxels are never carved.
+        # Each is computed with the same float32 operations as over the whole box.
+        i, j, k = np.nonzero(
+            (block != VoxelLabel.EMPTY) & (block != VoxelLabel.CLUTTER) & (block != VoxelLabel.STRUCTURE)
+        )
+        if not len(i):
+            return 0
+        ax, ay, az = axes[0][i], axes[1][j], axes[2][k]
         R = T[:3, :3].astype(np.float32)
-        # Sensor-frame coordinates by broadcasting the three axes: no (n, 3) temporary of all voxels.
-        sx = axes[0][:, None, None] * R[0, 0] + axes[1][None, :, None] * R[1, 0] + axes[2][None, None, :] * R[2, 0]
-        sy = axes[0][:, None, None] * R[0, 1] + axes[1][None, :, None] * R[1, 1] + axes[2][None, None, :] * R[2, 1]
-        sz = axes[0][:, None, None] * R[0, 2] + axes[1][None, :, None] * R[1, 2] + axes[2][None, None, :] * R[2, 2]
+        sx = ax * R[0, 0] + ay * R[1, 0] + az * R[2, 0]
+        sy = ax * R[0, 1] + ay * R[1, 1] + az * R[2, 1]
+        sz = ax * R[0, 2] + ay * R[1, 2] + az * R[2, 2]
         horizontal = np.hypot(sx, sy)
         r = np.hypot(horizontal, sz)
         step = np.float32(np.radians(config.angular_step))
@@ -300,21 +308,16 @@ class VoxelGrid:
         which = np.searchsorted(np.maximum(sizes - 1, 1), footprint)  # first size with size - 1 >= footprint
         wide = which >= len(sizes)  # voxels right at the scanner: no window is wide enough
         which = np.minimum(which, len(sizes) - 1)
-        live = (in_fov & ~wide).ravel()
-        key = np.where(live, which.ravel(), -1).astype(np.int8)
+        live = in_fov & ~wide
+        key = np.where(live, which, -1).astype(np.int8)
         limit = np.zeros(r.size, dtype=np.float32)
-        flat_row, flat_col = row.ravel(), col.ravel()
-        for k in np.flatnonzero(np.bincount(key[live], minlength=len(sizes))):
-            sel = np.flatnonzero(key == k)
-            pooled, f = _block_pooled(measured, int(sizes[k]))
-            limit[sel] = pooled[flat_row[sel] // f, flat_col[sel] // f]
-        limit = limit.reshape(r.shape)
-        carve = in_fov & ~wide & (r + half_diagonal < limit)
-        block = self.labels[first[0] : last[0], first[1] : last[1], first[2] : last[2]]
-        carve &= (block != VoxelLabel.CLUTTER) & (block != VoxelLabel.STRUCTURE)
-        newly = int(np.count_nonzero(carve & (block != VoxelLabel.EMPTY)))
-        block[carve] = VoxelLabel.EMPTY
-        return newly
+        for size in np.flatnonzero(np.bincount(key[live], minlength=len(sizes))):
+            sel = np.flatnonzero(key == size)
+            pooled, f = _block_pooled(measured, int(sizes[size]))
+            limit[sel] = pooled[row[sel] // f, col[sel] // f]
+        carve = live & (r + half_diagonal < limit)
+        block[i[carve], j[carve], k[carve]] = VoxelLabel.EMPTY
+        return int(np.count_nonzero(carve))
 
     def _trace_low(self, points: np.ndarray, centre: np.ndarray, floor_z: float) -> None:
         """Mark in :attr:`crossed` the voxels that the rays to ``points`` cross below

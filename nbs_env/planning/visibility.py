@@ -129,8 +129,12 @@ class VisibilityModel:
         # Groups of voxels share one line of sight (see GainConfig.group).
         g = max(1, int(self.config.group))
         if len(targets):
-            _, inverse, counts = np.unique(targets // g, axis=0, return_inverse=True, return_counts=True)
-            inverse = inverse.reshape(-1)
+            # One integer per group, in the lexicographic order of its (i, j, k) // g: the groups of
+            # np.unique(targets // g, axis=0) without its sort of rows.
+            cells = targets // g
+            span = np.asarray(labels.shape) // g + 1
+            key = (cells[:, 0] * span[1] + cells[:, 1]) * span[2] + cells[:, 2]
+            _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
             sums = np.zeros((len(counts), 3))
             np.add.at(sums, inverse, self.targets)
             self.group_centres = sums / counts[:, None]
