@@ -53,6 +53,30 @@ def test_target_groups_are_the_voxels_sharing_their_index_over_group(group):
     np.testing.assert_array_equal(model.group_centres, sums / counts[:, None])
 
 
+def test_exposed_faces_of_random_blocks_match_the_neighbour_by_neighbour_oracle():
+    """Each face of a blocking voxel whose neighbour across it is not blocking, in the order of the
+    axes, the two sides and the voxels: the same mesh as shifting the padded grid with np.roll."""
+    rng = np.random.default_rng(2)
+    blocking = rng.random((13, 9, 7)) < 0.35
+    corners = {
+        0: np.array([[0, 0, 0], [0, 1, 0], [0, 1, 1], [0, 0, 1]]),
+        1: np.array([[0, 0, 0], [0, 0, 1], [1, 0, 1], [1, 0, 0]]),
+        2: np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]),
+    }
+    padded = np.pad(blocking, 1)
+    quads = []
+    for axis in range(3):
+        for side in (0, 1):
+            neighbour = np.roll(padded, -1 if side else 1, axis=axis)
+            idx = np.argwhere((padded & ~neighbour)[1:-1, 1:-1, 1:-1]).astype(np.float32)
+            idx[:, axis] += side
+            quads.append(idx[:, None, :] + corners[axis][None, :, :])
+    want = np.concatenate(quads).reshape(-1, 3)
+    vertices, triangles = occupied_surface(blocking)
+    np.testing.assert_array_equal(vertices, want)
+    assert len(triangles) == 2 * len(want) // 4
+
+
 def test_a_wall_hidden_behind_a_cabinet_favours_the_far_side():
     labels, origin = room_with_cabinet()
     model = VisibilityModel(labels, origin, S)

@@ -83,13 +83,13 @@ def occupied_surface(blocking: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         1: np.array([[0, 0, 0], [0, 0, 1], [1, 0, 1], [1, 0, 0]]),
         2: np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]),
     }
+    inner = padded[1:-1, 1:-1, 1:-1]
     for axis in range(3):
         for side in (0, 1):
-            shift = [0, 0, 0]
-            shift[axis] = 1 if side else -1
-            neighbour = np.roll(padded, -shift[axis], axis=axis)
-            exposed = padded & ~neighbour
-            idx = np.argwhere(exposed[1:-1, 1:-1, 1:-1])
+            # The neighbour across the face: one voxel along the axis, read from the padded grid.
+            window = [slice(1, -1)] * 3
+            window[axis] = slice(2, None) if side else slice(0, -2)
+            idx = np.argwhere(inner & ~padded[tuple(window)])
             if not len(idx):
                 continue
             base = idx.astype(np.float32)
