@@ -8,7 +8,7 @@ import pytest
 from nbs_env.config import ScannerConfig
 from nbs_env.labels import VoxelLabel
 from nbs_env.planning.planner import greedy_order
-from nbs_env.planning.visibility import GainConfig, VisibilityModel, occupied_surface
+from nbs_env.planning.visibility import GainConfig, VisibilityModel, coarse_blocking
 
 S = 0.1
 
@@ -20,16 +20,6 @@ def room_with_cabinet() -> tuple[np.ndarray, np.ndarray]:
     labels[59, :, :] = VoxelLabel.OCCLUDED_STRUCTURE
     labels[51:56, 10:25, 0:20] = VoxelLabel.CLUTTER
     return labels, np.zeros(3)
-
-
-def test_exposed_faces_of_a_single_voxel_and_a_block():
-    one = np.zeros((3, 3, 3), bool)
-    one[1, 1, 1] = True
-    vertices, triangles = occupied_surface(one)
-    assert len(triangles) == 12 and vertices.min() == 1 and vertices.max() == 2
-    block = np.ones((2, 2, 2), bool)
-    _, triangles = occupied_surface(block)
-    assert len(triangles) == 6 * 4 * 2  # inner faces are not exposed
 
 
 @pytest.mark.parametrize("group", [1, 2, 3])
@@ -53,28 +43,74 @@ def test_target_groups_are_the_voxels_sharing_their_index_over_group(group):
     np.testing.assert_array_equal(model.group_centres, sums / counts[:, None])
 
 
-def test_exposed_faces_of_random_blocks_match_the_neighbour_by_neighbour_oracle():
-    """Each face of a blocking voxel whose neighbour across it is not blocking, in the order of the
-    axes, the two sides and the voxels: the same mesh as shifting the padded grid with np.roll."""
-    rng = np.random.default_rng(2)
-    blocking = rng.random((13, 9, 7)) < 0.35
-    corners = {
-        0: np.array([[0, 0, 0], [0, 1, 0], [0, 1, 1], [0, 0, 1]]),
-        1: np.array([[0, 0, 0], [0, 0, 1], [1, 0, 1], [1, 0, 0]]),
-        2: np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]),
-    }
-    padded = np.pad(blocking, 1)
-    quads = []
-    for axis in range(3):
-        for side in (0, 1):
-            neighbour = np.roll(padded, -1 if side else 1, axis=axis)
-            idx = np.argwhere((padded & ~neighbour)[1:-1, 1:-1, 1:-1]).astype(np.float32)
-            idx[:, axis] += side
-            quads.append(idx[:, None, :] + corners[axis][None, :, :])
-    want = np.concatenate(quads).reshape(-1, 3)
-    vertices, triangles = occupied_surface(blocking)
-    np.testing.assert_array_equal(vertices, want)
-    assert len(triangles) == 2 * len(want) // 4
+def _first_entry(blocking: np.ndarray, origin: np.ndarray, size: float, start: np.ndarray, unit: np.ndarray) -> float:
+    """The oracle: the smallest t >= 0 at which start + t * unit is in a blocking voxel's closed box
+    (the slab test against every blocking voxel), inf when there is none."""
+    lo = origin + np.argwhere(blocking) * size
+    hi = lo + size
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0, t1 = (lo - start) / unit, (hi - start) / unit
+    near = np.nanmax(np.minimum(t0, t1), axis=1)
+    far = np.nanmin(np.maximum(t0, t1), axis=1)
+    hit = (near <= far) & (far >= 0)
+    return float(max(near[hit].min(), 0.0)) if hit.any() else np.inf
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_lines_of_sight_are_those_of_the_slab_test_against_every_blocking_voxel(seed):
+    """On random grids, with sensors inside and outside them, a target is seen exactly when it lies
+    in the range limits and the elevation band and the line to it enters no blocking voxel before the
+    tolerance short of it (the oracle tests every voxel's box)."""
+    rng = np.random.default_rng(seed)
+    shape = tuple(int(n) for n in rng.integers(4, 26, 3))
+    labels = np.where(rng.random(shape) < rng.uniform(0.01, 0.12), VoxelLabel.CLUTTER, VoxelLabel.EMPTY)
+    labels = labels.astype(np.uint8)
+    origin = rng.uniform(-2, 2, 3)
+    size = float(rng.uniform(0.04, 0.2))
+    config = GainConfig(tolerance_voxels=float(rng.uniform(0, 1.5)))
+    model = VisibilityModel(labels, origin, size, config)
+    scanner = ScannerConfig(min_range=0.1, max_range=float(np.ptp(shape) * size), elevation_min=-60.0)
+    extent = np.asarray(shape) * size
+    sensors = origin + rng.uniform(-0.3, 1.3, (4, 3)) * extent
+    targets = origin + rng.uniform(-0.2, 1.2, (60, 3)) * extent
+    got = model._seen(sensors, targets, scanner)
+    blocking = labels == VoxelLabel.CLUTTER
+    lo, hi = np.sin(np.radians(scanner.elevation_min)), np.sin(np.radians(scanner.elevation_max))
+    for c, sensor in enumerate(sensors):
+        for n, target in enumerate(targets):
+            d = np.linalg.norm(target - sensor)
+            unit = (target - sensor) / d
+            inside = scanner.min_range <= d <= scanner.max_range and lo <= unit[2] <= hi
+            want = inside and _first_entry(blocking, origin, size, sensor, unit) >= d - config.tolerance_voxels * size
+            assert got[c, n] == want, (c, n)
+    assert got.any() and not got.all()
+
+
+def test_lines_along_an_axis_and_through_a_corner():
+    """Lines parallel to an axis are traversed; a line through the edge that two diagonal blocking
+    voxels share does not slip between them."""
+    labels = np.zeros((12, 12, 4), dtype=np.uint8)
+    labels[6, 2, :] = VoxelLabel.STRUCTURE  # on the x axis line at y = 2.5 voxels
+    labels[5, 6, :] = labels[6, 5, :] = VoxelLabel.CLUTTER  # a diagonal step meeting at (6, 6)
+    model = VisibilityModel(labels, np.zeros(3), 1.0, GainConfig(tolerance_voxels=0.5))
+    scanner = ScannerConfig(min_range=0.0, max_range=100.0, elevation_min=-90.0, elevation_max=90.0)
+    sensors = np.array([[0.5, 2.5, 2.5], [0.5, 8.5, 2.5], [3.0, 3.0, 2.5]])
+    targets = np.array([[11.5, 2.5, 2.5], [11.5, 8.5, 2.5], [0.5, 2.5, 0.5], [9.0, 9.0, 2.5], [3.5, 11.5, 2.5]])
+    seen = model._seen(sensors, targets, scanner)
+    assert not seen[0, 0]  # along x through the wall at x = 6
+    assert seen[1, 1]  # along x, clear
+    assert seen[0, 2]  # down a free column
+    assert not seen[2, 3]  # along the diagonal through the corner (6, 6) of the step
+    assert seen[2, 4]  # away from the step
+
+
+def test_coarse_cells_hold_a_blocking_voxel_exactly_when_one_of_theirs_does():
+    rng = np.random.default_rng(4)
+    blocking = rng.random((9, 13, 6)) < 0.02
+    coarse = coarse_blocking(blocking, 4)
+    assert coarse.shape == (3, 4, 2)
+    for i, j, k in np.ndindex(coarse.shape):
+        assert coarse[i, j, k] == blocking[4 * i : 4 * i + 4, 4 * j : 4 * j + 4, 4 * k : 4 * k + 4].any()
 
 
 def test_a_wall_hidden_behind_a_cabinet_favours_the_far_side():
