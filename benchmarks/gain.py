@@ -2,8 +2,9 @@
 
 The room (a plan built here: one 10 x 8 m room, 3 m ceiling, ten pieces of furniture) is scanned
 once at the default 0.5° pattern; the robot's belief gives V(t), navigation gives the candidates, and
-the gain of each is counted with ``VisibilityModel`` (lines of sight traversed through the voxels). Goal: under 0.5 s for 64 candidates on a 2-core machine. It also prints how the time
-grows with the number of candidates and with the voxel count (voxel sizes 10, 7.5 and 5 cm).
+the gain of each is counted with ``VisibilityModel`` (lines of sight traversed through the voxels).
+Goal: under 0.5 s for 64 candidates on a 2-core machine. It also prints how the time grows with the
+number of candidates and with the voxel count (voxel sizes 10, 7.5 and 5 cm).
 
 Usage: python benchmarks/gain.py [--repeat 5]
 """
