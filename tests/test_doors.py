@@ -247,3 +247,20 @@ def test_a_face_turned_off_its_wall_is_moved_onto_it():
     (door,) = detect_doors([tilted], [(points, origin)])
     assert door.width == pytest.approx(0.9, abs=0.051)
     assert np.allclose(door.centre[:2], [5.05, 0.0], atol=0.05)
+
+
+def test_the_point_index_finds_what_a_mask_over_every_point_finds():
+    """PointIndex.within is np.flatnonzero of the box mask, bounds included, for boxes inside,
+    across and outside the points, and for points exactly on a bound."""
+    from nbs_env.perception.faces import PointIndex
+
+    rng = np.random.default_rng(3)
+    points = np.round(rng.uniform(-3, 7, (5000, 3)), 2)  # many points exactly on 1 cm bounds
+    index = PointIndex(points, cell=0.5)
+    for _ in range(200):
+        a, b = np.round(rng.uniform(-5, 9, (2, 2)), 2)
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        x, y = points[:, 0], points[:, 1]
+        want = np.flatnonzero((x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1]))
+        np.testing.assert_array_equal(index.within(lo, hi), want)
+    assert len(PointIndex(np.zeros((0, 3))).within(np.zeros(2), np.ones(2))) == 0

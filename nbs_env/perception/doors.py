@@ -45,7 +45,7 @@ import shapely
 from scipy.spatial import cKDTree
 
 from nbs_env.config import Config, _finite_fields, _integer, _require
-from nbs_env.perception.faces import WallFace
+from nbs_env.perception.faces import PointIndex, WallFace
 from nbs_env.perception.structure import face_image
 
 __all__ = ["DetectedDoor", "DoorConfig", "detect_doors"]
@@ -225,7 +225,7 @@ def _fill_row_gaps(image: np.ndarray, gap: int) -> np.ndarray:
     return image | ((last >= 0) & (following < cols) & (following - last - 1 <= gap))
 
 
-def _refit(face: WallFace, points: np.ndarray, band: float, margin: float) -> WallFace:
+def _refit(face: WallFace, index: PointIndex, band: float, margin: float) -> WallFace:
     """The face moved onto the wall its points show.
 
     Of the points within ``band`` of the face, over its length and between ``margin`` above the
@@ -237,9 +237,8 @@ def _refit(face: WallFace, points: np.ndarray, band: float, margin: float) -> Wa
     the line, they cover less than half the face, or the line leaves the band at their middle.
     """
     p0, p1 = np.asarray(face.p0, dtype=float), np.asarray(face.p1, dtype=float)
-    lo, hi = np.minimum(p0, p1) - band, np.maximum(p0, p1) + band
-    box = np.all((points[:, :2] >= lo) & (points[:, :2] <= hi), axis=1)  # a cheap first cut
-    u, v, w = face.local(points[box]).T
+    box = index.within(np.minimum(p0, p1) - band, np.maximum(p0, p1) + band)  # a cheap first cut
+    u, v, w = face.local(index.points[box]).T
     keep = (np.abs(w) <= band) & (u >= 0) & (u <= face.length) & (v > margin) & (v < face.height - margin)
     u, w = u[keep], w[keep]
     if len(u) < _MIN_FIT:
@@ -297,7 +296,7 @@ def _crossing(face: WallFace, others: Sequence[WallFace], margin: float) -> tupl
 def _followed(
     face: WallFace,
     others: Sequence[WallFace],
-    points: np.ndarray,
+    points: PointIndex,
     pixel: float,
     gap: int,
     reach: float,
@@ -380,8 +379,10 @@ def _crossings(face: WallFace, scans: Sequence[tuple[np.ndarray, np.ndarray]], b
         o = face.local(np.asarray(origin, dtype=float).reshape(1, 3))[0]
         if o[2] <= 0:
             continue
-        local = face.local(np.asarray(points, dtype=float))
-        far = local[local[:, 2] < -behind]
+        points = np.asarray(points, dtype=float)
+        # Only the points beyond the face go through the whole transform.
+        w = (points[:, :2] - np.asarray(face.p0, dtype=float)) @ face.normal
+        far = face.local(points[w < -behind])
         t = o[2] / (o[2] - far[:, 2])
         crossings.append(o[:2] + t[:, None] * (far[:, :2] - o[:2]))
     return np.concatenate(crossings)
@@ -521,15 +522,16 @@ def detect_doors(
     """
     cfg = config or DoorConfig()
     points = np.concatenate([np.asarray(p, dtype=float) for p, _ in scans]) if scans else np.zeros((0, 3))
+    index = PointIndex(points)
     doors: list[DetectedDoor] = []
     measured: cKDTree | None = None  # built for the first opening whose rays are counted
     px = cfg.pixel
     gap = int(np.floor(cfg.fill_gap / px + 1e-9))
     for k, given in enumerate(faces):
-        face = _refit(given, points, _BAND, cfg.floor_gap)
+        face = _refit(given, index, _BAND, cfg.floor_gap)
         # The image's rows run from the floor, its columns along the (followed) face.
         others = [f for j, f in enumerate(faces) if j != k]
-        face, image = _followed(face, others, points, px, gap, cfg.max_extension, cfg.floor_gap)
+        face, image = _followed(face, others, index, px, gap, cfg.max_extension, cfg.floor_gap)
         rows = image.shape[0]
         # Height of the empty run from the floor (allowing a threshold) in every column.
         start = int(np.ceil(cfg.floor_gap / px))

@@ -35,7 +35,7 @@ from scipy import ndimage
 from shapely.geometry import Polygon
 
 from nbs_env.errors import ModelFileError
-from nbs_env.perception.faces import WallFace
+from nbs_env.perception.faces import PointIndex, WallFace
 
 __all__ = [
     "DEFAULT_MODEL_RESOURCE",
@@ -85,24 +85,29 @@ def _pixel_count(extent: float, pixel: float) -> int:
     return max(1, math.ceil(ratio))
 
 
-def _near(face: WallFace, points: np.ndarray, margin: float) -> np.ndarray:
+def _near(face: WallFace, points: np.ndarray | PointIndex, margin: float) -> np.ndarray:
     """Indices of the (n, 3) points whose xy lies in the face's bounding box grown by ``margin``: a
     cheap first cut, so that only those go through the face-frame transform."""
     p0, p1 = np.asarray(face.p0, dtype=float), np.asarray(face.p1, dtype=float)
     lo, hi = np.minimum(p0, p1) - margin, np.maximum(p0, p1) + margin
+    if isinstance(points, PointIndex):
+        return points.within(lo, hi)
     x, y = points[:, 0], points[:, 1]
     return np.flatnonzero((x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1]))
 
 
-def face_image(face: WallFace, points: np.ndarray, *, pixel: float = 0.05, band: float = 0.10) -> np.ndarray:
+def face_image(
+    face: WallFace, points: np.ndarray | PointIndex, *, pixel: float = 0.05, band: float = 0.10
+) -> np.ndarray:
     """Binary image of the measured points near a wall face.
 
     Parameters
     ----------
     face : WallFace
         The vertical face.
-    points : (n, 3) float
-        Measured world points (any n, also 0).
+    points : (n, 3) float or PointIndex
+        Measured world points (any n, also 0), or an index of them (the same image, faster when
+        many faces look at the same points).
     pixel : float, keyword-only
         Pixel size in metres (> 0).
     band : float, keyword-only
@@ -120,7 +125,8 @@ def face_image(face: WallFace, points: np.ndarray, *, pixel: float = 0.05, band:
         raise ValueError(f"pixel must be a finite number > 0 metres, got {pixel!r}")
     if not (math.isfinite(band) and band >= 0):
         raise ValueError(f"band must be a finite number >= 0 metres, got {band!r}")
-    points = np.asarray(points, dtype=float)
+    index = points if isinstance(points, PointIndex) else None
+    points = index.points if index is not None else np.asarray(points, dtype=float)
     if points.ndim != 2 or points.shape[1] != 3:
         raise ValueError(f"points must have shape (n, 3), got {points.shape}")
     length, height = face.length, face.height
@@ -128,7 +134,7 @@ def face_image(face: WallFace, points: np.ndarray, *, pixel: float = 0.05, band:
     image = np.zeros((d2, d1), dtype=bool)
     if len(points) == 0:
         return image
-    u, v, w = face.local(points[_near(face, points, band)]).T
+    u, v, w = face.local(points[_near(face, index if index is not None else points, band)]).T
     keep = (np.abs(w) <= band) & (u >= 0) & (u <= length) & (v >= 0) & (v <= height)
     cols = np.minimum((u[keep] / pixel).astype(np.intp), d1 - 1)  # u, v >= 0 here, so truncation is floor
     rows = np.minimum((v[keep] / pixel).astype(np.intp), d2 - 1)
