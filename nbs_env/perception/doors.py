@@ -40,6 +40,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import shapely
 from scipy.spatial import cKDTree
@@ -225,6 +226,25 @@ def _fill_row_gaps(image: np.ndarray, gap: int) -> np.ndarray:
     return image | ((last >= 0) & (following < cols) & (following - last - 1 <= gap))
 
 
+@numba.njit(cache=True, nogil=True)
+def _densest_window(offsets: np.ndarray, penalty: np.ndarray, window: float) -> tuple[int, int]:
+    """(k, i): the window [offsets[k, i], offsets[k, i] + window] that holds the most of row k's
+    (sorted) offsets, less ``penalty[k]``; ties go to the first row, then the lowest window (the
+    ``np.argmax`` of the counts that ``np.searchsorted`` gives row by row)."""
+    best, best_k, best_i = -np.inf, 0, 0
+    rows, n = offsets.shape
+    for k in range(rows):
+        end = 0
+        for i in range(n):
+            top = offsets[k, i] + window
+            while end < n and offsets[k, end] <= top:
+                end += 1
+            score = (end - i) - penalty[k]
+            if score > best:
+                best, best_k, best_i = score, k, i
+    return best_k, best_i
+
+
 def _refit(face: WallFace, index: PointIndex, band: float, margin: float) -> WallFace:
     """The face moved onto the wall its points show.
 
@@ -249,10 +269,9 @@ def _refit(face: WallFace, index: PointIndex, band: float, margin: float) -> Wal
     turn = np.tan(np.radians(_MAX_TURN))
     slopes = np.linspace(-turn, turn, 2 * int(np.ceil(turn * face.length / _ON_LINE)) + 1)
     offsets = np.sort(sw[None, :] - slopes[:, None] * su[None, :], axis=1)
-    counts = np.stack([np.searchsorted(row, row + 2 * _ON_LINE, side="right") for row in offsets]) - np.arange(len(su))
-    best = np.unravel_index(np.argmax(counts - 1e-6 * np.abs(slopes)[:, None]), counts.shape)  # ties: least turn
-    b = slopes[best[0]]
-    a = offsets[best] + _ON_LINE
+    k, i = _densest_window(offsets, 1e-6 * np.abs(slopes), 2 * _ON_LINE)  # ties: least turn
+    b = slopes[k]
+    a = offsets[k, i] + _ON_LINE
     near = np.abs(w - (a + b * u)) <= _ON_LINE
     if np.count_nonzero(near) < _MIN_FIT or np.ptp(u[near]) < face.length / 2:
         return face
@@ -371,20 +390,42 @@ def _out_of_range(
     return unseen
 
 
+@numba.njit(cache=True, nogil=True)
+def _plane_crossings(
+    points: np.ndarray,
+    p0: np.ndarray,
+    direction: np.ndarray,
+    normal: np.ndarray,
+    z0: float,
+    o: np.ndarray,
+    behind: float,
+) -> np.ndarray:
+    """(k, 2) float: the face-frame (u, v) where the ray from ``o`` (in the face frame) to each of the
+    (n, 3) world ``points`` lying ``behind`` m or more beyond the face crosses its plane."""
+    out = np.empty((len(points), 2))
+    k = 0
+    for i in range(len(points)):
+        x, y = points[i, 0] - p0[0], points[i, 1] - p0[1]
+        w = x * normal[0] + y * normal[1]
+        if w < -behind:
+            t = o[2] / (o[2] - w)
+            out[k, 0] = o[0] + t * ((x * direction[0] + y * direction[1]) - o[0])
+            out[k, 1] = o[1] + t * ((points[i, 2] - z0) - o[1])
+            k += 1
+    return out[:k]
+
+
 def _crossings(face: WallFace, scans: Sequence[tuple[np.ndarray, np.ndarray]], behind: float) -> np.ndarray:
     """(k, 2) float: (u, v) where the face plane is crossed by the ray from each scan's origin (in
     front of the face) to each of its points ``behind`` m or more beyond the face."""
     crossings = [np.zeros((0, 2))]
+    p0 = np.asarray(face.p0, dtype=float)
     for points, origin in scans:
         o = face.local(np.asarray(origin, dtype=float).reshape(1, 3))[0]
         if o[2] <= 0:
             continue
-        points = np.asarray(points, dtype=float)
-        # Only the points beyond the face go through the whole transform.
-        w = (points[:, :2] - np.asarray(face.p0, dtype=float)) @ face.normal
-        far = face.local(points[w < -behind])
-        t = o[2] / (o[2] - far[:, 2])
-        crossings.append(o[:2] + t[:, None] * (far[:, :2] - o[:2]))
+        points = np.ascontiguousarray(points, dtype=float)
+        crossings.append(_plane_crossings(points, p0, face.direction, face.normal, float(face.z0), o, float(behind)))
     return np.concatenate(crossings)
 
 
@@ -470,12 +511,16 @@ def _near_measured(origin: np.ndarray, directions: np.ndarray, reach: float, mea
     return np.isfinite(distance).reshape(len(directions), len(steps)).any(axis=1)
 
 
-def _within(points: np.ndarray, origins: Sequence[np.ndarray], reach: float) -> np.ndarray:
-    """The (n, 3) ``points`` within ``reach`` of one of the ``origins``: all :func:`_near_measured`
-    can meet, so its tree holds a few thousand points instead of the room's hundreds of thousands."""
+def _within(index: PointIndex, origins: Sequence[np.ndarray], reach: float) -> np.ndarray:
+    """The (n, 3) points of the ``index`` within ``reach`` of one of the ``origins``: all
+    :func:`_near_measured` can meet, so its tree holds a few thousand points instead of the room's
+    hundreds of thousands."""
+    points = index.points
     keep = np.zeros(len(points), dtype=bool)
     for origin in origins:
-        keep |= np.sum((points - np.asarray(origin, dtype=float)) ** 2, axis=1) <= reach**2
+        origin = np.asarray(origin, dtype=float)
+        near = index.within(origin[:2] - reach, origin[:2] + reach)
+        keep[near] |= np.sum((points[near] - origin) ** 2, axis=1) <= reach**2
     return points[keep]
 
 
@@ -572,7 +617,7 @@ def detect_doors(
             covered = float("nan")
             if no_return is not None:
                 if measured is None:
-                    measured = cKDTree(_within(points, [o for _, o in scans], min_range + 2 * _CLEARANCE))
+                    measured = cKDTree(_within(index, [o for _, o in scans], min_range + 2 * _CLEARANCE))
                 hits, misses = _rising_rays(face, scans, no_return, u0, u1, height, min_range, others, measured)
                 if hits + misses >= cfg.min_rising_rays:
                     covered = hits / (hits + misses)

@@ -99,7 +99,7 @@ def _start(p: float, d: float, t: float, lo: int, hi: int) -> tuple[int, int, fl
 
 
 @numba.njit(cache=True, nogil=True)
-def _clear(blocking, coarse, p0, p1, p2, d0, d1, d2, limit, block):  # pragma: no cover - compiled
+def _clear(blocking, coarse, p0, p1, p2, d0, d1, d2, limit, block):
     """Whether the ray from (p0, p1, p2) along the unit (d0, d1, d2), all in voxel units, enters no
     blocking voxel before ``limit``.
 
@@ -169,7 +169,7 @@ def _clear(blocking, coarse, p0, p1, p2, d0, d1, d2, limit, block):  # pragma: n
 @numba.njit(cache=True, nogil=True)
 def _lines_of_sight(
     blocking, coarse, origin, size, sensors, targets, min_range, max_range, sin_lo, sin_hi, tolerance, block
-):  # pragma: no cover - compiled
+):
     """(c, n) bool: whether each of the (c, 3) sensors sees each of the (n, 3) targets (world
     metres): within the range limits and the elevation band, and the line to the target enters no
     blocking voxel before ``tolerance`` metres short of it."""
