@@ -35,10 +35,11 @@ def test_coverage_meter_counts_against_the_full_surface():
 
 @pytest.mark.parametrize("radius", [0.05, 0.16])
 def test_coverage_meter_senses_what_a_tree_over_each_scan_senses(radius):
-    """The meter indexes the samples once and queries each scan's points against them; the samples
-    it marks are exactly those with a point within reach (the direct query from every sample into a
-    tree of the scan's points), and each point goes to its nearest sample. At 16 cm a point has
-    dozens of samples within reach, past the first query's eight."""
+    """The meter indexes the samples once (in plan columns) and queries each scan's points against
+    them; the samples it marks are exactly those with a point within reach (the direct query from
+    every sample into a tree of the scan's points), and each point goes to its nearest sample (a
+    tree of the samples). At 16 cm a point has dozens of samples within reach; points far off the
+    building reach none."""
     from scipy.spatial import cKDTree
 
     scene = load_scene("office")
@@ -46,6 +47,7 @@ def test_coverage_meter_senses_what_a_tree_over_each_scan_senses(radius):
     rng = np.random.default_rng(3)
     samples = meter.samples.points
     scans = [samples[rng.choice(len(samples), 4000)] + rng.normal(scale=0.03, size=(4000, 3)) for _ in range(3)]
+    scans[1] = np.vstack([scans[1], [[100.0, 100.0, 100.0], [-50.0, 0.0, 1.0], [0.0, 0.0, -30.0]]])  # far off
     sensed = np.zeros(len(samples), dtype=bool)
     for k, points in enumerate(scans):
         origin = np.array([2.0, 2.0, 1.5])
