@@ -61,6 +61,55 @@ def test_carving_never_goes_beyond_the_measured_range(box_scene):
     assert np.all((empty > 0) & (empty < [A, B, H]))
 
 
+def _sliding_min_plain(a: np.ndarray, size: int, axis: int) -> np.ndarray:
+    a = np.moveaxis(a, axis, 0)
+    cur, length = a, 1
+    while 2 * length <= size:
+        cur = np.minimum(cur[:-length], cur[length:])
+        length *= 2
+    n = a.shape[0] - size + 1
+    return np.moveaxis(np.minimum(cur[:n], cur[size - length : size - length + n]), 0, axis)
+
+
+def _min_filter_plain(image: np.ndarray, size: int) -> np.ndarray:
+    if size <= 1:
+        return image
+    half = size // 2
+    padded = np.pad(image, ((half, half), (0, 0)), mode="edge")
+    padded = np.pad(padded, ((0, 0), (half, half)), mode="wrap")
+    return _sliding_min_plain(_sliding_min_plain(padded, size, 0), size, 1)
+
+
+def _block_pooled_plain(image: np.ndarray, size: int) -> tuple[np.ndarray, int]:
+    """The pooling of VoxelGrid's carving in numpy (the oracle of the compiled one)."""
+    if size <= 5:
+        return _min_filter_plain(image, size), 1
+    half = (size - 1) // 2
+    f = max(1, half // 2)
+    h, w = image.shape
+    padded = np.pad(image, ((0, -h % f), (0, 0)), mode="edge")
+    padded = np.pad(padded, ((0, 0), (0, -w % f)), mode="wrap")
+    blocks = padded.reshape(padded.shape[0] // f, f, padded.shape[1] // f, f).min(axis=(1, 3))
+    reach = -(-half // f)
+    return _min_filter_plain(blocks, 2 * reach + 1), f
+
+
+@pytest.mark.parametrize("shape", [(100, 360), (37, 53), (5, 7)])
+def test_the_compiled_pooling_is_the_numpy_pooling(shape):
+    """Every window size, on images whose sides are and are not multiples of the block size, with
+    ties (whole centimetres) and no-return pixels (0)."""
+    from nbs_env.mapping.voxels import _POOL_SIZES, _block_pooled
+
+    rng = np.random.default_rng(shape[0])
+    image = np.round(rng.uniform(0, 9, shape), 2).astype(np.float32)
+    image[rng.random(shape) < 0.1] = 0.0
+    for size in _POOL_SIZES:
+        got, f = _block_pooled(image, size)
+        want, g = _block_pooled_plain(image, size)
+        assert f == g
+        np.testing.assert_array_equal(got, want)
+
+
 def _carve_whole_box(grid, T, depth, config):
     """The carving computed for every voxel of the box within reach (the oracle of VoxelGrid._carve,
     which computes only the unsensed voxels)."""

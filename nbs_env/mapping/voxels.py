@@ -26,6 +26,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import numba
 import numpy as np
 import shapely
 from shapely.geometry import Polygon
@@ -61,32 +62,34 @@ def frontier_strips(frontier: Sequence[WallFace], reach: float = FRONTIER_REACH)
 _POOL_SIZES = (1, 3, 5, 7, 9, 13, 17, 25, 33, 49, 65)
 
 
-def _sliding_min(a: np.ndarray, size: int, axis: int) -> np.ndarray:
-    """Minimum over windows of ``size`` consecutive entries along ``axis`` (output shorter by size - 1).
-
-    Windows of doubling length (van Herk's idea without the blocks): log2(size) element-wise minima
-    of shifted views, several times faster than scipy's minimum_filter here.
-    """
-    a = np.moveaxis(a, axis, 0)
-    cur, length = a, 1
-    while 2 * length <= size:
-        cur = np.minimum(cur[:-length], cur[length:])
-        length *= 2
-    n = a.shape[0] - size + 1
-    out = np.minimum(cur[:n], cur[size - length : size - length + n])
-    return np.moveaxis(out, 0, axis)
-
-
+@numba.njit(cache=True, nogil=True)
 def _min_filter(image: np.ndarray, size: int) -> np.ndarray:
     """Minimum over a ``size`` x ``size`` window centred on each pixel; rows clamp, columns wrap."""
     if size <= 1:
-        return image
+        return image.copy()
+    h, w = image.shape
     half = size // 2
-    padded = np.pad(image, ((half, half), (0, 0)), mode="edge")
-    padded = np.pad(padded, ((0, 0), (half, half)), mode="wrap")
-    return _sliding_min(_sliding_min(padded, size, 0), size, 1)
+    across = np.empty_like(image)
+    row = np.empty(w + 2 * half, dtype=image.dtype)
+    for r in range(h):
+        for c in range(w + 2 * half):
+            row[c] = image[r, (c - half) % w]
+        for c in range(w):
+            m = row[c]
+            for d in range(1, size):
+                m = min(m, row[c + d])
+            across[r, c] = m
+    out = np.empty_like(image)
+    for r in range(h):
+        out[r, :] = across[r, :]
+        for d in range(-half, half + 1):
+            rr = min(max(r + d, 0), h - 1)
+            for c in range(w):
+                out[r, c] = min(out[r, c], across[rr, c])
+    return out
 
 
+@numba.njit(cache=True, nogil=True)
 def _block_pooled(image: np.ndarray, size: int) -> tuple[np.ndarray, int]:
     """A window minimum over at least ``size`` pixels; wide windows on a block-minimum copy.
 
@@ -103,9 +106,23 @@ def _block_pooled(image: np.ndarray, size: int) -> tuple[np.ndarray, int]:
     half = (size - 1) // 2
     f = max(1, half // 2)
     h, w = image.shape
-    padded = np.pad(image, ((0, -h % f), (0, 0)), mode="edge")
-    padded = np.pad(padded, ((0, 0), (0, -w % f)), mode="wrap")
-    blocks = padded.reshape(padded.shape[0] // f, f, padded.shape[1] // f, f).min(axis=(1, 3))
+    bh, bw = -(-h // f), -(-w // f)
+    # Block minima; the rows past the image repeat its last row, the columns past it wrap round.
+    blocks = np.empty((bh, bw), dtype=image.dtype)
+    line = np.empty(bw * f, dtype=image.dtype)
+    for br in range(bh):
+        top = min(br * f, h - 1)
+        for c in range(bw * f):
+            line[c] = image[top, c if c < w else c - w]
+        for r in range(br * f + 1, br * f + f):
+            rr = min(r, h - 1)
+            for c in range(bw * f):
+                line[c] = min(line[c], image[rr, c if c < w else c - w])
+        for bc in range(bw):
+            m = line[bc * f]
+            for c in range(bc * f + 1, bc * f + f):
+                m = min(m, line[c])
+            blocks[br, bc] = m
     reach = -(-half // f)
     return _min_filter(blocks, 2 * reach + 1), f
 
