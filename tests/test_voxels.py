@@ -312,3 +312,38 @@ def test_rays_down_to_the_floor_mark_the_voxels_they_crossed_and_navigation_read
     grid.crossed[:] = False
     cut = traversable_floor(grid, 0.0, [pose[:3, 3]], [pose[:2, 3]], cfg, NavigationConfig())
     assert not cut.free[cells[:, 0], cells[:, 1]].all()
+
+
+def _occupy_plain(grid: VoxelGrid, points: np.ndarray, structure: np.ndarray) -> tuple[int, int]:
+    """The marking of occupied voxels with whole-grid masks (the oracle of VoxelGrid._occupy)."""
+    rel = (points.astype(np.float32) - grid.origin.astype(np.float32)) / np.float32(grid.voxel_size)
+    idx = np.floor(rel).astype(np.int32)
+    shape = np.asarray(grid.shape, dtype=np.int32)
+    ok = ((idx >= 0) & (idx < shape)).all(axis=1)
+    idx, structure = idx[ok], structure[ok]
+    flat = (idx[:, 0].astype(np.int64) * shape[1] + idx[:, 1]) * shape[2] + idx[:, 2]
+    labels = grid.labels.reshape(-1)
+    before_occupied = (labels == VoxelLabel.CLUTTER) | (labels == VoxelLabel.STRUCTURE)
+    before_structure = labels == VoxelLabel.STRUCTURE
+    hit = np.zeros(labels.size, dtype=bool)
+    hit[flat] = True
+    hit_structure = np.zeros(labels.size, dtype=bool)
+    hit_structure[flat[structure]] = True
+    labels[hit & ~hit_structure & ~before_structure] = VoxelLabel.CLUTTER
+    labels[hit_structure] = VoxelLabel.STRUCTURE
+    return int(np.count_nonzero(hit & ~before_occupied)), int(np.count_nonzero(hit_structure & ~before_structure))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_marking_occupied_voxels_point_by_point_is_the_whole_grid_marking(seed):
+    """Points in and out of a grid holding every label, several to a voxel, Structure and Clutter
+    mixed: the same labels and counts as the whole-grid masks."""
+    rng = np.random.default_rng(seed)
+    grid = VoxelGrid(np.array([-1.0, 0.5, 0.0]), 0.1, rng.integers(0, 6, (20, 15, 10)).astype(np.uint8))
+    oracle = VoxelGrid(grid.origin.copy(), grid.voxel_size, grid.labels.copy())
+    for _ in range(2):
+        points = grid.origin + rng.uniform(-0.3, 2.3, (3000, 3)) * [1.0, 0.75, 0.5]
+        points = np.vstack([points, points[:500]])  # repeated points
+        structure = rng.random(len(points)) < 0.4
+        assert grid._occupy(points, structure) == _occupy_plain(oracle, points, structure)
+        np.testing.assert_array_equal(grid.labels, oracle.labels)

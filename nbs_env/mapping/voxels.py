@@ -32,7 +32,7 @@ import shapely
 from shapely.geometry import Polygon
 
 from nbs_env.config import ScannerConfig
-from nbs_env.labels import LABEL_COLOURS, VoxelLabel, is_occupied
+from nbs_env.labels import LABEL_COLOURS, VoxelLabel
 from nbs_env.perception.faces import WallFace
 from nbs_env.sensing.pose import check_pose
 
@@ -125,6 +125,43 @@ def _block_pooled(image: np.ndarray, size: int) -> tuple[np.ndarray, int]:
             blocks[br, bc] = m
     reach = -(-half // f)
     return _min_filter(blocks, 2 * reach + 1), f
+
+
+@numba.njit(cache=True, nogil=True)
+def _occupy_voxels(labels: np.ndarray, cells: np.ndarray, structure: np.ndarray) -> tuple[int, int]:
+    """Mark the voxels holding points occupied: STRUCTURE where a Structure point falls, else
+    CLUTTER unless STRUCTURE already; returns (voxels newly occupied, voxels newly STRUCTURE).
+
+    ``cells`` (n, 3) float32 are the points' voxel indices (floored), out of the grid where the
+    point is. A voxel's first point notes in its label (bit 7 set) whether it was occupied and
+    Structure before and whether a Structure point fell in it; a last pass writes the labels.
+    """
+    nx, ny, nz = labels.shape
+    touched = np.empty((len(cells), 3), dtype=np.int64)
+    n_touched = 0
+    occupied = 0
+    new_structure = 0
+    for p in range(len(cells)):
+        if not (0 <= cells[p, 0] < nx and 0 <= cells[p, 1] < ny and 0 <= cells[p, 2] < nz):
+            continue
+        i, j, k = int(cells[p, 0]), int(cells[p, 1]), int(cells[p, 2])
+        label = labels[i, j, k]
+        if label < 128:  # the voxel's first point
+            before_structure = label == 3
+            if label != 2 and not before_structure:
+                occupied += 1
+            label = np.uint8(128 | (2 if before_structure else 0))
+            touched[n_touched, 0], touched[n_touched, 1], touched[n_touched, 2] = i, j, k
+            n_touched += 1
+        if structure[p] and not label & 4:
+            label |= np.uint8(4)
+            if not label & 2:
+                new_structure += 1
+        labels[i, j, k] = label
+    for t in range(n_touched):
+        i, j, k = touched[t, 0], touched[t, 1], touched[t, 2]
+        labels[i, j, k] = 3 if labels[i, j, k] & 6 else 2
+    return occupied, new_structure
 
 
 @dataclass(frozen=True)
@@ -369,24 +406,7 @@ class VoxelGrid:
             return 0, 0
         # float32 is exact enough to pick a 5 cm voxel within hundreds of metres, and twice as fast.
         rel = (points.astype(np.float32) - self.origin.astype(np.float32)) / np.float32(self.voxel_size)
-        idx = np.floor(rel).astype(np.int32)
-        shape = np.asarray(self.shape, dtype=np.int32)
-        ok = ((idx >= 0) & (idx < shape)).all(axis=1)
-        idx, structure = idx[ok], structure[ok]
-        flat = (idx[:, 0].astype(np.int64) * shape[1] + idx[:, 1]) * shape[2] + idx[:, 2]
-        labels = self.labels.reshape(-1)
-        before_occupied = is_occupied(labels)
-        before_structure = labels == VoxelLabel.STRUCTURE
-        # Whole-grid masks count distinct voxels without sorting the points.
-        hit = np.zeros(labels.size, dtype=bool)
-        hit[flat] = True
-        hit_structure = np.zeros(labels.size, dtype=bool)
-        hit_structure[flat[structure]] = True
-        labels[hit & ~hit_structure & ~before_structure] = VoxelLabel.CLUTTER
-        labels[hit_structure] = VoxelLabel.STRUCTURE
-        occupied = int(np.count_nonzero(hit & ~before_occupied))
-        new_structure = int(np.count_nonzero(hit_structure & ~before_structure))
-        return occupied, new_structure
+        return _occupy_voxels(self.labels, np.floor(rel), structure)
 
     # ------------------------------------------------------------------ occlusion labels
     def update_occlusion(
