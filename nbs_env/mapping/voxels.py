@@ -74,11 +74,10 @@ def _min_filter(image: np.ndarray, size: int) -> np.ndarray:
     for r in range(h):
         for c in range(w + 2 * half):
             row[c] = image[r, (c - half) % w]
-        for c in range(w):
-            m = row[c]
-            for d in range(1, size):
-                m = min(m, row[c + d])
-            across[r, c] = m
+        across[r, :] = row[:w]
+        for d in range(1, size):  # the inner loops run along rows: vectorised
+            for c in range(w):
+                across[r, c] = min(across[r, c], row[c + d])
     out = np.empty_like(image)
     for r in range(h):
         out[r, :] = across[r, :]
@@ -112,12 +111,15 @@ def _block_pooled(image: np.ndarray, size: int) -> tuple[np.ndarray, int]:
     line = np.empty(bw * f, dtype=image.dtype)
     for br in range(bh):
         top = min(br * f, h - 1)
-        for c in range(bw * f):
-            line[c] = image[top, c if c < w else c - w]
+        line[:w] = image[top, :]
+        for c in range(w, bw * f):
+            line[c] = image[top, c % w]
         for r in range(br * f + 1, br * f + f):
             rr = min(r, h - 1)
-            for c in range(bw * f):
-                line[c] = min(line[c], image[rr, c if c < w else c - w])
+            for c in range(w):
+                line[c] = min(line[c], image[rr, c])
+            for c in range(w, bw * f):
+                line[c] = min(line[c], image[rr, c % w])
         for bc in range(bw):
             m = line[bc * f]
             for c in range(bc * f + 1, bc * f + f):
