@@ -16,7 +16,7 @@ import numpy as np
 from nbs_env.config import ScannerConfig
 from nbs_env.labels import VoxelLabel, is_occupied
 from nbs_env.mapping.voxels import IntegrationStats, VoxelGrid
-from nbs_env.perception.faces import WallFace
+from nbs_env.perception.faces import PointIndex, WallFace
 from nbs_env.perception.roi import RoI, RoIConfig, RoIScan, compute_roi
 from nbs_env.perception.structure import SEClassifier, face_image, label_points
 from nbs_env.sensing.registration import AccumulatedCloud
@@ -76,7 +76,7 @@ class RoomModel:
 FRONTIER_OCCUPANCY = 0.1
 
 
-def frontier_faces(faces: list[WallFace], points: np.ndarray, min_length: float = 0.3) -> list[WallFace]:
+def frontier_faces(faces: list[WallFace], points: np.ndarray | PointIndex, min_length: float = 0.3) -> list[WallFace]:
     """The RoI faces along which no wall was measured (:data:`FRONTIER_OCCUPANCY`), at least
     ``min_length`` metres long: where the room may go on beyond what the scans saw."""
     out = []
@@ -177,7 +177,8 @@ class RoomBelief:
         times["roi"] = time.perf_counter() - t
 
         t = time.perf_counter()
-        working = self.cloud.working_points()
+        # Classification, relabelling and the frontier each look at the points near one face at a time.
+        working = PointIndex(self.cloud.working_points())
         self.se = self.classifier.classify_faces(roi.wall_faces, working)
         self.roi = roi
         se_faces = self.se_faces
@@ -201,17 +202,18 @@ class RoomBelief:
         times["voxels"] = time.perf_counter() - t
         return BeliefUpdate(stats, int(labels.sum()), int((~labels).sum()), times)
 
-    def _relabel_occupied(self, working: np.ndarray, se_faces: list[WallFace], roi: RoI) -> None:
+    def _relabel_occupied(self, working: PointIndex, se_faces: list[WallFace], roi: RoI) -> None:
         """Bring earlier occupied voxels in line with the current SE faces (the RoI and its
         classification change as the room is discovered)."""
         grid = self.grid
         assert grid is not None
-        idx = grid.index_of(working)
+        idx = grid.index_of(working.points)
         ok = grid.inside(idx)
         idx = idx[ok]
-        structure = label_points(
-            working[ok], se_faces, roi.floor_z, roi.ceiling_z, roi.polygon, ceiling=roi.has_ceiling
-        )
+        # A point's label depends on it alone: labelling all and keeping those in the grid is
+        # labelling those in the grid.
+        structure = label_points(working, se_faces, roi.floor_z, roi.ceiling_z, roi.polygon, ceiling=roi.has_ceiling)
+        structure = structure[ok]
         flat = np.ravel_multi_index(idx.T, grid.shape)
         labels = grid.labels.reshape(-1)
         occupied = is_occupied(labels[flat])

@@ -413,14 +413,14 @@ class SEClassifier:
         """(m,) bool: True where the face with these (α, δ, ε) is classified SE."""
         return self.decision_function(features) > 0
 
-    def classify_faces(self, faces: Sequence[WallFace], points: np.ndarray) -> np.ndarray:
+    def classify_faces(self, faces: Sequence[WallFace], points: np.ndarray | PointIndex) -> np.ndarray:
         """Classify wall faces from the measured points, with the model's own pixel and band.
 
         Parameters
         ----------
         faces : sequence of m WallFace
-        points : (n, 3) float
-            Measured world points.
+        points : (n, 3) float or PointIndex
+            Measured world points, or an index of them.
 
         Returns
         -------
@@ -429,7 +429,8 @@ class SEClassifier:
         """
         if len(faces) == 0:
             return np.zeros(0, dtype=bool)
-        points = np.asarray(points, dtype=float)
+        if not isinstance(points, PointIndex):
+            points = np.asarray(points, dtype=float)
         features = np.array([face_features(face_image(f, points, pixel=self.pixel, band=self.band)) for f in faces])
         return self.predict(features)
 
@@ -617,7 +618,7 @@ def _has_non_number(value: Any) -> bool:
 
 
 def label_points(
-    points: np.ndarray,
+    points: np.ndarray | PointIndex,
     se_faces: Sequence[WallFace],
     floor_z: float,
     ceiling_z: float,
@@ -630,8 +631,8 @@ def label_points(
 
     Parameters
     ----------
-    points : (n, 3) float
-        Measured world points.
+    points : (n, 3) float or PointIndex
+        Measured world points, or an index of them (the same labels, faster over many points).
     se_faces : sequence of WallFace
         The wall faces classified SE.
     floor_z, ceiling_z : float
@@ -650,7 +651,8 @@ def label_points(
         length + distance``, ``-distance <= v <= height + distance``; or with ``|z - floor_z| <= distance``
         or ``|z - ceiling_z| <= distance`` and its xy inside the polygon grown by ``distance``.
     """
-    points = np.asarray(points, dtype=float)
+    index = points if isinstance(points, PointIndex) else None
+    points = index.points if index is not None else np.asarray(points, dtype=float)
     if points.ndim != 2 or points.shape[1] != 3:
         raise ValueError(f"points must have shape (n, 3), got {points.shape}")
     if not (math.isfinite(distance) and distance >= 0):
@@ -666,7 +668,7 @@ def label_points(
     for face in se_faces:
         # The rectangle kept reaches `distance` past the face's ends and sides: its corners lie
         # within distance·√2 of the face's bounding box.
-        idx = _near(face, points, 1.5 * distance)
+        idx = _near(face, index if index is not None else points, 1.5 * distance)
         u, v, w = face.local(points[idx]).T
         structure[idx] |= (
             (np.abs(w) <= distance)
