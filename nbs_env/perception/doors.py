@@ -245,6 +245,44 @@ def _densest_window(offsets: np.ndarray, penalty: np.ndarray, window: float) -> 
     return best_k, best_i
 
 
+@numba.njit(cache=True, nogil=True)
+def _window_bounds(u: np.ndarray, w: np.ndarray, slopes: np.ndarray, window: float) -> np.ndarray:
+    """(len(slopes),) int: for each slope b, at least the most offsets w - b u that one window of
+    ``window`` holds (the fullest three consecutive bins of a histogram with bins of ``window``)."""
+    out = np.zeros(len(slopes), dtype=np.int64)
+    for k in range(len(slopes)):
+        lo, hi = np.inf, -np.inf
+        for n in range(len(u)):
+            x = w[n] - slopes[k] * u[n]
+            lo, hi = min(lo, x), max(hi, x)
+        counts = np.zeros(int((hi - lo) / window) + 3, dtype=np.int64)
+        for n in range(len(u)):
+            counts[int((w[n] - slopes[k] * u[n] - lo) / window)] += 1
+        for b in range(len(counts) - 2):
+            out[k] = max(out[k], counts[b] + counts[b + 1] + counts[b + 2])
+    return out
+
+
+def _densest_line(u: np.ndarray, w: np.ndarray, slopes: np.ndarray, window: float) -> tuple[int, float]:
+    """(k, lowest): the line w = a + slopes[k] u whose window of ``window`` above the offset
+    ``lowest`` (one of the points') holds the most points less 1e-6 |slope| (ties: least turn, then
+    the first slope, then the lowest window): the argmax over every slope's sorted offsets, sorting
+    only the slopes whose histogram bound can reach the best found."""
+    penalty = 1e-6 * np.abs(slopes)
+    bound = _window_bounds(np.ascontiguousarray(u), np.ascontiguousarray(w), slopes, window) - penalty
+    best, best_k, best_lowest = -np.inf, 0, 0.0
+    for k in np.argsort(-bound, kind="stable"):
+        if bound[k] < best:
+            break
+        offsets = np.sort(w - slopes[k] * u)[None, :]
+        _, i = _densest_window(offsets, penalty[k : k + 1], window)
+        count = np.searchsorted(offsets[0], offsets[0, i] + window, side="right") - i
+        score = count - penalty[k]
+        if score > best or (score == best and k < best_k):
+            best, best_k, best_lowest = score, int(k), float(offsets[0, i])
+    return best_k, best_lowest
+
+
 def _refit(face: WallFace, index: PointIndex, band: float, margin: float) -> WallFace:
     """The face moved onto the wall its points show.
 
@@ -268,10 +306,9 @@ def _refit(face: WallFace, index: PointIndex, band: float, margin: float) -> Wal
     su, sw = u[::step], w[::step]
     turn = np.tan(np.radians(_MAX_TURN))
     slopes = np.linspace(-turn, turn, 2 * int(np.ceil(turn * face.length / _ON_LINE)) + 1)
-    offsets = np.sort(sw[None, :] - slopes[:, None] * su[None, :], axis=1)
-    k, i = _densest_window(offsets, 1e-6 * np.abs(slopes), 2 * _ON_LINE)  # ties: least turn
+    k, lowest = _densest_line(su, sw, slopes, 2 * _ON_LINE)
     b = slopes[k]
-    a = offsets[k, i] + _ON_LINE
+    a = lowest + _ON_LINE
     near = np.abs(w - (a + b * u)) <= _ON_LINE
     if np.count_nonzero(near) < _MIN_FIT or np.ptp(u[near]) < face.length / 2:
         return face

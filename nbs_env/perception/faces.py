@@ -128,6 +128,12 @@ class PointIndex:
         rows = np.arange(c0[0], c1[0] + 1) * self._shape[1]
         starts = np.searchsorted(self._keys, rows + c0[1], side="left")
         ends = np.searchsorted(self._keys, rows + c1[1], side="right")
-        idx = np.sort(np.concatenate([self._order[a:b] for a, b in zip(starts, ends, strict=True)]))
+        idx = np.concatenate([self._order[a:b] for a, b in zip(starts, ends, strict=True)])
+        if len(idx) > len(self.points) // 64:  # many: a pass over a mask beats sorting them
+            mask = np.zeros(len(self.points), dtype=bool)
+            mask[idx] = True
+            idx = np.flatnonzero(mask)
+        else:
+            idx = np.sort(idx)
         x, y = self.points[idx, 0], self.points[idx, 1]
         return idx[(x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1])]
