@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 __all__ = ["PointIndex", "WallFace"]
@@ -72,6 +73,21 @@ class WallFace:
         return np.column_stack([rel @ self.direction, points[:, 2] - self.z0, rel @ self.normal])
 
 
+@numba.njit(cache=True, nogil=True)
+def _counting_sort(keys: np.ndarray, count: int) -> np.ndarray:
+    """The stable argsort of (n,) integer ``keys`` in [0, count): a counting sort, O(n + count)."""
+    starts = np.zeros(count + 1, dtype=np.int64)
+    for key in keys:
+        starts[key + 1] += 1
+    for k in range(count):
+        starts[k + 1] += starts[k]
+    order = np.empty(len(keys), dtype=np.int64)
+    for i in range(len(keys)):
+        order[starts[keys[i]]] = i
+        starts[keys[i]] += 1
+    return order
+
+
 class PointIndex:
     """Points sorted into square plan cells, to find those in a plan box without a pass over all.
 
@@ -95,11 +111,14 @@ class PointIndex:
         self.points = points
         self.cell = float(cell)
         if len(points):
-            self._min = points[:, :2].min(axis=0)
-            cells = self._cells(points[:, :2])
-            self._shape = cells.max(axis=0) + 1
-            keys = cells[:, 0] * self._shape[1] + cells[:, 1]
-            self._order = np.argsort(keys, kind="stable")
+            # Column by column: numpy reduces a strided (n, 2) view along axis 0 several times slower.
+            x, y = points[:, 0], points[:, 1]
+            self._min = np.array([x.min(), y.min()])
+            cx = np.floor((x - self._min[0]) / self.cell).astype(np.int64)
+            cy = np.floor((y - self._min[1]) / self.cell).astype(np.int64)
+            self._shape = np.array([cx.max() + 1, cy.max() + 1])
+            keys = cx * self._shape[1] + cy
+            self._order = _counting_sort(keys, int(self._shape[0] * self._shape[1]))
             self._keys = keys[self._order]
 
     def __len__(self) -> int:
