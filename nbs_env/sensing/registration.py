@@ -39,6 +39,19 @@ def _cloud(points: np.ndarray, normals: np.ndarray | None = None):
 _MIN_NORMAL_NEIGHBOURS = 6
 
 
+def _cells_around(points: np.ndarray, chosen: np.ndarray, size: float) -> np.ndarray:
+    """Ascending indices of the (n, 3) ``points`` in the cubes of edge ``size`` that touch the cube
+    of one of the ``chosen`` points: all points within ``size`` of them, and some more."""
+    cells = np.floor(points / size).astype(np.int64)
+    cells -= cells.min(axis=0) - 1
+    dims = cells.max(axis=0) + 2
+    key = (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
+    steps = np.array([(a * dims[1] + b) * dims[2] + c for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)])
+    hot = np.zeros(int(np.prod(dims)), dtype=bool)
+    hot[(key[chosen][:, None] + steps[None, :]).ravel()] = True
+    return np.flatnonzero(hot[key])
+
+
 def _downsample_with_normals(
     points: np.ndarray, origin: np.ndarray, voxel: float, radius: float | None, reach: float | None = None
 ):
@@ -56,13 +69,17 @@ def _downsample_with_normals(
         from scipy.spatial import cKDTree
 
         pts = np.asarray(pc.points)
-        count = cKDTree(pts).query_ball_point(pts, radius, return_length=True)
-        sparse = np.flatnonzero(count < _MIN_NORMAL_NEIGHBOURS)
+        # Fewer than six points (itself included) within the radius: the sixth nearest lies beyond it.
+        sixth, _ = cKDTree(pts).query(pts, k=_MIN_NORMAL_NEIGHBOURS, distance_upper_bound=np.nextafter(radius, np.inf))
+        sparse = np.flatnonzero(np.isinf(sixth[:, -1]))
         if len(sparse):
-            wide = o3d.geometry.PointCloud(pc)
+            # A point's normal reads only its neighbours within ``reach``: the points in the cells
+            # of ``reach`` round the sparse points' cells give them the normals the whole cloud would.
+            near = _cells_around(pts, sparse, reach)
+            wide = pc.select_by_index(near.tolist())
             wide.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=reach, max_nn=30))
             normals = np.asarray(pc.normals)
-            normals[sparse] = np.asarray(wide.normals)[sparse]
+            normals[sparse] = np.asarray(wide.normals)[np.searchsorted(near, sparse)]
             pc.normals = o3d.utility.Vector3dVector(normals)
     # Normals face the scanner, so that averaging over scans does not cancel them.
     pc.orient_normals_towards_camera_location(np.asarray(origin, dtype=np.float64))
