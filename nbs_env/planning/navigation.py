@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, lru_cache
 from typing import NamedTuple
 
 import numpy as np
@@ -844,46 +844,71 @@ def assume_blind_zone_free(
         ray within ``min_range`` of the stop is assumed free; the robot waits to see it.
     """
     out = np.array(labels, copy=True)
-    nx, ny, nz = out.shape
-    s = float(voxel_size)
-    xs = origin[0] + (np.arange(nx) + 0.5) * s
-    ys = origin[1] + (np.arange(ny) + 0.5) * s
-    zs = origin[2] + (np.arange(nz) + 0.5) * s
-    lowest = np.radians(elevation_min)
-    half_diagonal = s * np.sqrt(3) / 2
     sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
     if blocked is not None and len(blocked) != len(sensors):
         raise ValueError(f"{len(blocked)} blocked-direction sets for {len(sensors)} stops")
     # Freeing a voxel never makes another one unsensed, so the stops may share one mask.
     unsensed = (out == VoxelLabel.UNKNOWN) | (out == VoxelLabel.OCCLUDED_CLUTTER)
+    grid = (tuple(float(v) for v in np.asarray(origin, dtype=float)), float(voxel_size), out.shape)
     for k, sensor in enumerate(sensors):
-        plan_distance = np.hypot(xs[:, None] - sensor[0], ys[None, :] - sensor[1])  # (nx, ny)
-        # Only columns whose lowest voxel could pass the test below are looked at: the elevation
-        # grows with the height and the half-diagonal's angle shrinks with the range, which is at
-        # least the column's plan distance. The window is the stop's cone, not the whole room.
-        possible = (
-            np.arctan2(zs[0] - sensor[2], plan_distance) - half_diagonal / np.maximum(plan_distance, 1e-3) < lowest
-        )
-        if min_range > 0:
-            possible |= plan_distance < min_range
-        rows, cols = np.flatnonzero(possible.any(axis=1)), np.flatnonzero(possible.any(axis=0))
-        if not len(rows):
-            continue
-        window = np.s_[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1]
-        d = plan_distance[window][:, :, None]
-        dz = (zs - sensor[2])[None, None, :]
-        r = np.hypot(d, dz)
-        # Partly below the lowest ray: carving needs the whole voxel in view (its centre's elevation
-        # less the angle its half diagonal subtends above the lowest elevation, the test of
-        # VoxelGrid's carving), so a voxel that straddles the cone is never carved either. Near a
-        # steep cone (a -60° scanner) that angle exceeds the voxel's height measured vertically.
-        below = np.arctan2(dz, d) - half_diagonal / np.maximum(r, 1e-3) < lowest
-        if min_range > 0:
-            below |= r < min_range
+        directions = None
         if blocked is not None and min_range > 0 and len(blocked[k]):
-            below &= ~_blocked_columns(blocked[k], sensor, min_range, origin, s, (nx, ny))[window][:, :, None]
+            directions = np.ascontiguousarray(blocked[k], dtype=float).tobytes()
+        cone = _blind_cone(*grid, tuple(float(v) for v in sensor), float(elevation_min), float(min_range), directions)
+        if cone is None:
+            continue
+        window, below = cone
         out[window][below & unsensed[window]] = VoxelLabel.EMPTY
     return out
+
+
+@lru_cache(maxsize=64)
+def _blind_cone(
+    origin: tuple[float, float, float],
+    voxel_size: float,
+    shape: tuple[int, int, int],
+    sensor: tuple[float, float, float],
+    elevation_min: float,
+    min_range: float,
+    blocked: bytes | None,
+) -> tuple[tuple[slice, slice], np.ndarray] | None:
+    """The window of columns round one stop and which of its voxels lie below the stop's field of
+    view or within its minimum range (:func:`assume_blind_zone_free`): geometry alone, so each plan
+    of a room reuses its stops' cones while the grid keeps its place and size (read-only masks)."""
+    nx, ny, nz = shape
+    s = voxel_size
+    xs = origin[0] + (np.arange(nx) + 0.5) * s
+    ys = origin[1] + (np.arange(ny) + 0.5) * s
+    zs = origin[2] + (np.arange(nz) + 0.5) * s
+    lowest = np.radians(elevation_min)
+    half_diagonal = s * np.sqrt(3) / 2
+    plan_distance = np.hypot(xs[:, None] - sensor[0], ys[None, :] - sensor[1])  # (nx, ny)
+    # Only columns whose lowest voxel could pass the test below are looked at: the elevation
+    # grows with the height and the half-diagonal's angle shrinks with the range, which is at
+    # least the column's plan distance. The window is the stop's cone, not the whole room.
+    possible = np.arctan2(zs[0] - sensor[2], plan_distance) - half_diagonal / np.maximum(plan_distance, 1e-3) < lowest
+    if min_range > 0:
+        possible |= plan_distance < min_range
+    rows, cols = np.flatnonzero(possible.any(axis=1)), np.flatnonzero(possible.any(axis=0))
+    if not len(rows):
+        return None
+    window = np.s_[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1]
+    d = plan_distance[window][:, :, None]
+    dz = (zs - sensor[2])[None, None, :]
+    r = np.hypot(d, dz)
+    # Partly below the lowest ray: carving needs the whole voxel in view (its centre's elevation
+    # less the angle its half diagonal subtends above the lowest elevation, the test of
+    # VoxelGrid's carving), so a voxel that straddles the cone is never carved either. Near a
+    # steep cone (a -60° scanner) that angle exceeds the voxel's height measured vertically.
+    below = np.arctan2(dz, d) - half_diagonal / np.maximum(r, 1e-3) < lowest
+    if min_range > 0:
+        below |= r < min_range
+    if blocked is not None:
+        directions = np.frombuffer(blocked, dtype=float).reshape(-1, 3)
+        columns = _blocked_columns(directions, np.asarray(sensor), min_range, np.asarray(origin), s, (nx, ny))
+        below &= ~columns[window][:, :, None]
+    below.setflags(write=False)
+    return window, below
 
 
 def _blocked_columns(
