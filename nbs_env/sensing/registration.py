@@ -14,6 +14,7 @@ by how much of S(t) it would have had to see through; a refused scan stays out o
 from __future__ import annotations
 
 import contextlib
+import os
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -84,6 +85,15 @@ def _downsample_with_normals(
     # Normals face the scanner, so that averaging over scans does not cancel them.
     pc.orient_normals_towards_camera_location(np.asarray(origin, dtype=np.float64))
     return pc
+
+
+def _point_threads() -> int:
+    """Threads for the steps that compute each point on its own (k-d trees, nearest neighbours,
+    covariances, normals): their results do not depend on the thread count, unlike ICP's sums."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
 
 
 @contextlib.contextmanager
@@ -364,7 +374,8 @@ def _heading_offset(points_sensor: np.ndarray, initial: np.ndarray, target_norma
     coarse = _cloud(points_sensor).voxel_down_sample(2 * voxel)
     if len(coarse.points) < 10 or len(target_normals) == 0:
         return None
-    coarse.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=6 * voxel, max_nn=30))
+    with _open3d_threads(_point_threads()):
+        coarse.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=6 * voxel, max_nn=30))
     hs = _heading_histogram(np.asarray(coarse.normals) @ initial[:3, :3].T)
     ht = _heading_histogram(np.asarray(target_normals))
     if not hs.any() or not ht.any():
@@ -579,9 +590,9 @@ class _Target:
         if cfg.method != "open3d":
             small_gicp = _small_gicp()
             self.sg = small_gicp.PointCloud(self.points)
-            self.tree = small_gicp.KdTree(self.sg, num_threads=1)
+            self.tree = small_gicp.KdTree(self.sg, num_threads=_point_threads())
             estimate = small_gicp.estimate_covariances if cfg.method == "gicp" else small_gicp.estimate_normals
-            estimate(self.sg, self.tree, num_neighbors=cfg.neighbours, num_threads=1)
+            estimate(self.sg, self.tree, num_neighbors=cfg.neighbours, num_threads=_point_threads())
         else:
             self._kd = None
             if need_planes:
@@ -592,7 +603,7 @@ class _Target:
     def nearest(self, world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(distance, index) of the nearest target point to each of ``world``."""
         if self.method != "open3d":
-            idx, sq = self.tree.batch_nearest_neighbor_search(world, num_threads=1)
+            idx, sq = self.tree.batch_nearest_neighbor_search(world, num_threads=_point_threads())
             idx, sq = np.asarray(idx, dtype=np.int64), np.asarray(sq, dtype=float)
             dist = np.where(idx >= 0, np.sqrt(np.maximum(sq, 0.0)), np.inf)
             return dist, np.maximum(idx, 0)
@@ -747,8 +758,10 @@ class _Source:
             small_gicp = _small_gicp()
             self.sg = small_gicp.PointCloud(self.points)
             if cfg.method == "gicp":  # plane-to-plane needs the scan's covariances; point-to-plane does not
-                tree = small_gicp.KdTree(self.sg, num_threads=1)
-                small_gicp.estimate_covariances(self.sg, tree, num_neighbors=cfg.neighbours, num_threads=1)
+                tree = small_gicp.KdTree(self.sg, num_threads=_point_threads())
+                small_gicp.estimate_covariances(
+                    self.sg, tree, num_neighbors=cfg.neighbours, num_threads=_point_threads()
+                )
 
 
 @dataclass(frozen=True)
