@@ -347,3 +347,45 @@ def test_marking_occupied_voxels_point_by_point_is_the_whole_grid_marking(seed):
         structure = rng.random(len(points)) < 0.4
         assert grid._occupy(points, structure) == _occupy_plain(oracle, points, structure)
         np.testing.assert_array_equal(grid.labels, oracle.labels)
+
+
+def _trace_low_plain(grid: VoxelGrid, points: np.ndarray, centre: np.ndarray, floor_z: float) -> np.ndarray:
+    """The low rays' crossed voxels with every sample materialised (the oracle of the kernel)."""
+    from nbs_env.mapping.voxels import TRACE_HEIGHT
+
+    s = grid.voxel_size
+    top = floor_z + TRACE_HEIGHT
+    low = points[points[:, 2] < top]
+    d = low - centre
+    drop = -d[:, 2]
+    length = np.linalg.norm(d, axis=1)
+    ok = drop > 1e-6
+    d, drop, length = d[ok], drop[ok], length[ok]
+    enter = np.maximum((centre[2] - top) / drop, 0.0) * length
+    leave = length - s * np.sqrt(3) / 2
+    step = s / 2
+    count = np.maximum(np.floor((leave - enter) / step).astype(np.int64) + 1, 0)
+    crossed = np.zeros(grid.shape, dtype=bool)
+    total = int(count.sum())
+    if total:
+        ray = np.repeat(np.arange(len(d)), count)
+        first = np.cumsum(count) - count
+        along = enter[ray] + (np.arange(total) - first[ray]) * step
+        samples = centre + d[ray] * (along / length[ray])[:, None]
+        idx = grid.index_of(samples)
+        idx = idx[grid.inside(idx)]
+        crossed[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+    return crossed
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_tracing_the_low_rays_ray_by_ray_marks_what_every_sample_marks(seed):
+    """Returns below, at and above the traced height, in and out of the grid: the same voxels."""
+    rng = np.random.default_rng(seed)
+    grid = VoxelGrid(np.array([-3.0, -2.0, -0.2]), 0.05, np.zeros((120, 90, 40), dtype=np.uint8))
+    centre = np.array([0.3, 0.4, 1.5])
+    points = np.column_stack([rng.uniform(-5, 5, 4000), rng.uniform(-4, 4, 4000), rng.uniform(-0.3, 2.5, 4000)])
+    grid._trace_low(points, centre, 0.0)
+    want = _trace_low_plain(grid, points, centre, 0.0)
+    assert want.any()
+    np.testing.assert_array_equal(grid.crossed, want)

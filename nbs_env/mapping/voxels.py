@@ -166,6 +166,34 @@ def _occupy_voxels(labels: np.ndarray, cells: np.ndarray, structure: np.ndarray)
     return occupied, new_structure
 
 
+@numba.njit(cache=True, nogil=True)
+def _trace_low(
+    points: np.ndarray, centre: np.ndarray, top: float, size: float, origin: np.ndarray, crossed: np.ndarray
+) -> None:
+    """:meth:`VoxelGrid._trace_low`, ray by ray: the samples every half voxel from where each ray to
+    a point below ``top`` comes down to ``top`` to a half diagonal short of the point."""
+    nx, ny, nz = crossed.shape
+    half_diagonal = size * np.sqrt(3.0) / 2
+    step = size / 2
+    for p in range(len(points)):
+        if not points[p, 2] < top:
+            continue
+        d0, d1, d2 = points[p, 0] - centre[0], points[p, 1] - centre[1], points[p, 2] - centre[2]
+        drop = -d2
+        if not drop > 1e-6:
+            continue
+        length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        enter = max((centre[2] - top) / drop, 0.0) * length
+        count = max(int(np.floor((length - half_diagonal - enter) / step)) + 1, 0)
+        for q in range(count):
+            f = (enter + q * step) / length
+            i = int(np.floor((centre[0] + d0 * f - origin[0]) / size))
+            j = int(np.floor((centre[1] + d1 * f - origin[1]) / size))
+            k = int(np.floor((centre[2] + d2 * f - origin[2]) / size))
+            if 0 <= i < nx and 0 <= j < ny and 0 <= k < nz:
+                crossed[i, j, k] = True
+
+
 @dataclass(frozen=True)
 class IntegrationStats:
     """What one scan changed: voxels newly EMPTY, newly occupied, and newly STRUCTURE."""
@@ -379,29 +407,14 @@ class VoxelGrid:
         """Mark in :attr:`crossed` the voxels that the rays to ``points`` cross below
         ``floor_z + TRACE_HEIGHT``, sampled every half voxel along each ray and stopping a voxel's
         half diagonal short of the return (its own voxel is not crossed)."""
-        s = self.voxel_size
-        top = floor_z + TRACE_HEIGHT
-        low = points[points[:, 2] < top]
-        d = low - centre
-        drop = -d[:, 2]
-        length = np.linalg.norm(d, axis=1)
-        ok = drop > 1e-6
-        d, drop, length = d[ok], drop[ok], length[ok]
-        # Distance along the ray where it comes down to ``top``, and where it stops short of its return.
-        enter = np.maximum((centre[2] - top) / drop, 0.0) * length
-        leave = length - s * np.sqrt(3) / 2
-        step = s / 2
-        count = np.maximum(np.floor((leave - enter) / step).astype(np.int64) + 1, 0)
-        total = int(count.sum())
-        if total == 0:
-            return
-        ray = np.repeat(np.arange(len(d)), count)
-        first = np.cumsum(count) - count
-        along = enter[ray] + (np.arange(total) - first[ray]) * step
-        samples = centre + d[ray] * (along / length[ray])[:, None]
-        idx = self.index_of(samples)
-        idx = idx[self.inside(idx)]
-        self.crossed[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+        _trace_low(
+            np.ascontiguousarray(points, dtype=float),
+            np.asarray(centre, dtype=float),
+            float(floor_z + TRACE_HEIGHT),
+            self.voxel_size,
+            self.origin,
+            self.crossed,
+        )
 
     def _occupy(self, points: np.ndarray, structure: np.ndarray) -> tuple[int, int]:
         if not len(points):
