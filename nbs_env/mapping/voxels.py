@@ -367,6 +367,13 @@ class VoxelGrid:
         if not len(i):
             return 0
         ax, ay, az = axes[0][i], axes[1][j], axes[2][k]
+        # A voxel is carved only nearer than the farthest return less its half diagonal; those
+        # beyond (the box's corners, half its volume) are dropped before the costly angles, with a
+        # centimetre to spare for the rounding of the range computed below.
+        near = ax * ax + ay * ay + az * az < np.float32((reach - s * np.sqrt(3) / 2 + 0.01) ** 2)
+        if not near.all():
+            i, j, k = i[near], j[near], k[near]
+            ax, ay, az = ax[near], ay[near], az[near]
         R = T[:3, :3].astype(np.float32)
         sx = ax * R[0, 0] + ay * R[1, 0] + az * R[2, 0]
         sy = ax * R[0, 1] + ay * R[1, 1] + az * R[2, 1]
