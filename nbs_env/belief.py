@@ -76,15 +76,21 @@ class RoomModel:
 FRONTIER_OCCUPANCY = 0.1
 
 
-def frontier_faces(faces: list[WallFace], points: np.ndarray | PointIndex, min_length: float = 0.3) -> list[WallFace]:
+def frontier_faces(
+    faces: list[WallFace],
+    points: np.ndarray | PointIndex,
+    min_length: float = 0.3,
+    images: list[np.ndarray] | None = None,
+) -> list[WallFace]:
     """The RoI faces along which no wall was measured (:data:`FRONTIER_OCCUPANCY`), at least
-    ``min_length`` metres long: where the room may go on beyond what the scans saw."""
+    ``min_length`` metres long: where the room may go on beyond what the scans saw. ``images``:
+    the faces' images at 5 cm and ±10 cm when the caller has them (:func:`face_image`'s defaults)."""
     out = []
     margin = round(0.3 / 0.05)
-    for face in faces:
+    for k, face in enumerate(faces):
         if face.length < min_length:
             continue
-        band = face_image(face, points)[margin:-margin]
+        band = (images[k] if images is not None else face_image(face, points))[margin:-margin]
         if band.size == 0 or band.mean() < FRONTIER_OCCUPANCY:
             out.append(face)
     return out
@@ -179,7 +185,9 @@ class RoomBelief:
         t = time.perf_counter()
         # Classification, relabelling and the frontier each look at the points near one face at a time.
         working = PointIndex(self.cloud.working_points())
-        self.se = self.classifier.classify_faces(roi.wall_faces, working)
+        clf = self.classifier
+        images = [face_image(f, working, pixel=clf.pixel, band=clf.band) for f in roi.wall_faces]
+        self.se = clf.classify_images(images)
         self.roi = roi
         se_faces = self.se_faces
         labels = label_points(new.points, se_faces, roi.floor_z, roi.ceiling_z, roi.polygon, ceiling=roi.has_ceiling)
@@ -195,7 +203,11 @@ class RoomBelief:
         stats = self.grid.integrate(new.points, labels, pose, scan.depth_image(), self.scanner, roi.floor_z)
         self._relabel_occupied(working, se_faces, roi)
         # Under the sky the floor goes on outdoors: no edge of the view says the room does.
-        self.frontier = frontier_faces(roi.wall_faces, working) if roi.has_ceiling else []
+        # The frontier reads the classifier's images when they are at its own pixel and band.
+        same = (clf.pixel, clf.band) == (0.05, 0.10)
+        self.frontier = (
+            frontier_faces(roi.wall_faces, working, images=images if same else None) if roi.has_ceiling else []
+        )
         self.grid.update_occlusion(
             roi.polygon, roi.floor_z, roi.ceiling_z, se_faces, ceiling=roi.has_ceiling, frontier=self.frontier
         )

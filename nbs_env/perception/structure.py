@@ -431,8 +431,14 @@ class SEClassifier:
             return np.zeros(0, dtype=bool)
         if not isinstance(points, PointIndex):
             points = np.asarray(points, dtype=float)
-        features = np.array([face_features(face_image(f, points, pixel=self.pixel, band=self.band)) for f in faces])
-        return self.predict(features)
+        return self.classify_images([face_image(f, points, pixel=self.pixel, band=self.band) for f in faces])
+
+    def classify_images(self, images: Sequence[np.ndarray]) -> np.ndarray:
+        """(m,) bool: :meth:`classify_faces` from the faces' images, made at the model's own pixel and
+        band (:func:`face_image`)."""
+        if len(images) == 0:
+            return np.zeros(0, dtype=bool)
+        return self.predict(np.array([face_features(image) for image in images]))
 
     # --------------------------------------------------------------------- storage
 
