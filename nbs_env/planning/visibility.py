@@ -99,7 +99,18 @@ def _start(p: float, d: float, t: float, lo: int, hi: int) -> tuple[int, int, fl
 
 
 @numba.njit(cache=True, nogil=True)
-def _clear(blocking, coarse, p0, p1, p2, d0, d1, d2, limit, block):
+def _clear(
+    blocking: np.ndarray,
+    coarse: np.ndarray,
+    p0: float,
+    p1: float,
+    p2: float,
+    d0: float,
+    d1: float,
+    d2: float,
+    limit: float,
+    block: int,
+) -> bool:
     """Whether the ray from (p0, p1, p2) along the unit (d0, d1, d2), all in voxel units, enters no
     blocking voxel before ``limit``.
 
@@ -168,8 +179,19 @@ def _clear(blocking, coarse, p0, p1, p2, d0, d1, d2, limit, block):
 
 @numba.njit(cache=True, nogil=True)
 def _lines_of_sight(
-    blocking, coarse, origin, size, sensors, targets, min_range, max_range, sin_lo, sin_hi, tolerance, block
-):
+    blocking: np.ndarray,
+    coarse: np.ndarray,
+    origin: np.ndarray,
+    size: float,
+    sensors: np.ndarray,
+    targets: np.ndarray,
+    min_range: float,
+    max_range: float,
+    sin_lo: float,
+    sin_hi: float,
+    tolerance: float,
+    block: int,
+) -> np.ndarray:
     """(c, n) bool: whether each of the (c, 3) sensors sees each of the (n, 3) targets (world
     metres): within the range limits and the elevation band, and the line to the target enters no
     blocking voxel before ``tolerance`` metres short of it."""
