@@ -150,6 +150,15 @@ def test_bad_checkpoints_raise_clear_errors(tmp_path):
         LearnedPolicy(evil)
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason=(
+        "since 5a530aa (issue 18: the gain's lines of sight traversed through the voxels) the greedy "
+        "finds a room on generated:20000001 that it missed before and ppo:reference still misses "
+        "(95.8% against 80.4%): the mean over the four validation storeys is 92.0% against 95.7%. "
+        "On the 20 test storeys the policy stays within 0.3 points (README); issue 19 retrains it."
+    ),
+)
 def test_the_bundled_reference_policy_keeps_its_standing_against_the_greedy():
     """``ppo:reference`` ships with the package (checksum-verified on load) with its learning curve.
     The curve's figures were measured in the env as it was when the policy was trained; the scanning
