@@ -227,22 +227,18 @@ def _fill_row_gaps(image: np.ndarray, gap: int) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def _densest_window(offsets: np.ndarray, penalty: np.ndarray, window: float) -> tuple[int, int]:
-    """(k, i): the window [offsets[k, i], offsets[k, i] + window] that holds the most of row k's
-    (sorted) offsets, less ``penalty[k]``; ties go to the first row, then the lowest window (the
-    ``np.argmax`` of the counts that ``np.searchsorted`` gives row by row)."""
-    best, best_k, best_i = -np.inf, 0, 0
-    rows, n = offsets.shape
-    for k in range(rows):
-        end = 0
-        for i in range(n):
-            top = offsets[k, i] + window
-            while end < n and offsets[k, end] <= top:
-                end += 1
-            score = (end - i) - penalty[k]
-            if score > best:
-                best, best_k, best_i = score, k, i
-    return best_k, best_i
+def _densest_window(offsets: np.ndarray, window: float) -> tuple[int, int]:
+    """(i, count): the window [offsets[i], offsets[i] + window] that holds the most of the (sorted)
+    offsets, and how many it holds; ties go to the lowest window (the ``np.argmax`` of the counts
+    that ``np.searchsorted`` gives)."""
+    best, best_i, end = 0, 0, 0
+    for i in range(len(offsets)):
+        top = offsets[i] + window
+        while end < len(offsets) and offsets[end] <= top:
+            end += 1
+        if end - i > best:
+            best, best_i = end - i, i
+    return best_i, best
 
 
 @numba.njit(cache=True, nogil=True)
@@ -274,12 +270,11 @@ def _densest_line(u: np.ndarray, w: np.ndarray, slopes: np.ndarray, window: floa
     for k in np.argsort(-bound, kind="stable"):
         if bound[k] < best:
             break
-        offsets = np.sort(w - slopes[k] * u)[None, :]
-        _, i = _densest_window(offsets, penalty[k : k + 1], window)
-        count = np.searchsorted(offsets[0], offsets[0, i] + window, side="right") - i
+        offsets = np.sort(w - slopes[k] * u)
+        i, count = _densest_window(offsets, window)
         score = count - penalty[k]
         if score > best or (score == best and k < best_k):
-            best, best_k, best_lowest = score, int(k), float(offsets[0, i])
+            best, best_k, best_lowest = score, int(k), float(offsets[i])
     return best_k, best_lowest
 
 
