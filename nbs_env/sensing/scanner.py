@@ -50,10 +50,17 @@ def _place_pattern(
 ) -> None:
     """Rays (n, 6) float32 of the pattern's (n,) direction columns turned by ``R`` (3, 3) and started
     at ``origin`` (3,), both float32: the element-wise float32 products and sums, left to right."""
+    # Unrolled, with the rotation in locals (measured 0.24 against 0.40 ms for 145 k rays).
+    r00, r01, r02 = R[0, 0], R[0, 1], R[0, 2]
+    r10, r11, r12 = R[1, 0], R[1, 1], R[1, 2]
+    r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
+    o0, o1, o2 = origin[0], origin[1], origin[2]
     for j in range(len(x)):
-        rays[j, 0], rays[j, 1], rays[j, 2] = origin[0], origin[1], origin[2]
-        for i in range(3):
-            rays[j, 3 + i] = x[j] * R[i, 0] + y[j] * R[i, 1] + z[j] * R[i, 2]
+        a, b, c = x[j], y[j], z[j]
+        rays[j, 0], rays[j, 1], rays[j, 2] = o0, o1, o2
+        rays[j, 3] = a * r00 + b * r01 + c * r02
+        rays[j, 4] = a * r10 + b * r11 + c * r12
+        rays[j, 5] = a * r20 + b * r21 + c * r22
 
 
 @numba.njit(cache=True, nogil=True)
@@ -70,12 +77,12 @@ def _keep_returns(
 ):
     """The returns within the range limits: their measured ranges (the hit distance plus the
     noise), sensor-frame points, pattern rows and columns, hit faces (int64) and true ranges."""
-    keep = np.empty(len(t_hit), dtype=np.int64)
+    # Count, then write: cheaper than gathering through an index array (measured 0.40 against
+    # 0.64 ms for 145 k rays).
     count = 0
     for j in range(len(t_hit)):
         measured = t_hit[j] + noise[j] if noisy else t_hit[j]
         if measured >= lowest and measured <= highest:
-            keep[count] = j
             count += 1
     ranges = np.empty(count, dtype=np.float32)
     points = np.empty((count, 3), dtype=np.float32)
@@ -83,15 +90,19 @@ def _keep_returns(
     kept_cols = np.empty(count, dtype=cols.dtype)
     kept_faces = np.empty(count, dtype=np.int64)
     true_ranges = np.empty(count, dtype=np.float32)
-    for k in range(count):
-        j = keep[k]
-        measured = t_hit[j] + noise[j] if noisy else t_hit[j]
-        ranges[k] = measured
-        for a in range(3):
-            points[k, a] = directions[j, a] * measured
-        kept_rows[k], kept_cols[k] = rows[j], cols[j]
-        kept_faces[k] = faces[j]
-        true_ranges[k] = t_hit[j]
+    k = 0
+    for j in range(len(t_hit)):
+        hit = t_hit[j]
+        measured = hit + noise[j] if noisy else hit
+        if measured >= lowest and measured <= highest:
+            ranges[k] = measured
+            points[k, 0] = directions[j, 0] * measured
+            points[k, 1] = directions[j, 1] * measured
+            points[k, 2] = directions[j, 2] * measured
+            kept_rows[k], kept_cols[k] = rows[j], cols[j]
+            kept_faces[k] = faces[j]
+            true_ranges[k] = hit
+            k += 1
     return ranges, points, kept_rows, kept_cols, kept_faces, true_ranges
 
 
@@ -212,16 +223,18 @@ class Scanner:
             o3d.core.Tensor(np.ascontiguousarray(scene.mesh.faces, dtype=np.uint32)),
         )
         n = self.config.n_rays
-        directions, _, _ = ray_pattern(self.config)
+        self._pattern = ray_pattern(self.config)
+        directions = self._pattern[0]
         self._columns = [np.ascontiguousarray(directions[:, i]) for i in range(3)]
         self._ray_buffer = np.empty((n, 6), dtype=np.float32)
         self._noise_buffer = np.empty(n, dtype=np.float32)
 
     def rays(self, pose: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """(n, 6) float32: origins and world directions of the pattern from ``pose`` (into ``out`` if given)."""
-        T = check_pose(pose)
-        n = self.config.n_rays
-        rays = np.empty((n, 6), dtype=np.float32) if out is None else out
+        return self._place(check_pose(pose), out)
+
+    def _place(self, T: np.ndarray, out: np.ndarray | None) -> np.ndarray:
+        rays = np.empty((self.config.n_rays, 6), dtype=np.float32) if out is None else out
         # Element-wise on contiguous columns rather than a matmul: a BLAS call leaves its worker
         # threads spinning, and on a 2-core machine they steal the cores Embree casts on next
         # (measured: casts twice as slow). One compiled pass writes origins and directions.
@@ -258,9 +271,9 @@ class Scanner:
         T = check_pose(pose)
         if cfg.range_noise > 0 and rng is None:
             raise ValueError("this scanner adds range noise: pass an np.random.Generator as rng")
-        directions, rows, cols = ray_pattern(cfg)
+        directions, rows, cols = self._pattern
         # Reused buffers: fresh multi-megabyte arrays cost page faults on every scan.
-        t_hit, prim = self.cast(self.rays(T, out=self._ray_buffer))
+        t_hit, prim = self.cast(self._place(T, self._ray_buffer))
         noise = self._noise_buffer
         if cfg.range_noise > 0:
             rng.standard_normal(dtype=np.float32, out=noise)
