@@ -37,7 +37,7 @@ from nbs_env.planning.planner import Plan
 from nbs_env.robot import KnownDoor, Robot, StepReport
 from nbs_env.settings import EnvConfig
 from scenes import FloorPlan, Scene, load_scene
-from scenes.generator import generate_plan
+from scenes.generator import generate_storey
 from scenes.geometry import point_is_free
 
 __all__ = ["STAGES", "ScanPoints", "ScanRecord", "StageTimes", "StepOutcome", "Storey", "resolve_scene"]
@@ -180,7 +180,8 @@ def resolve_scene(
         scene = load_scene(spec)
     elif isinstance(spec, (str, Path)) and str(spec) == "generated":
         seed = int(rng.integers(0, 2**31 - 1))
-        scene = generate_plan(seed, config.generator).to_scene(source=f"generated:{seed}", validate=False)
+        # The scene the generator validated its plan on, with the plan's metadata.
+        scene = generate_storey(seed, config.generator)[1]
     elif isinstance(spec, (str, Path)):
         key = str(spec)
         if key not in cache:

@@ -33,7 +33,7 @@ from scenes.errors import (
     UnsupportedFormatError,
 )
 from scenes.floorplan import ClutterPlan, DoorPlan, FloorPlan, RoomPlan, WindowPlan, extrude, load_plan
-from scenes.generator import GeneratorConfig, generate_plan
+from scenes.generator import GeneratorConfig, generate_plan, generate_storey
 from scenes.model import STRUCTURAL_CLASSES, Door, Room, Scene, StructureSamples, SurfaceClass
 
 __all__ = [
@@ -63,6 +63,7 @@ __all__ = [
     "bundled_plan",
     "extrude",
     "generate_plan",
+    "generate_storey",
     "list_scenes",
     "load_plan",
     "load_scene",
@@ -158,13 +159,12 @@ def _load(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene:
         opts = _take(options, (*fields, "validate"), "generated storey")
         opts.pop("validate", None)  # generated storeys are always validated
         try:
-            plan = generate_plan(seed, GeneratorConfig(**opts))
+            _, scene = generate_storey(seed, GeneratorConfig(**opts))
         except ValueError as exc:
             if isinstance(exc, SceneError):
                 raise
             raise UnknownSceneError(text, f"bad generator option: {exc}") from None
-        scene = plan.to_scene(source=text, validate=False)
-        scene.metadata.update(plan.metadata)
+        scene.name = text  # as the user spelled it ("generated:05")
         return scene
     path = Path(text)
     suffix = path.suffix.lower()

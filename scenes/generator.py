@@ -40,6 +40,7 @@ from scenes.floorplan import (
     _rectangle,
 )
 from scenes.geometry import STOREY_CLEARANCE
+from scenes.model import Scene
 from scenes.validation import validate_plan_scene
 
 __all__ = ["MAX_CLUTTER_DENSITY", "GeneratorConfig", "generate_plan", "generate_scene"]
@@ -131,6 +132,19 @@ def generate_plan(seed: int, config: GeneratorConfig | None = None, **options: o
     StoreyValidationError
         When no valid storey was drawn in ``max_attempts`` tries.
     """
+    return generate_storey(seed, config, **options)[0]
+
+
+def generate_storey(seed: int, config: GeneratorConfig | None = None, **options: object) -> tuple[FloorPlan, Scene]:
+    """:func:`generate_plan` and the validated scene it was checked on (extruded once, not twice).
+
+    The scene carries the plan's metadata and the source name ``generated:SEED``.
+
+    Raises
+    ------
+    StoreyValidationError
+        When no valid storey was drawn in ``max_attempts`` tries.
+    """
     config = replace(config or GeneratorConfig(), **options) if options else (config or GeneratorConfig())
     rng = np.random.default_rng(seed)
     last: Exception | None = None
@@ -143,18 +157,17 @@ def generate_plan(seed: int, config: GeneratorConfig | None = None, **options: o
             plan = replace(plan, start=(round(float(scene.start[0]), 4), round(float(scene.start[1]), 4)))
             scene.start = plan.start
             validate_plan_scene(plan, scene)
-            return replace(plan, metadata={"seed": seed, "attempts": attempt + 1, "generator": config.to_dict()})
+            plan = replace(plan, metadata={"seed": seed, "attempts": attempt + 1, "generator": config.to_dict()})
+            scene.metadata.update(plan.metadata)
+            return plan, scene
         except SceneError as exc:  # a draw that failed a check: draw again
             last = exc
     raise StoreyValidationError(f"generated:{seed}", f"no valid storey in {config.max_attempts} draws (last: {last})")
 
 
-def generate_scene(seed: int, config: GeneratorConfig | None = None, **options: object):
+def generate_scene(seed: int, config: GeneratorConfig | None = None, **options: object) -> Scene:
     """:func:`generate_plan` extruded to a validated :class:`~scenes.model.Scene`."""
-    plan = generate_plan(seed, config, **options)
-    scene = plan.to_scene(source=plan.name, validate=False)
-    scene.metadata.update(plan.metadata)
-    return scene
+    return generate_storey(seed, config, **options)[1]
 
 
 # -------------------------------------------------------------------------------------- internals

@@ -119,3 +119,22 @@ def test_bad_generator_options():
         GeneratorConfig(clutter_density=-1)
     with pytest.raises(TypeError, match="does not take"):
         load_scene("generated:1", colour="red")
+
+
+@pytest.mark.parametrize("seed", [0, 7])
+def test_the_storey_generated_with_its_plan_is_the_plan_extruded(seed):
+    """generate_storey hands back the scene its plan was validated on instead of extruding again:
+    it must be the plan's extrusion, mesh, labels, rooms, doors, start and all."""
+    from scenes.generator import generate_storey
+
+    plan, scene = generate_storey(seed, rooms=3)
+    assert plan == generate_plan(seed, rooms=3)
+    again = plan.to_scene(source=plan.name, validate=False)
+    np.testing.assert_array_equal(scene.mesh.vertices, again.mesh.vertices)
+    np.testing.assert_array_equal(scene.mesh.faces, again.mesh.faces)
+    np.testing.assert_array_equal(scene.face_labels, again.face_labels)
+    np.testing.assert_array_equal(scene.face_rooms, again.face_rooms)
+    np.testing.assert_array_equal(scene.start, again.start)
+    assert scene.name == again.name == f"generated:{seed}"
+    assert len(scene.rooms) == len(again.rooms) and len(scene.doors) == len(again.doors)
+    assert scene.metadata["seed"] == seed and scene.metadata["attempts"] >= 1
