@@ -15,11 +15,11 @@ import numpy as np
 
 from nbs_env.config import ScannerConfig
 from nbs_env.labels import VoxelLabel, is_occupied
+from nbs_env.mapping.cloud import VoxelMeans
 from nbs_env.mapping.voxels import IntegrationStats, VoxelGrid
 from nbs_env.perception.faces import PointIndex, WallFace
 from nbs_env.perception.roi import RoI, RoIConfig, RoIScan, compute_roi
 from nbs_env.perception.structure import SEClassifier, face_image, label_points
-from nbs_env.sensing.registration import AccumulatedCloud
 from nbs_env.sensing.scanner import Scan
 
 __all__ = ["BeliefUpdate", "RoomBelief", "RoomModel"]
@@ -149,7 +149,7 @@ class RoomBelief:
         self.scans: list[RoIScan] = []
         # Occluded-structure voxels a scan was predicted to see and did not: kept out of later gains.
         self.unobservable = np.zeros((0, 3))
-        self.cloud = AccumulatedCloud(voxel_size=perception_voxel, normals=False, rooms=False)
+        self.cloud = VoxelMeans(perception_voxel)
         self.grid: VoxelGrid | None = None
         self.roi: RoI | None = None
         self.se: np.ndarray = np.zeros(0, dtype=bool)
@@ -178,13 +178,13 @@ class RoomBelief:
         t = time.perf_counter()
         new = RoIScan.from_scan(scan, pose, keep_direction)
         self.scans.append(new)
-        self.cloud.add(new.points, new.origin)
+        self.cloud.add(new.points)
         roi = compute_roi(self.scans, self.roi_config, self.exclude)
         times["roi"] = time.perf_counter() - t
 
         t = time.perf_counter()
         # Classification, relabelling and the frontier each look at the points near one face at a time.
-        working = PointIndex(self.cloud.working_points())
+        working = PointIndex(self.cloud.points)
         clf = self.classifier
         images = [face_image(f, working, pixel=clf.pixel, band=clf.band) for f in roi.wall_faces]
         self.se = clf.classify_images(images)
@@ -253,7 +253,7 @@ class RoomBelief:
         roi = self.roi
         if roi is None:
             return None
-        points = self.cloud.working_points()
+        points = self.cloud.points
         se_faces = self.se_faces
         structure = label_points(points, se_faces, roi.floor_z, roi.ceiling_z, roi.polygon, ceiling=roi.has_ceiling)
         return RoomModel(

@@ -1,0 +1,83 @@
+"""The room's working copy: its points averaged in world-anchored voxels, updated scan by scan."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["VoxelMeans"]
+
+# Cells are packed 21 bits an axis into one int64 key: +-2^20 cells, 52 km at 5 cm.
+_BITS = 21
+_HALF = 1 << (_BITS - 1)
+
+
+class VoxelMeans:
+    """Points averaged per voxel of a grid anchored at the world origin.
+
+    Each voxel ``floor(p / voxel_size)`` keeps the sum and the count of the points that fell in it;
+    the working copy is one point per voxel, their mean. Adding a scan costs a sort of its points
+    and a merge with the voxels held, not a new downsampling of every point of the room, and the
+    copy does not depend on the order the scans came in.
+
+    Parameters
+    ----------
+    voxel_size : float
+        Edge of the voxels, metres.
+    """
+
+    def __init__(self, voxel_size: float) -> None:
+        if not (np.isfinite(voxel_size) and voxel_size > 0):
+            raise ValueError(f"voxel_size must be a positive number of metres, got {voxel_size}")
+        self.voxel_size = float(voxel_size)
+        self._keys = np.zeros(0, dtype=np.int64)
+        self._sums = np.zeros((0, 3))
+        self._counts = np.zeros(0, dtype=np.int64)
+        self._points: np.ndarray | None = np.zeros((0, 3))
+
+    def __len__(self) -> int:
+        """Voxels held (points in the working copy)."""
+        return len(self._keys)
+
+    def add(self, points: np.ndarray) -> None:
+        """Add (n, 3) float world points.
+
+        Raises
+        ------
+        ValueError
+            The points are not a finite (n, 3) array, or lie farther than 2^20 voxels from the origin.
+        """
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
+            raise ValueError(f"points must be a finite (n, 3) array, got shape {points.shape}")
+        if not len(points):
+            return
+        cells = np.floor(points / self.voxel_size).astype(np.int64)
+        if cells.min() < -_HALF or cells.max() >= _HALF:
+            raise ValueError(f"points lie farther than {_HALF} voxels of {self.voxel_size} m from the origin")
+        cells += _HALF
+        keys = (cells[:, 0] << (2 * _BITS)) | (cells[:, 1] << _BITS) | cells[:, 2]
+        order = np.argsort(keys, kind="stable")
+        keys = keys[order]
+        starts = np.flatnonzero(np.concatenate([[True], keys[1:] != keys[:-1]]))
+        keys = keys[starts]
+        sums = np.add.reduceat(points[order], starts, axis=0)
+        counts = np.diff(np.append(starts, len(order)))
+        at = np.searchsorted(self._keys, keys)
+        held = at < len(self._keys)
+        held[held] = self._keys[at[held]] == keys[held]
+        self._sums[at[held]] += sums[held]
+        self._counts[at[held]] += counts[held]
+        new = ~held
+        if new.any():
+            self._keys = np.insert(self._keys, at[new], keys[new])
+            self._sums = np.insert(self._sums, at[new], sums[new], axis=0)
+            self._counts = np.insert(self._counts, at[new], counts[new])
+        self._points = None
+
+    @property
+    def points(self) -> np.ndarray:
+        """(m, 3) float: one point per voxel, the mean of its points, in the order of the voxels' keys."""
+        if self._points is None:
+            self._points = self._sums / self._counts[:, None]
+            self._points.flags.writeable = False
+        return self._points
