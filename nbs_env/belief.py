@@ -190,7 +190,9 @@ class RoomBelief:
         self.se = clf.classify_images(images)
         self.roi = roi
         se_faces = self.se_faces
-        labels = label_points(new.points, se_faces, roi.floor_z, roi.ceiling_z, roi.polygon, ceiling=roi.has_ceiling)
+        labels = label_points(
+            PointIndex(new.points), se_faces, roi.floor_z, roi.ceiling_z, roi.polygon, ceiling=roi.has_ceiling
+        )
         times["classification"] = time.perf_counter() - t
 
         t = time.perf_counter()

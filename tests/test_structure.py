@@ -544,3 +544,31 @@ def test_label_points_many_points_is_fast():
     labels = label_points(points, faces, 0.0, 2.6, ROOM)
     assert time.perf_counter() - start < 2.0
     assert 0 < labels.sum() < len(points)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_labelling_through_the_compiled_face_pass_is_the_numpy_labelling(seed):
+    """label_points over a PointIndex marks the SE faces' points in one compiled pass; the numpy
+    pass over a plain array (kept as the oracle) must give the same labels: oblique, axis-parallel
+    and reversed faces, points on the bounds (distance exactly), in and beyond the margins."""
+    from nbs_env.perception.faces import PointIndex
+    from nbs_env.perception.structure import label_points
+
+    rng = np.random.default_rng(seed)
+    faces = [
+        WallFace(np.array([0.0, 0.0]), np.array([6.0, 0.0]), 0.0, 2.8),
+        WallFace(np.array([6.0, 0.0]), np.array([6.0, 4.0]), 0.0, 2.8),
+        WallFace(np.array([6.0, 4.0]), np.array([1.3, 5.7]), 0.0, 2.8),
+        WallFace(np.array([1.3, 5.7]), np.array([0.0, 0.0]), 0.0, 2.8),
+    ]
+    points = rng.uniform([-1.0, -1.0, -0.5], [7.0, 7.0, 3.3], size=(20_000, 3))
+    # Points exactly 0.1 m off the first face and exactly at its ends.
+    points[:50] = np.column_stack([rng.uniform(0, 6, 50), np.full(50, 0.1), rng.uniform(0, 2.8, 50)])
+    points[50:60] = [[-0.1, 0.05, 1.0]] * 10
+    polygon = np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 4.0], [1.3, 5.7]])
+    for cell in (0.5, 0.37):
+        for chosen in (faces, faces[1:3], []):
+            want = label_points(points, chosen, 0.0, 2.8, polygon)
+            got = label_points(PointIndex(points, cell=cell), chosen, 0.0, 2.8, polygon)
+            np.testing.assert_array_equal(got, want)
+            assert want.sum() > (1000 if chosen else 0)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numba
@@ -69,8 +70,17 @@ class WallFace:
             from the face plane, positive into the room).
         """
         points = np.asarray(points, dtype=float)
-        rel = points[:, :2] - np.asarray(self.p0, dtype=float)
-        return np.column_stack([rel @ self.direction, points[:, 2] - self.z0, rel @ self.normal])
+        p0, d = np.asarray(self.p0, dtype=float), self.direction
+        # Element-wise products and sums, not a matrix product (whose BLAS kernel may fuse them):
+        # the compiled kernels below compute the same numbers.
+        rx, ry = points[:, 0] - p0[0], points[:, 1] - p0[1]
+        return np.column_stack([rx * d[0] + ry * d[1], points[:, 2] - self.z0, rx * -d[1] + ry * d[0]])
+
+    def params(self) -> np.ndarray:
+        """(7,) float: p0 (x, y), the unit direction (x, y), z0, length and height: what the
+        compiled kernels read of a face."""
+        p0, d = np.asarray(self.p0, dtype=float), self.direction
+        return np.array([p0[0], p0[1], d[0], d[1], self.z0, self.length, self.height])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -86,6 +96,68 @@ def _counting_sort(keys: np.ndarray, count: int) -> np.ndarray:
         order[starts[keys[i]]] = i
         starts[keys[i]] += 1
     return order
+
+
+@numba.njit(cache=True, nogil=True)
+def _mark_near_faces(
+    points: np.ndarray,
+    order: np.ndarray,
+    keys: np.ndarray,
+    corner: np.ndarray,
+    shape: np.ndarray,
+    cell: float,
+    faces: np.ndarray,
+    ends: np.ndarray,
+    distance: float,
+    out: np.ndarray,
+) -> None:
+    """Set ``out[i]`` for the points within ``distance`` of one of the ``faces``' rectangles.
+
+    A point counts when its xy lies in the face's bounding box grown by 1.5 ``distance`` (the cells
+    of a :class:`PointIndex` of ``points``: ``order``, ``keys``, ``corner``, ``shape``, ``cell``)
+    and, in the face frame, ``|w| <= distance``, ``-distance <= u <= length + distance`` and
+    ``-distance <= v <= height + distance``. ``faces`` (m, 7) are :meth:`WallFace.params`,
+    ``ends`` (m, 4) the faces' xy bounding boxes (lo x, lo y, hi x, hi y).
+    """
+    margin = 1.5 * distance
+    for f in range(len(faces)):
+        px, py, dx, dy, z0, length, height = (
+            faces[f, 0],
+            faces[f, 1],
+            faces[f, 2],
+            faces[f, 3],
+            faces[f, 4],
+            faces[f, 5],
+            faces[f, 6],
+        )
+        lo_x, lo_y = ends[f, 0] - margin, ends[f, 1] - margin
+        hi_x, hi_y = ends[f, 2] + margin, ends[f, 3] + margin
+        c0x = max(np.int64(np.floor((lo_x - corner[0]) / cell)), 0)
+        c0y = max(np.int64(np.floor((lo_y - corner[1]) / cell)), 0)
+        c1x = min(np.int64(np.floor((hi_x - corner[0]) / cell)), shape[0] - 1)
+        c1y = min(np.int64(np.floor((hi_y - corner[1]) / cell)), shape[1] - 1)
+        if c1x < c0x or c1y < c0y:
+            continue
+        for cx in range(c0x, c1x + 1):
+            start = np.searchsorted(keys, cx * shape[1] + c0y)
+            stop = np.searchsorted(keys, cx * shape[1] + c1y, side="right")
+            for k in range(start, stop):
+                i = order[k]
+                x, y = points[i, 0], points[i, 1]
+                if not (x >= lo_x and x <= hi_x and y >= lo_y and y <= hi_y):
+                    continue
+                rx, ry = x - px, y - py
+                u = rx * dx + ry * dy
+                w = rx * -dy + ry * dx
+                v = points[i, 2] - z0
+                if (
+                    abs(w) <= distance
+                    and u >= -distance
+                    and u <= length + distance
+                    and v >= -distance
+                    and v <= height + distance
+                ):
+                    out[i] = True
 
 
 class PointIndex:
@@ -123,6 +195,17 @@ class PointIndex:
 
     def __len__(self) -> int:
         return len(self.points)
+
+    def mark_near(self, faces: Sequence[WallFace], distance: float, out: np.ndarray) -> None:
+        """Set ``out`` (n,) bool where a point lies within ``distance`` of one of ``faces``'
+        rectangles (see :func:`_mark_near_faces`); one compiled pass over the faces' cells."""
+        if not len(self.points) or not len(faces):
+            return
+        params = np.array([f.params() for f in faces])
+        ends = np.array([[*np.minimum(f.p0, f.p1), *np.maximum(f.p0, f.p1)] for f in faces], dtype=float)
+        _mark_near_faces(
+            self.points, self._order, self._keys, self._min, self._shape, self.cell, params, ends, float(distance), out
+        )
 
     def _cells(self, xy: np.ndarray) -> np.ndarray:
         # Subtraction and division by a positive number round monotonically, so a point at or

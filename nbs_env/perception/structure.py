@@ -671,10 +671,12 @@ def label_points(
         return structure
     # One vectorised pass over the points per face: O(n) memory, and 10-20 faces cost 10-20 passes,
     # where an (n, faces) broadcast would allocate several (n, faces) arrays for nothing.
-    for face in se_faces:
-        # The rectangle kept reaches `distance` past the face's ends and sides: its corners lie
-        # within distance·√2 of the face's bounding box.
-        idx = _near(face, index if index is not None else points, 1.5 * distance)
+    # The rectangle kept reaches `distance` past the face's ends and sides: its corners lie
+    # within distance·√2 of the face's bounding box.
+    if index is not None:
+        index.mark_near(se_faces, distance, structure)
+    for face in se_faces if index is None else ():
+        idx = _near(face, points, 1.5 * distance)
         u, v, w = face.local(points[idx]).T
         structure[idx] |= (
             (np.abs(w) <= distance)
