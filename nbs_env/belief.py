@@ -19,7 +19,7 @@ from nbs_env.mapping.cloud import VoxelMeans
 from nbs_env.mapping.voxels import IntegrationStats, VoxelGrid
 from nbs_env.perception.faces import PointIndex, WallFace
 from nbs_env.perception.roi import RoI, RoIConfig, RoIScan, compute_roi
-from nbs_env.perception.structure import SEClassifier, face_image, label_points
+from nbs_env.perception.structure import SEClassifier, face_image, face_images, label_points
 from nbs_env.sensing.scanner import Scan
 
 __all__ = ["BeliefUpdate", "RoomBelief", "RoomModel"]
@@ -186,7 +186,7 @@ class RoomBelief:
         # Classification, relabelling and the frontier each look at the points near one face at a time.
         working = PointIndex(self.cloud.points)
         clf = self.classifier
-        images = [face_image(f, working, pixel=clf.pixel, band=clf.band) for f in roi.wall_faces]
+        images = face_images(roi.wall_faces, working, pixel=clf.pixel, band=clf.band)
         self.se = clf.classify_images(images)
         self.roi = roi
         se_faces = self.se_faces

@@ -572,3 +572,27 @@ def test_labelling_through_the_compiled_face_pass_is_the_numpy_labelling(seed):
             got = label_points(PointIndex(points, cell=cell), chosen, 0.0, 2.8, polygon)
             np.testing.assert_array_equal(got, want)
             assert want.sum() > (1000 if chosen else 0)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_face_images_in_one_compiled_pass_are_the_numpy_images(seed):
+    """face_images over a PointIndex fills every face's image in one compiled pass; each must be
+    face_image's numpy image (the oracle): oblique faces, points on the far edges and band."""
+    from nbs_env.perception.faces import PointIndex
+    from nbs_env.perception.structure import face_image, face_images
+
+    rng = np.random.default_rng(seed)
+    faces = [
+        WallFace(np.array([0.0, 0.0]), np.array([6.0, 0.0]), 0.1, 2.8),
+        WallFace(np.array([6.0, 0.0]), np.array([6.0, 4.02]), 0.1, 2.8),
+        WallFace(np.array([6.0, 4.02]), np.array([1.3, 5.7]), 0.1, 2.8),
+    ]
+    points = rng.uniform([-1.0, -1.0, -0.5], [7.0, 7.0, 3.3], size=(30_000, 3))
+    points[:20] = [[6.0, 0.1, 2.8]] * 10 + [[3.0, 0.1, 0.1]] * 10  # on the far edge, on the band
+    for pixel, band in ((0.05, 0.10), (0.1, 0.2)):
+        got = face_images(faces, PointIndex(points, cell=0.5), pixel=pixel, band=band)
+        for face, image in zip(faces, got, strict=True):
+            want = face_image(face, points, pixel=pixel, band=band)
+            assert image.shape == want.shape and want.any()
+            np.testing.assert_array_equal(image, want)
+    assert face_images([], PointIndex(points)) == []

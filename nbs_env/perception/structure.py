@@ -45,6 +45,7 @@ __all__ = [
     "SEClassifier",
     "face_features",
     "face_image",
+    "face_images",
     "label_points",
 ]
 
@@ -140,6 +141,19 @@ def face_image(
     rows = np.minimum((v[keep] / pixel).astype(np.intp), d2 - 1)
     image[rows, cols] = True
     return image
+
+
+def face_images(
+    faces: Sequence[WallFace], points: np.ndarray | PointIndex, *, pixel: float = 0.05, band: float = 0.10
+) -> list[np.ndarray]:
+    """:func:`face_image` of each of ``faces``; over a :class:`PointIndex`, in one compiled pass
+    (the same images)."""
+    if not isinstance(points, PointIndex) or not (math.isfinite(pixel) and pixel > 0 and math.isfinite(band)):
+        return [face_image(f, points, pixel=pixel, band=band) for f in faces]
+    if band < 0:
+        raise ValueError(f"band must be a finite number >= 0 metres, got {band!r}")
+    dims = np.array([[_pixel_count(f.height, pixel), _pixel_count(f.length, pixel)] for f in faces], dtype=np.int64)
+    return points.face_images(faces, band, pixel, dims)
 
 
 def face_features(image: np.ndarray) -> np.ndarray:
