@@ -554,6 +554,8 @@ def polygon_from_image(
         if np.linalg.norm(b - a) > 0:
             hough_lines.append((a, (b - a) / np.linalg.norm(b - a)))
 
+    hough_a = np.array([a for a, _ in hough_lines]).reshape(-1, 2)
+    hough_d = np.array([d for _, d in hough_lines]).reshape(-1, 2)
     n = len(boundary)
     lines: list[tuple[np.ndarray, np.ndarray, int]] = []
     for k, start in enumerate(vertex_idx):
@@ -565,14 +567,21 @@ def polygon_from_image(
         if len(pts) < 2:
             continue
         centre, direction = _fit_line(pts)
+        # The Hough line within 10° of the fit that passes within 1.5 pixels of most of the
+        # samples (the first such line on a tie), all lines at once.
         best, best_count = None, 0
-        for a, d in hough_lines:
-            if abs(d @ direction) < np.cos(np.radians(10)):
-                continue
-            dist = np.abs((pts - a) @ np.array([-d[1], d[0]]))
-            count = int(np.count_nonzero(dist < 1.5 * pixel))
-            if count > best_count:
-                best, best_count = (a, d), count
+        if len(hough_lines):
+            ok = np.abs(hough_d @ direction) >= np.cos(np.radians(10))
+            if ok.any():
+                a, d = hough_a[ok], hough_d[ok]
+                dist = np.abs(
+                    (pts[None, :, 0] - a[:, 0, None]) * -d[:, 1, None]
+                    + (pts[None, :, 1] - a[:, 1, None]) * d[:, 0, None]
+                )
+                counts = np.count_nonzero(dist < 1.5 * pixel, axis=1)
+                j = int(np.argmax(counts))
+                if counts[j] > 0:
+                    best, best_count = (a[j], d[j]), int(counts[j])
         if best is not None and best_count >= 0.5 * len(pts):
             a, d = best
             inliers = pts[np.abs((pts - a) @ np.array([-d[1], d[0]])) < 2.0 * pixel]
