@@ -17,6 +17,7 @@ Paper §3.1 and METHOD §3. After each scan:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -281,8 +282,11 @@ WALL_TOP_QUANTILE = 0.9
 
 def _peak(values: np.ndarray, bin_size: float) -> float:
     """The median of the values in and beside the fullest histogram bin."""
-    edges = np.arange(values.min(), values.max() + 2 * bin_size, bin_size)
-    counts, edges = np.histogram(values, bins=edges)
+    # Equal bins from the lowest value, given as a count and a range: numpy's arithmetic binning,
+    # twice as fast as a search through explicit edges (the bins of np.arange, to rounding).
+    lo = float(values.min())
+    bins = max(1, math.ceil((float(values.max()) + 2 * bin_size - lo) / bin_size) - 1)
+    counts, edges = np.histogram(values, bins=bins, range=(lo, lo + bins * bin_size))
     k = int(np.argmax(counts))
     near = values[(values >= edges[k] - bin_size) & (values < edges[k + 1] + bin_size)]
     return float(np.median(near))
