@@ -298,7 +298,7 @@ def make_method(name: str) -> RegistrationConfig:
     """The RegistrationConfig of a method name (module docstring)."""
     base, _, extra = name.partition("[")
     overrides: dict[str, Any] = {}
-    for item in filter(None, extra.rstrip("]").split(";")):
+    for item in filter(None, extra.removesuffix("]").split(";")):
         key, _, value = item.partition("=")
         if value in ("None", "True", "False"):
             overrides[key] = {"None": None, "True": True, "False": False}[value]
@@ -329,7 +329,7 @@ def replay(seq: Sequence, method: str, target_mode: str = "estimated") -> list[d
             prior = _planar_of(seq.stops[k - 1].true) @ stop.increment
         # The map update (downsampling and normals of the previous scan) happens in the first call
         # that reads the working copy; it is the same for every method, so it is done here, untimed.
-        cloud.working_cloud()
+        cloud.target_arrays()
         result = register(stop.points.astype(np.float64), prior, cloud, cfg, stop.travelled)
         estimate, recorded = result.pose, stop.recorded_pose
         dt, dr = pose_error(estimate, stop.true)
@@ -342,7 +342,8 @@ def replay(seq: Sequence, method: str, target_mode: str = "estimated") -> list[d
             )
         )  # fmt: skip
         placed = stop.true if target_mode == "truth" else estimate
-        cloud.add(stop.points.astype(np.float64) @ placed[:3, :3].T + placed[:3, 3], placed[:3, 3], registered=None)
+        world = stop.points.astype(np.float64) @ placed[:3, :3].T + placed[:3, 3]
+        cloud.add(world, placed[:3, 3], registered=None, pose=placed)
     return rows
 
 

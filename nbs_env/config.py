@@ -175,8 +175,12 @@ class RegistrationConfig(Config):
         Correspondence distances of the coarse-to-fine ICP stages, metres.
     max_iterations : int
         Iterations per stage.
-    normal_radius : float
-        Radius for the target's normal estimation, metres.
+    stage_voxels : tuple of float or None
+        Per stage, the voxel size of the scan's copy it aligns, at least ``voxel_size`` (None:
+        ``voxel_size`` for every stage). A stage's time grows with the scan's points, and the coarse
+        stages need only bring the pose within the next stage's reach.
+    convergence : float
+        A stage stops when its update turns less than this (radians) and moves less (metres).
     min_fitness : float
         Least share of source points with a correspondence at the finest stage (only when
         ``min_agreement`` is None).
@@ -203,7 +207,8 @@ class RegistrationConfig(Config):
         to plane; the scan's covariances too). ``"open3d"``: open3d's point-to-plane ICP with the
         working copy's normals (the method before the study).
     neighbours : int
-        Neighbours for the normals and covariances of ``"plane"`` and ``"gicp"``.
+        Nearest points for the normals and covariances: of each scan's copy (in the scan itself),
+        and of the target for ``"plane"`` and ``"gicp"``.
     min_points : int
         Fewest downsampled points a scan, and the part of S(t) facing it, must have to be
         registered (an empty scan: the scanner in a wall, every return under the minimum range).
@@ -245,10 +250,9 @@ class RegistrationConfig(Config):
     the see-through gate were written for failures seen there and in tests/test_registration.py).
     """
 
-    voxel_size: float = 0.05
+    voxel_size: float = 0.1
     max_correspondence: tuple[float, ...] = (0.5, 0.2, 0.08)
     max_iterations: int = 40
-    normal_radius: float = 0.15
     min_fitness: float = 0.3
     max_rmse: float = 0.04
     max_correction_m: float = 0.75
@@ -269,11 +273,13 @@ class RegistrationConfig(Config):
     heading_check_deg: float = 2.0
     min_constraint: float = 0.0
     exclude_rejected: bool = True
+    stage_voxels: tuple[float, ...] | None = (0.3, 0.2, 0.1)
+    convergence: float = 1e-4
 
     def __post_init__(self) -> None:
         _finite(
+            convergence=self.convergence,
             voxel_size=self.voxel_size,
-            normal_radius=self.normal_radius,
             min_fitness=self.min_fitness,
             max_rmse=self.max_rmse,
             max_correction_m=self.max_correction_m,
@@ -315,4 +321,13 @@ class RegistrationConfig(Config):
             f"max_correspondence must be positive distances, got {self.max_correspondence}",
         )
         _require(self.max_iterations >= 1, f"max_iterations must be >= 1, got {self.max_iterations}")
+        _require(self.convergence > 0, f"convergence must be > 0, got {self.convergence}")
+        if self.stage_voxels is not None:
+            _require(
+                len(self.stage_voxels) == len(self.max_correspondence)
+                and all(isinstance(v, (int, float)) and math.isfinite(v) for v in self.stage_voxels)
+                and all(v >= self.voxel_size for v in self.stage_voxels),
+                f"stage_voxels must give one voxel size of at least voxel_size ({self.voxel_size}) per stage "
+                f"of max_correspondence ({len(self.max_correspondence)}), got {self.stage_voxels}",
+            )
         _require(0 <= self.min_fitness <= 1, f"min_fitness is a share in [0, 1], got {self.min_fitness}")

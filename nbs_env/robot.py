@@ -114,8 +114,9 @@ class Robot:
         )
         self._floor_z = float(scene.start[2])
         # S(t) of the storey, ICP's target; without ICP it needs no normals.
+        registration = self.config.registration
         self.cloud = AccumulatedCloud(
-            self.config.registration.voxel_size, normals=not self.config.perfect_localisation, rooms=False
+            registration.voxel_size, normals=not self.config.perfect_localisation, rooms=False
         )
         self.belief = RoomBelief(self.config.scanner, voxel_size=self.config.voxel_size, roi_config=self.config.roi)
         self.visited: list[np.ndarray] = []
@@ -166,7 +167,7 @@ class Robot:
             self.unregistered_m = 0.0 if result.accepted else travelled
         times["registration"] = time.perf_counter() - t
         world = scan.to_world(self.pose)
-        self.cloud.add(world, self.pose[:3, 3], room=self.room_index)
+        self.cloud.add(world, self.pose[:3, 3], room=self.room_index, pose=None if result is None else self.pose)
         update = self.belief.add_scan(scan, self.pose, keep_direction)
         nav = self.config.navigation
         self.belief.cover(self.pose[:2, 3], nav.robot_radius + nav.safety_distance + 2 * self.config.voxel_size)

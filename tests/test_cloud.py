@@ -46,3 +46,25 @@ def test_bad_points_are_refused():
     with pytest.raises(ValueError, match="voxel_size"):
         VoxelMeans(0.0)
     assert len(cloud) == 0 and cloud.points.shape == (0, 3)
+
+
+def test_normals_are_summed_per_voxel_with_the_points():
+    rng = np.random.default_rng(4)
+    points = rng.uniform(-1.0, 1.0, size=(500, 3))
+    normals = rng.normal(size=(500, 3))
+    cloud = VoxelMeans(0.5, normals=True)
+    cloud.add(points[:250], normals[:250])
+    copy = cloud.copy()
+    cloud.add(points[250:], normals[250:])
+    cells = np.floor(points / 0.5).astype(int)
+    for k, p in enumerate(cloud.points):
+        mine = np.all(cells == np.floor(p / 0.5).astype(int), axis=1)
+        np.testing.assert_allclose(cloud.normal_sums[k], normals[mine].sum(axis=0), atol=1e-12)
+        assert cloud.counts[k] == mine.sum()
+    assert copy.counts.sum() == 250  # the copy did not see the second batch
+    with pytest.raises(ValueError, match="normals"):
+        cloud.add(points)
+    with pytest.raises(ValueError, match="normals"):
+        VoxelMeans(0.5).add(points, normals)
+    with pytest.raises(ValueError, match="no normals"):
+        _ = VoxelMeans(0.5).normal_sums

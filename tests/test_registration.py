@@ -295,3 +295,80 @@ def test_levelling_keeps_the_pose_without_a_floor():
     initial = planar(1.0, 2.0, 0.0, 1.5)
     walls_only = np.random.default_rng(0).uniform(-5, 5, (5000, 3)) * [1, 1, 0.1]  # nothing 1.5 m below
     assert np.array_equal(level_from_floor(walls_only, initial, 1.5), initial)
+
+
+def _oracle_normals(points, radius, reach, k=20, least=6):
+    """The plane normals of ``_plane_normals``, by brute force and numpy's eigh."""
+    d2 = ((points[:, None, :] - points[None, :, :]) ** 2).sum(-1)
+    out = np.zeros_like(points)
+    for i in range(len(points)):
+        order = np.argsort(d2[i], kind="stable")[:k]
+        near = order[d2[i, order] <= radius**2]
+        if len(near) < least:
+            near = order[d2[i, order] <= reach**2]
+        if len(near) < 3:
+            continue
+        q = points[near] - points[near].mean(axis=0)
+        out[i] = np.linalg.eigh(q.T @ q)[1][:, 0]
+    return out
+
+
+def test_the_compiled_plane_normals_are_the_eigenvector_normals():
+    """Two noisy planes at a right angle, dense near the corner and sparse far out: each normal
+    the smallest eigenvector of its neighbours' scatter (up to sign), the sparse points' from the
+    wider reach, none for an isolated point."""
+    import small_gicp
+
+    from nbs_env.sensing.registration import _MIN_NORMAL_NEIGHBOURS, _NORMAL_NEIGHBOURS, _plane_normals
+
+    rng = np.random.default_rng(3)
+    dense = np.column_stack([rng.uniform(0, 1, 300), rng.uniform(0, 1, 300), rng.normal(0, 0.002, 300)])
+    wall = np.column_stack([rng.normal(0, 0.002, 200), rng.uniform(0, 1, 200), rng.uniform(0, 1, 200)])
+    sparse = np.column_stack([rng.uniform(2, 4, 40), rng.uniform(0, 2, 40), rng.normal(0, 0.002, 40)])
+    points = np.vstack([dense, wall, sparse, [[9.0, 9.0, 9.0]]])
+    tree = small_gicp.KdTree(points, num_threads=1)
+    idx, sq = tree.batch_knn_search(points, _NORMAL_NEIGHBOURS, num_threads=1)
+    idx, sq = np.asarray(idx).astype(np.int64), np.asarray(sq)
+    got = _plane_normals(points, idx, sq, 0.15**2, 0.6**2, _MIN_NORMAL_NEIGHBOURS)
+    want = _oracle_normals(points, 0.15, 0.6, _NORMAL_NEIGHBOURS, _MIN_NORMAL_NEIGHBOURS)
+    found = np.linalg.norm(want, axis=1) > 0
+    np.testing.assert_allclose(np.abs(np.einsum("ij,ij->i", got[found], want[found])), 1.0, atol=1e-6)
+    assert not got[~found].any() and not found[-1]
+    # The sparse plane (0.3 m apart on average) took its normals from the reach: still the floor's.
+    assert np.all(np.abs(got[500:540, 2]) > 0.99)
+
+
+def test_a_registered_scan_is_downsampled_once_and_placed_with_its_pose():
+    """``add(..., pose=)`` takes the copy ``register`` made of the same scan, placed with the pose
+    (points and normals turned with it); a different scan with ``pose=`` is refused."""
+    scanner, rng, _, cloud = _l_room_first_scan(2)
+    t1 = pose_from_xyz_rpy(2.4, 5.2, 1.5, 0.0, 0.0, 0.3)
+    scan = scanner.scan(t1, rng)
+    result = register(scan.points, planar(2.45, 5.25, 0.32, 1.5), cloud)
+    assert result.accepted, result.reason
+    copy = cloud._prepared
+    before = len(cloud.working_points())
+    cloud.add(scan.to_world(result.pose), result.pose[:3, 3], pose=result.pose)
+    placed, normals = copy.world()
+    np.testing.assert_allclose(placed, copy.points @ result.pose[:3, :3].T + result.pose[:3, 3])
+    np.testing.assert_allclose(normals, copy.normals @ result.pose[:3, :3].T)
+    assert len(cloud.working_points()) > before
+    # Normals face the scanner that measured them.
+    work, facing = cloud.working_points(), cloud.working_normals()
+    assert np.all(np.abs(np.linalg.norm(facing, axis=1) - 1.0) < 1e-9)
+    register(scan.points, result.pose, cloud)
+    with pytest.raises(ValueError, match="pose= adds only the scan"):
+        cloud.add(scan.to_world(result.pose)[:-5], result.pose[:3, 3], pose=result.pose)
+    assert len(work) == len(cloud.working_points())
+
+
+def test_registration_config_checks_its_stages():
+    from nbs_env.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="stage_voxels"):
+        RegistrationConfig(stage_voxels=(0.3, 0.2))
+    with pytest.raises(ConfigError, match="stage_voxels"):
+        RegistrationConfig(voxel_size=0.1, stage_voxels=(0.3, 0.2, 0.05))
+    with pytest.raises(ConfigError, match="convergence"):
+        RegistrationConfig(convergence=0.0)
+    RegistrationConfig(voxel_size=0.05, stage_voxels=None)

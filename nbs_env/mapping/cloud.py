@@ -1,4 +1,5 @@
-"""The room's working copy: its points averaged in world-anchored voxels, updated scan by scan."""
+"""Working copies of accumulated scans: points (and normals) averaged in world-anchored voxels,
+updated scan by scan (the room's copy for perception, S(t)'s for registration)."""
 
 from __future__ import annotations
 
@@ -23,14 +24,18 @@ class VoxelMeans:
     ----------
     voxel_size : float
         Edge of the voxels, metres.
+    normals : bool
+        Keep the sum of the points' normals per voxel too (then every ``add`` gives normals).
     """
 
-    def __init__(self, voxel_size: float) -> None:
+    def __init__(self, voxel_size: float, normals: bool = False) -> None:
         if not (np.isfinite(voxel_size) and voxel_size > 0):
             raise ValueError(f"voxel_size must be a positive number of metres, got {voxel_size}")
         self.voxel_size = float(voxel_size)
+        self.has_normals = bool(normals)
         self._keys = np.zeros(0, dtype=np.int64)
-        self._sums = np.zeros((0, 3))
+        # Columns 0-2 the points' sums, 3-5 their normals' (with ``normals``).
+        self._sums = np.zeros((0, 6 if normals else 3))
         self._counts = np.zeros(0, dtype=np.int64)
         self._points: np.ndarray | None = np.zeros((0, 3))
 
@@ -38,17 +43,28 @@ class VoxelMeans:
         """Voxels held (points in the working copy)."""
         return len(self._keys)
 
-    def add(self, points: np.ndarray) -> None:
-        """Add (n, 3) float world points.
+    def add(self, points: np.ndarray, normals: np.ndarray | None = None) -> None:
+        """Add (n, 3) float world points, with their (n, 3) float unit ``normals`` when the copy
+        keeps normals.
 
         Raises
         ------
         ValueError
-            The points are not a finite (n, 3) array, or lie farther than 2^20 voxels from the origin.
+            The points are not a finite (n, 3) array, lie farther than 2^20 voxels from the origin,
+            or normals are missing, or given to a copy without.
         """
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
             raise ValueError(f"points must be a finite (n, 3) array, got shape {points.shape}")
+        if (normals is None) == self.has_normals:
+            raise ValueError("normals must be given exactly when the copy keeps normals (VoxelMeans(normals=True))")
+        if normals is not None:
+            normals = np.asarray(normals, dtype=np.float64)
+            if normals.shape != points.shape or not np.all(np.isfinite(normals)):
+                raise ValueError(f"normals must be a finite array shaped like the points, got {normals.shape}")
+            values = np.hstack([points, normals])
+        else:
+            values = points
         if not len(points):
             return
         cells = np.floor(points / self.voxel_size).astype(np.int64)
@@ -60,7 +76,7 @@ class VoxelMeans:
         keys = keys[order]
         starts = np.flatnonzero(np.concatenate([[True], keys[1:] != keys[:-1]]))
         keys = keys[starts]
-        sums = np.add.reduceat(points[order], starts, axis=0)
+        sums = np.add.reduceat(values[order], starts, axis=0)
         counts = np.diff(np.append(starts, len(order)))
         at = np.searchsorted(self._keys, keys)
         held = at < len(self._keys)
@@ -78,6 +94,25 @@ class VoxelMeans:
     def points(self) -> np.ndarray:
         """(m, 3) float: one point per voxel, the mean of its points, in the order of the voxels' keys."""
         if self._points is None:
-            self._points = self._sums / self._counts[:, None]
+            self._points = self._sums[:, :3] / self._counts[:, None]
             self._points.flags.writeable = False
         return self._points
+
+    @property
+    def normal_sums(self) -> np.ndarray:
+        """(m, 3) float: per voxel, the sum of its points' normals (the copy keeps normals)."""
+        if not self.has_normals:
+            raise ValueError("this copy keeps no normals (VoxelMeans(normals=True))")
+        return self._sums[:, 3:]
+
+    @property
+    def counts(self) -> np.ndarray:
+        """(m,) int: points per voxel."""
+        return self._counts
+
+    def copy(self) -> VoxelMeans:
+        """An independent copy."""
+        out = VoxelMeans(self.voxel_size, self.has_normals)
+        out._keys, out._sums, out._counts = self._keys.copy(), self._sums.copy(), self._counts.copy()
+        out._points = None
+        return out

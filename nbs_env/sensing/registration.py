@@ -1,11 +1,14 @@
 """Registration of a new scan into the accumulated cloud S(t): ICP from the odometry pose.
 
 S(t) keeps every registered scan at full resolution (for output and the coverage metric) and a
-voxel-downsampled working copy with normals (for ICP and perception), for the storey and per room.
+voxel-downsampled working copy with normals (ICP's target), for the storey and per room: each scan
+is downsampled once (10 cm voxel means), its normals estimated in the scan itself, and merged into
+world-anchored voxels.
 
-The default ICP is small_gicp's GICP on the working copies, one thread, with the covariances of
-the target estimated at each registration, restarted from the walls' heading when that disagrees
-with ICP's. A pose is judged by how much of the scan's overlap with S(t) lies on S(t)'s planes and
+The default ICP is small_gicp's GICP, one thread, coarse to fine: the coarse stages align coarser
+copies of the scan (30 and 20 cm), the finest the 10 cm copy, against the target's 10 cm copy with
+its covariances estimated at each registration; it is restarted from the walls' heading when that
+disagrees with ICP's. A pose is judged by how much of the scan's overlap with S(t) lies on S(t)'s planes and
 by how much of S(t) it would have had to see through; a refused scan stays out of later targets.
 ``benchmarks/registration.py`` measures it against open3d's ICP on the same scans (figures in
 ``benchmarks/README.md``).
@@ -19,9 +22,11 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from nbs_env.config import RegistrationConfig
+from nbs_env.mapping.cloud import VoxelMeans
 from nbs_env.sensing.pose import check_pose, pose_error, yaw_of
 from scenes._open3d import open3d
 
@@ -33,57 +38,6 @@ def _cloud(points: np.ndarray, normals: np.ndarray | None = None):
     pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=np.float64)))
     if normals is not None:
         pc.normals = o3d.utility.Vector3dVector(np.asarray(normals, dtype=np.float64))
-    return pc
-
-
-#: Fewest neighbours within the normal radius for a trusted normal (with ``normal_reach``).
-_MIN_NORMAL_NEIGHBOURS = 6
-
-
-def _cells_around(points: np.ndarray, chosen: np.ndarray, size: float) -> np.ndarray:
-    """Ascending indices of the (n, 3) ``points`` in the cubes of edge ``size`` that touch the cube
-    of one of the ``chosen`` points: all points within ``size`` of them, and some more."""
-    cells = np.floor(points / size).astype(np.int64)
-    cells -= cells.min(axis=0) - 1
-    dims = cells.max(axis=0) + 2
-    key = (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
-    steps = np.array([(a * dims[1] + b) * dims[2] + c for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)])
-    hot = np.zeros(int(np.prod(dims)), dtype=bool)
-    hot[(key[chosen][:, None] + steps[None, :]).ravel()] = True
-    return np.flatnonzero(hot[key])
-
-
-def _downsample_with_normals(
-    points: np.ndarray, origin: np.ndarray, voxel: float, radius: float | None, reach: float | None = None
-):
-    o3d = open3d()
-    pc = _cloud(points).voxel_down_sample(voxel)
-    # An empty scan (the scanner inside a wall, or every return below the minimum range) has no
-    # normals to orient; open3d raises on it.
-    if radius is None or len(pc.points) == 0:
-        return pc
-    pc.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=30))
-    if reach is not None and reach > radius:
-        # Far returns are sparser than the radius (9 cm apart at 10 m, 26 cm at 30 m with the
-        # 0.5° pattern): with fewer than three neighbours open3d leaves them the default normal
-        # (0, 0, 1), wrong on every wall. They take their normal from a wider neighbourhood.
-        from scipy.spatial import cKDTree
-
-        pts = np.asarray(pc.points)
-        # Fewer than six points (itself included) within the radius: the sixth nearest lies beyond it.
-        sixth, _ = cKDTree(pts).query(pts, k=_MIN_NORMAL_NEIGHBOURS, distance_upper_bound=np.nextafter(radius, np.inf))
-        sparse = np.flatnonzero(np.isinf(sixth[:, -1]))
-        if len(sparse):
-            # A point's normal reads only its neighbours within ``reach``: the points in the cells
-            # of ``reach`` round the sparse points' cells give them the normals the whole cloud would.
-            near = _cells_around(pts, sparse, reach)
-            wide = pc.select_by_index(near.tolist())
-            wide.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=reach, max_nn=30))
-            normals = np.asarray(pc.normals)
-            normals[sparse] = np.asarray(wide.normals)[np.searchsorted(near, sparse)]
-            pc.normals = o3d.utility.Vector3dVector(normals)
-    # Normals face the scanner, so that averaging over scans does not cancel them.
-    pc.orient_normals_towards_camera_location(np.asarray(origin, dtype=np.float64))
     return pc
 
 
@@ -111,6 +65,156 @@ def _open3d_threads(n: int | None) -> Iterator[None]:
         utility.set_max_threads(previous)
 
 
+#: Nearest points a normal reads at most, and the fewest within ``normal_radius`` for a trusted one.
+_NORMAL_NEIGHBOURS = 20
+_MIN_NORMAL_NEIGHBOURS = 6
+
+
+@numba.njit(cache=True)
+def _smallest_eigenvector(A: np.ndarray, V: np.ndarray) -> tuple[float, float, float]:
+    """The eigenvector of the smallest eigenvalue of the symmetric 3 x 3 ``A`` (overwritten; ``V``
+    is work space), by cyclic Jacobi rotations."""
+    for i in range(3):
+        for j in range(3):
+            V[i, j] = 1.0 if i == j else 0.0
+    for _ in range(12):
+        off = A[0, 1] * A[0, 1] + A[0, 2] * A[0, 2] + A[1, 2] * A[1, 2]
+        if off <= 1e-30 * (A[0, 0] * A[0, 0] + A[1, 1] * A[1, 1] + A[2, 2] * A[2, 2]):
+            break
+        for p, q in ((0, 1), (0, 2), (1, 2)):
+            apq = A[p, q]
+            if apq == 0.0:
+                continue
+            theta = (A[q, q] - A[p, p]) / (2.0 * apq)
+            t = (1.0 if theta >= 0 else -1.0) / (abs(theta) + np.sqrt(theta * theta + 1.0))
+            c = 1.0 / np.sqrt(t * t + 1.0)
+            s = t * c
+            for k in range(3):
+                akp, akq = A[k, p], A[k, q]
+                A[k, p] = c * akp - s * akq
+                A[k, q] = s * akp + c * akq
+            for k in range(3):
+                apk, aqk = A[p, k], A[q, k]
+                A[p, k] = c * apk - s * aqk
+                A[q, k] = s * apk + c * aqk
+            for k in range(3):
+                vkp, vkq = V[k, p], V[k, q]
+                V[k, p] = c * vkp - s * vkq
+                V[k, q] = s * vkp + c * vkq
+    m = 0
+    if A[1, 1] < A[m, m]:
+        m = 1
+    if A[2, 2] < A[m, m]:
+        m = 2
+    return V[0, m], V[1, m], V[2, m]
+
+
+@numba.njit(cache=True)
+def _plane_normals(
+    points: np.ndarray, idx: np.ndarray, sq: np.ndarray, radius2: float, reach2: float, least: int
+) -> np.ndarray:
+    """Per point, the normal of the plane through its nearest points (``idx``, ``sq``: their indices
+    and squared distances, ascending, -1 past the last): those within ``radius2``, or within
+    ``reach2`` when fewer than ``least`` lie within ``radius2``. Zero with fewer than three."""
+    n, k = idx.shape
+    out = np.zeros((n, 3))
+    A = np.empty((3, 3))
+    V = np.empty((3, 3))
+    for i in range(n):
+        near = 0
+        while near < k and idx[i, near] >= 0 and sq[i, near] <= radius2:
+            near += 1
+        limit = radius2 if near >= least else reach2
+        count = 0
+        sx = sy = sz = 0.0
+        while count < k and idx[i, count] >= 0 and sq[i, count] <= limit:
+            p = points[idx[i, count]]
+            sx += p[0]
+            sy += p[1]
+            sz += p[2]
+            count += 1
+        if count < 3:
+            continue
+        mx, my, mz = sx / count, sy / count, sz / count
+        xx = xy = xz = yy = yz = zz = 0.0
+        for j in range(count):
+            p = points[idx[i, j]]
+            dx, dy, dz = p[0] - mx, p[1] - my, p[2] - mz
+            xx += dx * dx
+            xy += dx * dy
+            xz += dx * dz
+            yy += dy * dy
+            yz += dy * dz
+            zz += dz * dz
+        A[0, 0], A[0, 1], A[0, 2] = xx, xy, xz
+        A[1, 0], A[1, 1], A[1, 2] = xy, yy, yz
+        A[2, 0], A[2, 1], A[2, 2] = xz, yz, zz
+        a, b, c = _smallest_eigenvector(A, V)
+        norm = np.sqrt(a * a + b * b + c * c)
+        out[i, 0], out[i, 1], out[i, 2] = a / norm, b / norm, c / norm
+    return out
+
+
+class _ScanCopy:
+    """One scan downsampled in the frame it is given in (small_gicp's voxel means), with unit
+    normals turned towards ``origin`` and, for GICP, covariances from each point's ``neighbours``
+    nearest; and the pose that places it once known.
+
+    A normal is the plane through the point's nearest points (at most 20) within ``normal_radius``,
+    estimated in the scan itself, so that a surface's normal never mixes in another scan's copy of
+    it. Far returns are sparser than the radius (9 cm apart at 10 m, 26 cm at 30 m with the 0.5°
+    pattern): a point with fewer than six points within it reads those within ``normal_reach``
+    instead. (Normals from the k nearest points alone reach across a corner into the next surface
+    where a scan is sparse: 15 m down a corridor from the scanner they turned the facing test and
+    the plane agreement against a correct pose; ``tests/test_registration.py``.)
+    """
+
+    def __init__(
+        self,
+        points: np.ndarray,
+        voxel: float,
+        neighbours: int,
+        origin: np.ndarray | None = None,
+        normal_radius: float | None = 0.15,
+        normal_reach: float | None = 0.6,
+        covariances: bool = True,
+    ) -> None:
+        small_gicp = _small_gicp()
+        points = np.asarray(points, dtype=np.float64)
+        self.size = len(points)
+        # One thread: small_gicp's threaded voxel grid does not merge voxels across its chunks.
+        self.sg = small_gicp.voxelgrid_sampling(points, voxel, num_threads=1) if len(points) else None
+        self.points = np.asarray(self.sg.points())[:, :3].copy() if self.sg is not None else np.zeros((0, 3))
+        self.normals = np.zeros_like(self.points)
+        self.pose: np.ndarray | None = None
+        if len(self.points) < 5 or (normal_radius is None and not covariances):
+            return
+        threads = _point_threads()
+        tree = small_gicp.KdTree(self.sg, num_threads=threads)
+        if covariances:
+            small_gicp.estimate_covariances(self.sg, tree, num_neighbors=neighbours, num_threads=threads)
+        if normal_radius is not None:
+            idx, sq = tree.batch_knn_search(self.points, _NORMAL_NEIGHBOURS, num_threads=threads)
+            reach = max(normal_radius, normal_reach or normal_radius)
+            normals = _plane_normals(
+                self.points,
+                np.asarray(idx).astype(np.int64),
+                np.asarray(sq),
+                normal_radius**2,
+                reach**2,
+                _MIN_NORMAL_NEIGHBOURS,
+            )
+            towards = (np.zeros(3) if origin is None else np.asarray(origin, dtype=float)) - self.points
+            self.normals = np.where((np.einsum("ij,ij->i", normals, towards) < 0)[:, None], -normals, normals)
+
+    def world(self) -> tuple[np.ndarray, np.ndarray]:
+        """(points, normals), (n, 3) float each, placed with :attr:`pose` (identity when None)."""
+        if self.pose is None:
+            return self.points, self.normals
+        R, t = self.pose[:3, :3], self.pose[:3, 3]
+        return self.points @ R.T + t, self.normals @ R.T
+
+
 class AccumulatedCloud:
     """S(t): the registered scans of the storey and of each room.
 
@@ -119,17 +223,19 @@ class AccumulatedCloud:
     voxel_size : float
         Voxel size of the working copies in metres.
     normal_radius : float
-        Neighbourhood radius for the normals of the working copies.
+        Neighbourhood radius for the normals, metres (:class:`_ScanCopy`).
     normals : bool
-        Estimate normals (ICP's target needs them); without, adding a scan costs about a third.
+        Estimate normals (ICP's target needs them).
     rooms : bool
         Keep a working copy per room as well as the storey's.
     normal_reach : float or None
         Points with fewer than six neighbours within ``normal_radius`` (far returns) take their
-        normal from within this radius instead of open3d's default (0, 0, 1); merged voxels get
-        unit normals, and voxels whose scans' normals disagree (mean length below 0.5: a corner,
-        both faces of a thin board) are left out of the working copy. None: neither (the working
-        copy before issue 14, whose merged normals were averages, not unit vectors).
+        normal from within this radius instead. None: ``normal_radius`` for all.
+
+    The working copies are world-anchored voxel means (:class:`~nbs_env.mapping.cloud.VoxelMeans`)
+    of every scan's downsampled copy: adding a scan touches only its own voxels, not the storey's.
+    A voxel's normal is the mean of its points' normals made unit length; voxels whose normals
+    disagree (mean length below 0.5: a corner, both faces of a thin board) are left out.
 
     Besides the working copies of every scan, the cloud keeps ICP's target: the working copy of the
     scans whose registration was accepted. A scan whose ICP was refused lies in S(t) at its odometry
@@ -140,7 +246,7 @@ class AccumulatedCloud:
 
     def __init__(
         self,
-        voxel_size: float = 0.05,
+        voxel_size: float = 0.1,
         normal_radius: float = 0.15,
         *,
         normals: bool = True,
@@ -156,12 +262,17 @@ class AccumulatedCloud:
         self._rooms_of_scans: list[int] = []
         self._origins: list[np.ndarray] = []
         self._registered: list[bool] = []
-        self._storey = None
-        self._target = None
-        self._room_copies: dict[int, object] = {}
+        self._storey: VoxelMeans | None = None
+        self._target: VoxelMeans | None = None
+        self._room_copies: dict[int, VoxelMeans] = {}
         self._pending: list[int] = []
+        self._views: dict = {}
         # The verdict of the last ``register`` on this cloud, for the scan added next.
         self._verdict: bool | None = None
+        # The downsampled copy of the scan the last ``register`` aligned (sensor frame), and the
+        # scans' copies waiting to be merged: each scan is downsampled, and its normals estimated, once.
+        self._prepared: _ScanCopy | None = None
+        self._copies: dict[int, _ScanCopy] = {}
 
     def __len__(self) -> int:
         return len(self._full)
@@ -176,7 +287,14 @@ class AccumulatedCloud:
         """Per scan, whether it is in ICP's target (its registration was accepted)."""
         return list(self._registered)
 
-    def add(self, points_world: np.ndarray, origin: np.ndarray, room: int = 0, registered: bool | None = None) -> None:
+    def add(
+        self,
+        points_world: np.ndarray,
+        origin: np.ndarray,
+        room: int = 0,
+        registered: bool | None = None,
+        pose: np.ndarray | None = None,
+    ) -> None:
         """Add a registered scan.
 
         Parameters
@@ -191,6 +309,12 @@ class AccumulatedCloud:
             Whether the pose came from an accepted registration (only such scans become ICP's
             target). Default: the verdict of the last :func:`register` into this cloud, or True
             when there was none since the last ``add`` (a scan placed without ICP).
+        pose : (4, 4) float, optional
+            The pose that placed the scan (its position is ``origin``). Given, the working copy is
+            the downsampled copy the last :func:`register` into this cloud made of the same scan,
+            placed with it, instead of a new downsampling of ``points_world``: the scan is then
+            downsampled, and its normals estimated, once. The registration's voxels must be the
+            cloud's.
         """
         points_world = np.asarray(points_world, dtype=np.float64)
         if points_world.ndim != 2 or points_world.shape[1] != 3 or not np.all(np.isfinite(points_world)):
@@ -198,6 +322,16 @@ class AccumulatedCloud:
         if registered is None:
             registered = True if self._verdict is None else self._verdict
         self._verdict = None
+        prepared, self._prepared = self._prepared, None
+        if pose is not None and prepared is not None:
+            pose = check_pose(pose, "pose")
+            if prepared.size != len(points_world):
+                raise ValueError(
+                    f"the last registered scan had {prepared.size} points and this one {len(points_world)}: "
+                    "pose= adds only the scan register() aligned"
+                )
+            prepared.pose = pose
+            self._copies[len(self._full)] = prepared
         self._full.append(points_world)
         self._rooms_of_scans.append(int(room))
         self._origins.append(np.asarray(origin, dtype=float))
@@ -206,33 +340,62 @@ class AccumulatedCloud:
         self._pending.append(len(self._full) - 1)
 
     def _update(self) -> None:
+        if not self._pending:
+            return
         for k in self._pending:
-            points, origin, room = self._full[k], self._origins[k], self._rooms_of_scans[k]
-            new = _downsample_with_normals(
-                points, origin, self.voxel_size, self.normal_radius if self.normals else None, self.normal_reach
-            )
-            if len(new.points) == 0:
+            copy = self._copies.pop(k, None)
+            if copy is None:
+                copy = self._scan_copy(self._full[k], self._origins[k], covariances=False)
+            points, normals = copy.world()
+            if not len(points):
                 continue
-            shared = self._target is self._storey
-            self._storey = self._merge(self._storey, new)
-            if self._registered[k]:
-                self._target = self._storey if shared else self._merge(self._target, new)
+            normals = normals if self.normals else None
+            if self._storey is None:
+                self._storey = self._target = VoxelMeans(self.voxel_size, self.normals)
+            if not self._registered[k] and self._target is self._storey:
+                # The first refused scan: from here on the target holds the registered scans only.
+                self._target = self._storey.copy()
+            self._storey.add(points, normals)
+            if self._registered[k] and self._target is not self._storey:
+                self._target.add(points, normals)
             if self.rooms:
-                self._room_copies[room] = self._merge(self._room_copies.get(room), new)
+                room = self._rooms_of_scans[k]
+                self._room_copies.setdefault(room, VoxelMeans(self.voxel_size, self.normals)).add(points, normals)
         self._pending = []
+        self._views = {}
 
-    def _merge(self, old, new):
-        if old is None:
-            return new
-        merged = (old + new).voxel_down_sample(self.voxel_size)
-        if self.normal_reach is None or not merged.has_normals():
-            return merged
-        # voxel_down_sample averages the normals of a voxel without normalising them.
-        normals = np.asarray(merged.normals)
-        length = np.linalg.norm(normals, axis=1)
-        merged.normals = open3d().utility.Vector3dVector(normals / np.maximum(length, 1e-12)[:, None])
+    def _scan_copy(self, points: np.ndarray, origin=None, neighbours: int = 20, covariances: bool = True) -> _ScanCopy:
+        """A scan's downsampled copy with this cloud's normals (and GICP's covariances)."""
+        radius = self.normal_radius if self.normals else None
+        return _ScanCopy(points, self.voxel_size, neighbours, origin, radius, self.normal_reach, covariances)
+
+    def _copy(self, key) -> VoxelMeans | None:
+        """The storey's copy (``None``), a room's (its index) or the target's (``"target"``), updated."""
+        self._update()
+        return self._target if key == "target" else self._storey if key is None else self._room_copies.get(key)
+
+    def _arrays(self, copy: VoxelMeans | None, subset: np.ndarray | None = None):
+        """(points, unit normals or None) of a working copy (of its voxels ``subset``), voxels with
+        disagreeing normals left out."""
+        if copy is None:
+            return np.zeros((0, 3)), (np.zeros((0, 3)) if self.normals else None)
+        points = copy.points if subset is None else copy.points[subset]
+        if not copy.has_normals:
+            return points, None
+        sums, counts = copy.normal_sums, copy.counts
+        if subset is not None:
+            sums, counts = sums[subset], counts[subset]
+        mean = sums / counts[:, None]
+        length = np.sqrt(np.einsum("ij,ij->i", mean, mean))
         keep = length >= 0.5
-        return merged if keep.all() else merged.select_by_index(np.flatnonzero(keep).tolist())
+        return points[keep], mean[keep] / length[keep, None]
+
+    def _view(self, key):
+        """The arrays of the storey's copy (``None``), a room's (its index) or the target's (``"target"``)."""
+        copy = self._copy(key)
+        if key not in self._views:
+            self._views[key] = self._arrays(copy)
+        return self._views[key]
 
     # ------------------------------------------------------------------ views
     def storey_points(self) -> np.ndarray:
@@ -246,19 +409,26 @@ class AccumulatedCloud:
 
     def working_points(self, room: int | None = None) -> np.ndarray:
         """(n, 3) float: the downsampled working copy of the storey, or of one room."""
-        self._update()
-        pc = self._storey if room is None else self._room_copies.get(room)
-        return np.zeros((0, 3)) if pc is None else np.asarray(pc.points)
+        return self._view(room)[0]
+
+    def working_normals(self, room: int | None = None) -> np.ndarray | None:
+        """(n, 3) float unit normals of :meth:`working_points` (None without normals)."""
+        return self._view(room)[1]
 
     def working_cloud(self, room: int | None = None):
         """The downsampled working copy (an open3d PointCloud with normals), or None when empty."""
-        self._update()
-        return self._storey if room is None else self._room_copies.get(room)
+        points, normals = self._view(room)
+        return _cloud(points, normals) if len(points) else None
+
+    def target_arrays(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """ICP's target, the working copy of the scans whose registration was accepted: (points,
+        unit normals or None), (n, 3) float each."""
+        return self._view("target")
 
     def target_cloud(self):
-        """ICP's target: the working copy of the scans whose registration was accepted, or None."""
-        self._update()
-        return self._target
+        """ICP's target as an open3d PointCloud with normals, or None when empty."""
+        points, normals = self.target_arrays()
+        return _cloud(points, normals) if len(points) else None
 
 
 @dataclass(frozen=True)
@@ -319,11 +489,11 @@ def _select_target(cloud: AccumulatedCloud, centre: np.ndarray, cfg: Registratio
     """The part of S(t) a scan from ``centre`` can overlap: ICP's target (the accepted scans, or
     every scan when ``cfg.exclude_rejected`` is off) within ``target_radius`` and, given the scan's
     ``extent`` ((2, 3) world box at the prior), within ``crop_margin`` of it; surfaces facing the
-    scanner. None when S(t) is empty."""
-    o3d = open3d()
-    target = cloud.target_cloud() if cfg.exclude_rejected else cloud.working_cloud()
-    if target is None or len(target.points) == 0:
+    scanner. (points, normals or None), or None when S(t) is empty."""
+    copy = cloud._copy("target" if cfg.exclude_rejected else None)
+    if copy is None or len(copy) == 0:
         return None
+    points = copy.points
     # Only the part of S(t) the scan can overlap; a storey-wide target slows every ICP step.
     lo, hi = centre - cfg.target_radius, centre + cfg.target_radius
     if extent is not None and cfg.crop_margin is not None:
@@ -331,15 +501,15 @@ def _select_target(cloud: AccumulatedCloud, centre: np.ndarray, cfg: Registratio
         # the end walls that fix its axis (a fixed 30 m box cut them off in the middle of a 70 m
         # corridor, and the pose drifted along it by 25 cm).
         lo, hi = np.maximum(lo, extent[0] - cfg.crop_margin), np.minimum(hi, extent[1] + cfg.crop_margin)
-    target = target.crop(o3d.geometry.AxisAlignedBoundingBox(lo, hi))
+    inside = np.flatnonzero(np.all((points >= lo) & (points <= hi), axis=1))
+    points, normals = cloud._arrays(copy, inside)
+    if normals is None:
+        return points, None
     # Only surfaces that face the scanner can be in its scan. Without this, the far face of a wall
     # (scanned from the next room, 10-25 cm behind) offers ICP a parallel twin to lock onto:
     # measured on five_rooms, accepted poses 15 cm off, one wall thickness.
-    if target.has_normals() and len(target.points):
-        pts, nrm = np.asarray(target.points), np.asarray(target.normals)
-        facing = np.einsum("ij,ij->i", nrm, centre - pts) > 0
-        target = target.select_by_index(np.flatnonzero(facing).tolist())
-    return target
+    facing = np.einsum("ij,ij->i", normals, centre - points) > 0
+    return points[facing], normals[facing]
 
 
 #: Histogram of wall-normal headings: bins per degree, and the smoothing (σ in bins).
@@ -360,23 +530,20 @@ def _heading_histogram(normals: np.ndarray) -> np.ndarray:
     return h / norm if norm > 0 else h
 
 
-def _heading_offset(points_sensor: np.ndarray, initial: np.ndarray, target_normals, limit_deg: float, voxel: float):
+def _heading_offset(normals: np.ndarray, initial: np.ndarray, target_normals, limit_deg: float):
     """The heading error of ``initial`` (radians, to add to its yaw) by matching the histogram of the
     scan's wall-normal headings against S(t)'s, within ±``limit_deg`` (below 45°, so that the 90°
-    aliases of a rectangular building stay out); None without walls to match.
+    aliases of a rectangular building stay out); None without walls to match. ``normals``: (n, 3)
+    the normals of the scan's working copy, sensor frame.
 
     Independent of the translation, so it holds where ICP's coarsest stage cannot: after a long
     leg down a corridor the odometry's heading can be more than 10° off (a 30 m corridor, 15 m
     from the first scan, 14° and 0.68 m off: GICP from the prior stops in a wrong pose, from the
     histogram's heading it finds the true one within 1 cm; tests/test_registration.py).
     """
-    o3d = open3d()
-    coarse = _cloud(points_sensor).voxel_down_sample(2 * voxel)
-    if len(coarse.points) < 10 or len(target_normals) == 0:
+    if len(normals) < 10 or len(target_normals) == 0:
         return None
-    with _open3d_threads(_point_threads()):
-        coarse.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=6 * voxel, max_nn=30))
-    hs = _heading_histogram(np.asarray(coarse.normals) @ initial[:3, :3].T)
+    hs = _heading_histogram(np.asarray(normals) @ initial[:3, :3].T)
     ht = _heading_histogram(np.asarray(target_normals))
     if not hs.any() or not ht.any():
         return None
@@ -580,13 +747,10 @@ class _Target:
     own normals; ``"open3d"``: open3d on the working copy.
     """
 
-    def __init__(self, target, cfg: RegistrationConfig, need_planes: bool) -> None:
-        self.cloud = target
-        self.points = np.asarray(target.points)
+    def __init__(self, points: np.ndarray, normals: np.ndarray | None, cfg: RegistrationConfig, need_planes: bool):
+        self.points = points
         self.method = cfg.method
-        normals = np.asarray(target.normals) if target.has_normals() else np.zeros_like(self.points)
-        length = np.linalg.norm(normals, axis=1, keepdims=True)
-        self.normals = normals / np.maximum(length, 1e-12)
+        self.normals = np.zeros_like(points) if normals is None else normals
         if cfg.method != "open3d":
             small_gicp = _small_gicp()
             self.sg = small_gicp.PointCloud(self.points)
@@ -594,6 +758,7 @@ class _Target:
             estimate = small_gicp.estimate_covariances if cfg.method == "gicp" else small_gicp.estimate_normals
             estimate(self.sg, self.tree, num_neighbors=cfg.neighbours, num_threads=_point_threads())
         else:
+            self.cloud = _cloud(points, normals)
             self._kd = None
             if need_planes:
                 from scipy.spatial import cKDTree
@@ -629,10 +794,16 @@ def _small_gicp():
 def _register(points_sensor, initial, cloud, cfg: RegistrationConfig, travelled: float, t0: float):
     initial = check_pose(initial, "initial pose")
     centre = initial[:3, 3]
-    source = _cloud(points_sensor).voxel_down_sample(cfg.voxel_size)
+    if cloud.voxel_size == cfg.voxel_size:
+        # The scan's working copy is the same downsampling (AccumulatedCloud.add with pose=).
+        copy = cloud._scan_copy(points_sensor, neighbours=cfg.neighbours)
+        cloud._prepared = copy
+    else:
+        copy = _ScanCopy(points_sensor, cfg.voxel_size, cfg.neighbours)
+        cloud._prepared = None
     extent = None
-    if len(source.points):
-        world = np.asarray(source.points) @ initial[:3, :3].T + centre
+    if len(copy.points):
+        world = copy.points @ initial[:3, :3].T + centre
         extent = np.stack([world.min(axis=0), world.max(axis=0)])
     selected = _select_target(cloud, centre, cfg, extent)
     if selected is None:
@@ -642,21 +813,26 @@ def _register(points_sensor, initial, cloud, cfg: RegistrationConfig, travelled:
         seconds = time.perf_counter() - t0
         return RegistrationResult(initial, initial, 0.0, float("inf"), False, reason, 0.0, 0.0, seconds)
 
-    if len(source.points) < cfg.min_points:
-        return refuse(f"the scan has {len(source.points)} points after downsampling, fewer than {cfg.min_points}")
-    if len(selected.points) < cfg.min_points:
-        return refuse(f"S(t) has {len(selected.points)} points facing the scanner, fewer than {cfg.min_points}")
+    if len(copy.points) < cfg.min_points:
+        return refuse(f"the scan has {len(copy.points)} points after downsampling, fewer than {cfg.min_points}")
+    if len(selected[0]) < cfg.min_points:
+        return refuse(f"S(t) has {len(selected[0])} points facing the scanner, fewer than {cfg.min_points}")
     gate_m = max(cfg.max_correction_m, cfg.correction_per_metre_m * travelled)
     gate_deg = max(cfg.max_correction_deg, cfg.correction_per_metre_deg * travelled)
     # Parallel reductions in open3d's ICP differ in the last bits from run to run, and ICP can
     # amplify that into a different local minimum; one thread makes a seed give the same poses
     # (small_gicp runs on one thread too).
     with _open3d_threads(1 if cfg.deterministic else None):
-        target = _Target(selected, cfg, cfg.min_agreement is not None or cfg.min_constraint > 0)
-        src = _Source(source, cfg, np.asarray(points_sensor, dtype=float))
+        target = _Target(*selected, cfg, cfg.min_agreement is not None or cfg.min_constraint > 0)
+        src = _Source(copy.points, cfg, np.asarray(points_sensor, dtype=float), copy.sg)
+        if cfg.stage_voxels is not None and cfg.method != "open3d":
+            # The coarse stages only need to bring the pose within the next stage's reach, and
+            # their time grows with the scan's points: they align coarser copies of it.
+            copies = {v: src if v == cfg.voxel_size else _Source.coarser(copy.points, v, cfg) for v in cfg.stage_voxels}
+            src.stages = [copies[v] for v in cfg.stage_voxels]
         best = _attempt(src, target, initial, initial, cfg, gate_m, gate_deg)
         if cfg.heading_check_deg > 0:
-            offset = _heading_offset(points_sensor, initial, target.normals, gate_deg, cfg.voxel_size)
+            offset = _heading_offset(copy.normals, initial, target.normals, gate_deg)
             turned = yaw_of(best.pose_icp) - yaw_of(initial)
             gap = (offset - turned + np.pi) % (2 * np.pi) - np.pi if offset is not None else 0.0
             if offset is not None and abs(gap) > np.radians(cfg.heading_check_deg):
@@ -747,21 +923,30 @@ class _RangeImage:
 
 
 class _Source:
-    """The downsampled scan, small_gicp's copy of it (with covariances for ``method="gicp"``) and
-    the raw scan's range image for the see-through gate."""
+    """The downsampled scan (sensor frame), small_gicp's copy of it (with covariances for
+    ``method="gicp"``), the raw scan's range image for the see-through gate, and the coarser
+    copies the coarse stages align (``stages``, None: this one for every stage)."""
 
-    def __init__(self, source, cfg: RegistrationConfig, raw: np.ndarray | None = None) -> None:
-        self.cloud = source
-        self.points = np.asarray(source.points)
+    def __init__(self, points: np.ndarray, cfg: RegistrationConfig, raw: np.ndarray | None = None, sg=None) -> None:
+        self.points = points
+        self.stages: list[_Source] | None = None
         self.image = None if raw is None or cfg.max_see_through is None else _RangeImage(raw)
-        if cfg.method != "open3d":
-            small_gicp = _small_gicp()
-            self.sg = small_gicp.PointCloud(self.points)
+        if cfg.method == "open3d":
+            self.cloud = _cloud(points)
+            return
+        small_gicp = _small_gicp()
+        if sg is None:
+            sg = small_gicp.PointCloud(points)
             if cfg.method == "gicp":  # plane-to-plane needs the scan's covariances; point-to-plane does not
-                tree = small_gicp.KdTree(self.sg, num_threads=_point_threads())
-                small_gicp.estimate_covariances(
-                    self.sg, tree, num_neighbors=cfg.neighbours, num_threads=_point_threads()
-                )
+                tree = small_gicp.KdTree(sg, num_threads=_point_threads())
+                small_gicp.estimate_covariances(sg, tree, num_neighbors=cfg.neighbours, num_threads=_point_threads())
+        self.sg = sg
+
+    @classmethod
+    def coarser(cls, points: np.ndarray, voxel: float, cfg: RegistrationConfig) -> _Source:
+        """A coarser copy of ``points`` (voxel means of edge ``voxel``), for a coarse stage."""
+        sg = _small_gicp().voxelgrid_sampling(points, voxel, num_threads=1)
+        return cls(np.asarray(sg.points())[:, :3].copy(), cfg)
 
 
 @dataclass(frozen=True)
@@ -784,27 +969,24 @@ class _Attempt:
         return not self.reason
 
 
-#: small_gicp's convergence: the update's rotation (radians) and translation (metres) below this.
-_GICP_EPSILON = 1e-5
-
-
 def _align(src: _Source, target: _Target, start: np.ndarray, cfg: RegistrationConfig):
     """Coarse-to-fine ICP from ``start``: (pose, fitness, inlier RMSE, finest-stage pairs or None)."""
     pose = start.copy()
     if cfg.method != "open3d":
         small_gicp = _small_gicp()
-        for distance in cfg.max_correspondence:
+        stages = src.stages or [src] * len(cfg.max_correspondence)
+        for distance, stage in zip(cfg.max_correspondence, stages, strict=True):
             result = small_gicp.align(
                 target.sg,
-                src.sg,
+                stage.sg,
                 target.tree,
                 init_T_target_source=pose,
                 registration_type="GICP" if cfg.method == "gicp" else "PLANE_ICP",
                 max_correspondence_distance=distance,
                 num_threads=1,
                 max_iterations=cfg.max_iterations,
-                rotation_epsilon=_GICP_EPSILON,
-                translation_epsilon=_GICP_EPSILON,
+                rotation_epsilon=cfg.convergence,
+                translation_epsilon=cfg.convergence,
             )
             pose = np.asarray(result.T_target_source).copy()
         return pose, None, None, None
