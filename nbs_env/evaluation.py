@@ -109,6 +109,7 @@ import shapely
 from scipy.spatial import cKDTree
 from shapely.geometry import Point, Polygon
 
+from nbs_env import threads
 from nbs_env.config import Config, _finite, _require
 from scenes import Scene, SurfaceClass
 from scenes.interior import interior_samples
@@ -200,7 +201,22 @@ class _SampleColumns:
         """(samples within ``radius`` of a point, each point's nearest sample (the sample count
         where none is within reach), its distance (inf where none))."""
         points = np.ascontiguousarray(points, dtype=float).reshape(-1, 3)
-        return _sense(points, self.samples, self.order, self.starts, self.lo, self.cell, self.shape, self.radius)
+
+        def rows(part: slice):
+            some = np.ascontiguousarray(points[part])
+            return _sense(some, self.samples, self.order, self.starts, self.lo, self.cell, self.shape, self.radius)
+
+        # Each point reads the samples of up to four columns within its reach: tens of steps.
+        parts = threads.split(rows, len(points), cost=30 * len(points))
+        if len(parts) == 1:
+            return parts[0]
+        near = np.logical_or.reduce([p[0] for p in parts])
+        nearest = np.empty(len(points), dtype=np.int64)
+        distance = np.empty(len(points))
+        for k, (_, which, dist) in enumerate(parts):
+            nearest[k :: len(parts)] = which
+            distance[k :: len(parts)] = dist
+        return near, nearest, distance
 
 
 @dataclass(frozen=True)

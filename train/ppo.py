@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from dataclasses import dataclass, replace
@@ -21,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nbs_env import threads
 from nbs_env.config import Config, _finite, _integer, _require
 from nbs_env.errors import ConfigError
 from policies.learned import NetworkConfig, build_network, save_checkpoint
@@ -222,7 +224,18 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
     out.mkdir(parents=True, exist_ok=True)
     factory = _env_factory(config.rooms, config.max_episode_steps, config.metre_cost)
     workers = [factory] * config.envs
-    venv = SubprocVecEnv(workers, start_method="spawn") if config.envs > 1 else DummyVecEnv(workers)
+    if config.envs > 1:
+        # Each worker's kernels share the cores with the others' (nbs_env.threads): a worker gets
+        # its share, unless NBS_THREADS says otherwise. The workers read it when they start.
+        previous = os.environ.get("NBS_THREADS")
+        os.environ.setdefault("NBS_THREADS", str(max(1, threads.cores() // config.envs)))
+        try:
+            venv = SubprocVecEnv(workers, start_method="spawn")
+        finally:
+            if previous is None:
+                del os.environ["NBS_THREADS"]
+    else:
+        venv = DummyVecEnv(workers)
     venv.seed(config.seed)
     network = NetworkConfig()
     device = "cuda" if torch.cuda.is_available() else "cpu"

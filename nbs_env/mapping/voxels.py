@@ -31,6 +31,7 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
+from nbs_env import threads
 from nbs_env.config import ScannerConfig
 from nbs_env.labels import LABEL_COLOURS, VoxelLabel
 from nbs_env.perception.faces import WallFace
@@ -475,13 +476,22 @@ class VoxelGrid:
         # and only those nearer than the farthest return less their half diagonal (a centimetre
         # to spare for the rounding of the range): the others are skipped before the angles.
         near2 = np.float32((reach - s * np.sqrt(3) / 2 + 0.01) ** 2)
-        flat, frame, horizontal, r = _carve_candidates(block, *axes, T[:3, :3].astype(np.float32), near2)
+        R = T[:3, :3].astype(np.float32)
+        plane = block.shape[1] * block.shape[2]
+
+        def candidates(slab: slice):
+            # A slab of the box along x: its candidates, in the whole box's flat indices.
+            flat, frame, horizontal, r = _carve_candidates(block[slab], axes[0][slab], axes[1], axes[2], R, near2)
+            # numpy's arctan2 between the two kernels: vectorised (SIMD where the CPU has it), many
+            # times faster than the C library's atan2f the kernels would call.
+            elevation = np.arctan2(frame[:, 2], horizontal)
+            azimuth = np.arctan2(frame[:, 1], frame[:, 0])
+            return flat + slab.start * plane, r, elevation, azimuth
+
+        slabs = threads.split(candidates, block.shape[0], cost=block.size, interleave=False)
+        flat, r, elevation, azimuth = (np.concatenate([part[a] for part in slabs]) for a in range(4))
         if not len(flat):
             return 0
-        # numpy's arctan2 between the two kernels: vectorised (SIMD where the CPU has it), many
-        # times faster than the C library's atan2f the kernels would call.
-        elevation = np.arctan2(frame[:, 2], horizontal)
-        azimuth = np.arctan2(frame[:, 1], frame[:, 0])
         # Each voxel reads the depth image pooled over the smallest window covering its angular
         # footprint (which shrinks with range); the sizes between the nearest and the farthest
         # candidate's are pooled.
@@ -500,12 +510,8 @@ class VoxelGrid:
             at += pooled.size
         if not images:
             return 0
-        return _carve_read(
-            block,
-            flat,
-            r,
-            elevation,
-            azimuth,
+        images = np.concatenate(images)
+        field = (
             half_diagonal,
             step,
             np.float32(np.radians(config.elevation_min)),
@@ -513,12 +519,14 @@ class VoxelGrid:
             config.n_rows,
             config.n_cols,
             np.float32(2 * np.pi / config.n_cols),
-            edges,
-            np.concatenate(images),
-            offsets,
-            widths,
-            factors,
         )
+
+        def read(part: slice) -> int:
+            # Each candidate writes its own voxel: the chunks never touch the same one.
+            angles = elevation[part], azimuth[part]
+            return _carve_read(block, flat[part], r[part], *angles, *field, edges, images, offsets, widths, factors)
+
+        return int(sum(threads.split(read, len(flat), cost=10 * len(flat), interleave=False)))
 
     def _trace_low(self, points: np.ndarray, centre: np.ndarray, floor_z: float) -> None:
         """Mark in :attr:`crossed` the voxels that the rays to ``points`` cross below

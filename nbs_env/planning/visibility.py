@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from nbs_env import threads
 from nbs_env.config import Config, ScannerConfig, _finite_fields, _integer, _require
 from nbs_env.labels import VoxelLabel, is_occupied
 
@@ -257,13 +258,9 @@ class VisibilityModel:
 
     def _seen(self, sensors: np.ndarray, targets: np.ndarray, scanner: ScannerConfig) -> np.ndarray:
         """(c, n) bool: which of the (n, 3) targets each of the (c, 3) sensors sees."""
-        return _lines_of_sight(
-            self.blocking,
-            self.coarse,
-            self.origin,
-            self.voxel_size,
-            np.ascontiguousarray(sensors, dtype=float).reshape(-1, 3),
-            np.ascontiguousarray(targets, dtype=float).reshape(-1, 3),
+        sensors = np.ascontiguousarray(sensors, dtype=float).reshape(-1, 3)
+        targets = np.ascontiguousarray(targets, dtype=float).reshape(-1, 3)
+        limits = (
             float(scanner.min_range),
             float(scanner.max_range),
             float(np.sin(np.radians(scanner.elevation_min))),
@@ -271,6 +268,19 @@ class VisibilityModel:
             float(self.config.tolerance_voxels * self.voxel_size),
             COARSE,
         )
+
+        def rows(part: slice) -> np.ndarray:
+            some = np.ascontiguousarray(sensors[part])
+            return _lines_of_sight(self.blocking, self.coarse, self.origin, self.voxel_size, some, targets, *limits)
+
+        # A line of sight costs about as many steps as voxels it crosses: tens per sensor-target pair.
+        parts = threads.split(rows, len(sensors), cost=20 * len(sensors) * len(targets))
+        if len(parts) == 1:
+            return parts[0]
+        out = np.empty((len(sensors), len(targets)), dtype=np.bool_)
+        for k, part in enumerate(parts):
+            out[k :: len(parts)] = part
+        return out
 
     def visible(self, sensor: np.ndarray, scanner: ScannerConfig) -> np.ndarray:
         """(n,) bool: which OCCLUDED_STRUCTURE voxels (:attr:`targets`) a scanner at ``sensor`` (3,)

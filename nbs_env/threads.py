@@ -1,0 +1,56 @@
+"""The process's cores for compiled kernels: their work split over Python threads.
+
+The kernels are compiled with ``nogil=True``, so threads run their chunks side by side. Each chunk
+is computed exactly as in the whole (rows of sensors, points), so the split changes the time and
+nothing else. The number of threads is the cores the process may use (its CPU affinity), or
+``NBS_THREADS`` when set: a training run with one env per core sets it to 1.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+__all__ = ["cores", "split"]
+
+_POOL: ThreadPoolExecutor | None = None
+_POOL_SIZE = 0
+
+
+def cores() -> int:
+    """Threads for the kernels: ``NBS_THREADS`` when set, else the cores the process may use."""
+    value = os.environ.get("NBS_THREADS")
+    if value:
+        try:
+            return max(1, int(value))
+        except ValueError:
+            raise ValueError(f"NBS_THREADS must be a whole number of threads, got {value!r}") from None
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def split(
+    work: Callable[[slice], Any], rows: int, cost: int, least: int = 100_000, interleave: bool = True
+) -> Sequence[Any]:
+    """``work(slice)`` for ``n`` slices of ``rows`` rows, run on ``n`` threads.
+
+    ``n`` is :func:`cores`, fewer when ``cost`` (the work's size in the kernel's inner steps) is
+    below ``least`` a thread: below that, starting threads costs more than it saves. The slices are
+    interleaved (``k::n``), so that rows whose cost grows along the array (far sensors, a room's
+    end) share out evenly, or with ``interleave=False`` contiguous runs (views without copies).
+    Returns the results in the order of the slices.
+    """
+    n = min(cores(), rows, max(1, cost // max(least, 1)))
+    if n <= 1:
+        return [work(slice(0, rows, 1))]
+    if not interleave:
+        bounds = [rows * k // n for k in range(n + 1)]
+        parts = [slice(bounds[k], bounds[k + 1], 1) for k in range(n)]
+    global _POOL, _POOL_SIZE
+    if _POOL is None or n > _POOL_SIZE:
+        _POOL, _POOL_SIZE = ThreadPoolExecutor(max_workers=n, thread_name_prefix="nbs-kernel"), n
+    return list(_POOL.map(work, parts if not interleave else [slice(k, None, n) for k in range(n)]))

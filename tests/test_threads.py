@@ -1,0 +1,75 @@
+"""Compiled kernels split over threads give what the whole gives, bit for bit."""
+
+import numpy as np
+import pytest
+
+from nbs_env import threads
+from nbs_env.config import ScannerConfig
+from nbs_env.labels import VoxelLabel
+from nbs_env.planning.visibility import VisibilityModel
+
+
+def test_split_covers_every_row_once_and_keeps_the_order(monkeypatch):
+    monkeypatch.setenv("NBS_THREADS", "3")
+    parts = threads.split(lambda s: np.arange(10)[s], 10, cost=10**9)
+    assert [list(p) for p in parts] == [[0, 3, 6, 9], [1, 4, 7], [2, 5, 8]]
+    assert len(threads.split(lambda s: s, 10, cost=10)) == 1  # too little work for threads
+    monkeypatch.setenv("NBS_THREADS", "two")
+    with pytest.raises(ValueError, match="NBS_THREADS"):
+        threads.cores()
+
+
+@pytest.mark.parametrize("n", ["1", "2", "3"])
+def test_lines_of_sight_on_threads_are_the_single_thread_ones(monkeypatch, n):
+    rng = np.random.default_rng(7)
+    labels = np.full((40, 30, 12), VoxelLabel.EMPTY, dtype=np.uint8)
+    labels[rng.random(labels.shape) < 0.04] = VoxelLabel.CLUTTER
+    labels[:, :, 0] = VoxelLabel.OCCLUDED_STRUCTURE
+    labels[0, :, :] = VoxelLabel.OCCLUDED_STRUCTURE
+    model = VisibilityModel(labels, np.zeros(3), 0.1)
+    sensors = np.column_stack([rng.uniform(0.5, 3.5, 37), rng.uniform(0.5, 2.5, 37), np.full(37, 0.6)])
+    scanner = ScannerConfig(min_range=0.3)
+    monkeypatch.setenv("NBS_THREADS", "1")
+    want = model._seen(sensors, model.targets, scanner)
+    monkeypatch.setenv("NBS_THREADS", n)
+    got = model._seen(sensors, model.targets, scanner)
+    assert want.any() and not want.all()
+    assert np.array_equal(got, want)
+
+
+def test_the_coverage_query_on_threads_is_the_single_thread_one(monkeypatch):
+    from nbs_env.evaluation import _SampleColumns
+
+    rng = np.random.default_rng(8)
+    samples = rng.uniform(0, 4, size=(5000, 3))
+    points = rng.uniform(-0.5, 4.5, size=(20000, 3))
+    columns = _SampleColumns(samples, 0.05)
+    monkeypatch.setenv("NBS_THREADS", "1")
+    want = columns.query(points)
+    monkeypatch.setenv("NBS_THREADS", "2")
+    got = columns.query(points)
+    assert want[0].any() and np.isfinite(want[2]).any()
+    for a, b in zip(got, want, strict=True):
+        assert np.array_equal(a, b)
+
+
+def test_carving_on_threads_gives_the_single_thread_labels(monkeypatch):
+    """A scan integrated with the carving split into slabs and chunks over threads labels every
+    voxel as on one thread."""
+    from nbs_env.mapping.voxels import VoxelGrid
+    from nbs_env.sensing.pose import pose_from_xyz_rpy
+    from nbs_env.sensing.scanner import Scanner
+    from scenes import load_scene
+
+    scene = load_scene("l_room")
+    config = ScannerConfig(angular_step=1.0)
+    pose = pose_from_xyz_rpy(3.0, 4.5, 1.5, 0.0, 0.0, 0.3)
+    scan = Scanner(scene, config).scan(pose, np.random.default_rng(0))
+    labels = {}
+    for n in ("1", "2", "3"):
+        monkeypatch.setenv("NBS_THREADS", n)
+        grid = VoxelGrid.covering(np.array([-0.5, -0.5, -0.2]), np.array([8.5, 10.5, 3.2]), 0.1)
+        grid.integrate(scan.to_world(pose), np.ones(len(scan), bool), pose, scan.depth_image(), config)
+        labels[n] = grid.labels.copy()
+    assert (labels["1"] == VoxelLabel.EMPTY).sum() > 1000
+    assert np.array_equal(labels["2"], labels["1"]) and np.array_equal(labels["3"], labels["1"])
