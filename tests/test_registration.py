@@ -372,3 +372,39 @@ def test_registration_config_checks_its_stages():
     with pytest.raises(ConfigError, match="convergence"):
         RegistrationConfig(convergence=0.0)
     RegistrationConfig(voxel_size=0.05, stage_voxels=None)
+
+
+def test_a_refused_icp_after_a_large_turn_is_tried_again_from_the_walls_heading(monkeypatch):
+    """When the walls' heading says the prior is off by more than the check and ICP, having turned
+    there, was refused, ICP runs again from the walls' heading; an accepted first attempt is kept
+    without a second (the rule that rescued a 22° turn on example_level1, which slid 3 m along a
+    corridor from the prior)."""
+    from nbs_env.sensing import registration as reg
+
+    scanner, rng, _, cloud = _l_room_first_scan(4)
+    t1 = pose_from_xyz_rpy(2.2, 5.3, 1.5, 0.0, 0.0, 0.2)
+    points = scanner.scan(t1, rng).points
+    prior = planar(2.25, 5.35, 0.2 + np.radians(12.0), 1.5)
+    starts = []
+    real = reg._attempt
+
+    def refuse_first(src, target, start, *args):
+        starts.append(start)
+        out = real(src, target, start, *args)
+        if len(starts) == 1:  # as if this attempt had slid off after turning
+            from dataclasses import replace
+
+            return replace(out, reason="refused for the test")
+        return out
+
+    monkeypatch.setattr(reg, "_attempt", refuse_first)
+    # 8 m driven: the gates allow a 16° correction.
+    result = register(points, prior, cloud, travelled=8.0)
+    assert len(starts) == 2 and result.accepted, result.reason
+    # The second start is the prior turned by the walls' heading: within a degree of the truth.
+    assert pose_error(starts[1], t1)[1] < 1.0 < pose_error(starts[0], t1)[1]
+    assert pose_error(result.pose, t1)[0] < 0.01
+    starts.clear()
+    monkeypatch.setattr(reg, "_attempt", lambda *a: (starts.append(a[2]), real(*a))[1])
+    cloud2 = _l_room_first_scan(4)[3]
+    assert register(points, prior, cloud2, travelled=8.0).accepted and len(starts) == 1

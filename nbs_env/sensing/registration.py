@@ -835,9 +835,13 @@ def _register(points_sensor, initial, cloud, cfg: RegistrationConfig, travelled:
             offset = _heading_offset(copy.normals, initial, target.normals, gate_deg)
             turned = yaw_of(best.pose_icp) - yaw_of(initial)
             gap = (offset - turned + np.pi) % (2 * np.pi) - np.pi if offset is not None else 0.0
-            if offset is not None and abs(gap) > np.radians(cfg.heading_check_deg):
+            check = np.radians(cfg.heading_check_deg)
+            if offset is not None and (abs(gap) > check or (not best.accepted and abs(offset) > check)):
                 # ICP's heading disagrees with the walls': ICP may have started too far off to
-                # turn there. Try again from the walls' heading and keep the better of the two.
+                # turn there. Or ICP was refused after the walls' turn: turning that far from the
+                # prior, its coarse matches can drag the position off (a 22° turn slid 3 m along a
+                # corridor of example_level1). Try again from the walls' heading and keep the
+                # better of the two.
                 other = _attempt(src, target, _turned(initial, offset), initial, cfg, gate_m, gate_deg)
                 if (other.accepted, other.agreeing) > (best.accepted, best.agreeing):
                     best = other
