@@ -99,6 +99,53 @@ def _counting_sort(keys: np.ndarray, count: int) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
+def _face_points(
+    points: np.ndarray,
+    order: np.ndarray,
+    keys: np.ndarray,
+    corner: np.ndarray,
+    shape: np.ndarray,
+    cell: float,
+    faces: np.ndarray,
+    ends: np.ndarray,
+    f: int,
+    margin: float,
+    found: np.ndarray,
+    frame: np.ndarray,
+) -> int:
+    """The points of face ``f``'s xy bounding box grown by ``margin``, read from the cells of a
+    :class:`PointIndex` (``order``, ``keys``, ``corner``, ``shape``, ``cell``): their indices into
+    ``found`` and their face-frame (u, w, v) into ``frame``, in the index's order. Returns how many.
+    ``faces`` (m, 7) are :meth:`WallFace.params`, ``ends`` (m, 4) the faces' xy bounding boxes
+    (lo x, lo y, hi x, hi y)."""
+    px, py, dx, dy, z0 = faces[f, 0], faces[f, 1], faces[f, 2], faces[f, 3], faces[f, 4]
+    lo_x, lo_y = ends[f, 0] - margin, ends[f, 1] - margin
+    hi_x, hi_y = ends[f, 2] + margin, ends[f, 3] + margin
+    c0x = max(np.int64(np.floor((lo_x - corner[0]) / cell)), 0)
+    c0y = max(np.int64(np.floor((lo_y - corner[1]) / cell)), 0)
+    c1x = min(np.int64(np.floor((hi_x - corner[0]) / cell)), shape[0] - 1)
+    c1y = min(np.int64(np.floor((hi_y - corner[1]) / cell)), shape[1] - 1)
+    count = 0
+    if c1x < c0x or c1y < c0y:
+        return 0
+    for cx in range(c0x, c1x + 1):
+        start = np.searchsorted(keys, cx * shape[1] + c0y)
+        stop = np.searchsorted(keys, cx * shape[1] + c1y, side="right")
+        for k in range(start, stop):
+            i = order[k]
+            x, y = points[i, 0], points[i, 1]
+            if not (x >= lo_x and x <= hi_x and y >= lo_y and y <= hi_y):
+                continue
+            rx, ry = x - px, y - py
+            found[count] = i
+            frame[count, 0] = rx * dx + ry * dy
+            frame[count, 1] = rx * -dy + ry * dx
+            frame[count, 2] = points[i, 2] - z0
+            count += 1
+    return count
+
+
+@numba.njit(cache=True, nogil=True)
 def _mark_near_faces(
     points: np.ndarray,
     order: np.ndarray,
@@ -119,45 +166,21 @@ def _mark_near_faces(
     ``-distance <= v <= height + distance``. ``faces`` (m, 7) are :meth:`WallFace.params`,
     ``ends`` (m, 4) the faces' xy bounding boxes (lo x, lo y, hi x, hi y).
     """
-    margin = 1.5 * distance
+    found = np.empty(len(points), dtype=np.int64)
+    frame = np.empty((len(points), 3))
     for f in range(len(faces)):
-        px, py, dx, dy, z0, length, height = (
-            faces[f, 0],
-            faces[f, 1],
-            faces[f, 2],
-            faces[f, 3],
-            faces[f, 4],
-            faces[f, 5],
-            faces[f, 6],
-        )
-        lo_x, lo_y = ends[f, 0] - margin, ends[f, 1] - margin
-        hi_x, hi_y = ends[f, 2] + margin, ends[f, 3] + margin
-        c0x = max(np.int64(np.floor((lo_x - corner[0]) / cell)), 0)
-        c0y = max(np.int64(np.floor((lo_y - corner[1]) / cell)), 0)
-        c1x = min(np.int64(np.floor((hi_x - corner[0]) / cell)), shape[0] - 1)
-        c1y = min(np.int64(np.floor((hi_y - corner[1]) / cell)), shape[1] - 1)
-        if c1x < c0x or c1y < c0y:
-            continue
-        for cx in range(c0x, c1x + 1):
-            start = np.searchsorted(keys, cx * shape[1] + c0y)
-            stop = np.searchsorted(keys, cx * shape[1] + c1y, side="right")
-            for k in range(start, stop):
-                i = order[k]
-                x, y = points[i, 0], points[i, 1]
-                if not (x >= lo_x and x <= hi_x and y >= lo_y and y <= hi_y):
-                    continue
-                rx, ry = x - px, y - py
-                u = rx * dx + ry * dy
-                w = rx * -dy + ry * dx
-                v = points[i, 2] - z0
-                if (
-                    abs(w) <= distance
-                    and u >= -distance
-                    and u <= length + distance
-                    and v >= -distance
-                    and v <= height + distance
-                ):
-                    out[i] = True
+        length, height = faces[f, 5], faces[f, 6]
+        n = _face_points(points, order, keys, corner, shape, cell, faces, ends, f, 1.5 * distance, found, frame)
+        for q in range(n):
+            u, w, v = frame[q, 0], frame[q, 1], frame[q, 2]
+            if (
+                abs(w) <= distance
+                and u >= -distance
+                and u <= length + distance
+                and v >= -distance
+                and v <= height + distance
+            ):
+                out[found[q]] = True
 
 
 @numba.njit(cache=True, nogil=True)
@@ -181,41 +204,18 @@ def _fill_face_images(
     a point of the face's bounding box grown by ``band`` (the cells of a :class:`PointIndex`) lies
     within ``band`` of the plane and on the face, ``0 <= u <= length``, ``0 <= v <= height``.
     ``faces`` (m, 7) are :meth:`WallFace.params`, ``ends`` (m, 4) the faces' xy bounding boxes."""
+    found = np.empty(len(points), dtype=np.int64)
+    frame = np.empty((len(points), 3))
     for f in range(len(faces)):
-        px, py, dx, dy, z0, length, height = (
-            faces[f, 0],
-            faces[f, 1],
-            faces[f, 2],
-            faces[f, 3],
-            faces[f, 4],
-            faces[f, 5],
-            faces[f, 6],
-        )
+        length, height = faces[f, 5], faces[f, 6]
         rows, cols = dims[f, 0], dims[f, 1]
-        lo_x, lo_y = ends[f, 0] - band, ends[f, 1] - band
-        hi_x, hi_y = ends[f, 2] + band, ends[f, 3] + band
-        c0x = max(np.int64(np.floor((lo_x - corner[0]) / cell)), 0)
-        c0y = max(np.int64(np.floor((lo_y - corner[1]) / cell)), 0)
-        c1x = min(np.int64(np.floor((hi_x - corner[0]) / cell)), shape[0] - 1)
-        c1y = min(np.int64(np.floor((hi_y - corner[1]) / cell)), shape[1] - 1)
-        if c1x < c0x or c1y < c0y:
-            continue
-        for cx in range(c0x, c1x + 1):
-            start = np.searchsorted(keys, cx * shape[1] + c0y)
-            stop = np.searchsorted(keys, cx * shape[1] + c1y, side="right")
-            for k in range(start, stop):
-                i = order[k]
-                x, y = points[i, 0], points[i, 1]
-                if not (x >= lo_x and x <= hi_x and y >= lo_y and y <= hi_y):
-                    continue
-                rx, ry = x - px, y - py
-                u = rx * dx + ry * dy
-                w = rx * -dy + ry * dx
-                v = points[i, 2] - z0
-                if abs(w) <= band and u >= 0 and u <= length and v >= 0 and v <= height:
-                    col = min(np.int64(u / pixel), cols - 1)
-                    row = min(np.int64(v / pixel), rows - 1)
-                    out[offsets[f] + row * cols + col] = True
+        n = _face_points(points, order, keys, corner, shape, cell, faces, ends, f, band, found, frame)
+        for q in range(n):
+            u, w, v = frame[q, 0], frame[q, 1], frame[q, 2]
+            if abs(w) <= band and u >= 0 and u <= length and v >= 0 and v <= height:
+                col = min(np.int64(u / pixel), cols - 1)
+                row = min(np.int64(v / pixel), rows - 1)
+                out[offsets[f] + row * cols + col] = True
 
 
 class PointIndex:
