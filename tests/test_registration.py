@@ -338,6 +338,51 @@ def test_the_compiled_plane_normals_are_the_eigenvector_normals():
     assert np.all(np.abs(got[500:540, 2]) > 0.99)
 
 
+def test_the_range_image_kernels_are_numpys_norm_and_minimum_at_bit_for_bit():
+    """The see-through gate's range image reads ranges and per-cell minima from compiled loops;
+    they are numpy's ``linalg.norm(axis=1)`` and ``minimum.at``, to the last bit (repeated cells,
+    empty cells, zero-length points)."""
+    from nbs_env.sensing.registration import _cell_minima, _ranges
+
+    rng = np.random.default_rng(5)
+    points = rng.normal(0, 7, (5000, 3))
+    points[:10] = 0.0
+    np.testing.assert_array_equal(_ranges(points), np.linalg.norm(points, axis=1))
+    cells = rng.integers(0, 300, 5000)  # about 17 values a cell, and cells 300-399 empty
+    values = rng.uniform(0, 30, 5000)
+    want = np.full(400, np.inf)
+    np.minimum.at(want, cells, values)
+    np.testing.assert_array_equal(_cell_minima(cells, values, 400), want)
+
+
+def test_the_compiled_target_selection_is_numpys():
+    """ICP's target, cut in one compiled pass (box, agreeing normals, facing the scanner), holds
+    the same voxels and normals, to the last bit, as numpy's passes over the working copy."""
+    from nbs_env.mapping.cloud import VoxelMeans
+    from nbs_env.sensing.registration import _facing_voxels
+
+    rng = np.random.default_rng(8)
+    copy = VoxelMeans(0.1, normals=True)
+    for _ in range(3):  # scans whose normals partly disagree in shared voxels
+        points = rng.uniform(-4, 4, (4000, 3))
+        normals = rng.normal(0, 1, (4000, 3))
+        copy.add(points, normals / np.linalg.norm(normals, axis=1, keepdims=True))
+    centre, lo, hi = np.array([0.5, -0.2, 1.0]), np.array([-3.0, -2.0, -4.0]), np.array([2.5, 4.0, 3.0])
+    points = copy.points
+    inside = np.flatnonzero(np.all((points >= lo) & (points <= hi), axis=1))
+    mean = copy.normal_sums[inside] / copy.counts[inside, None]
+    # Sums in the kernel's order (einsum's order varies with the machine's SIMD width).
+    length = np.sqrt(mean[:, 0] * mean[:, 0] + mean[:, 1] * mean[:, 1] + mean[:, 2] * mean[:, 2])
+    keep = length >= 0.5
+    want_points, want_normals = points[inside][keep], mean[keep] / length[keep, None]
+    towards = centre - want_points
+    facing = (want_normals * towards)[:, 0] + (want_normals * towards)[:, 1] + (want_normals * towards)[:, 2] > 0
+    index, normals = _facing_voxels(points, copy.normal_sums, copy.counts, lo, hi, centre)
+    assert 0 < len(index) < len(inside)
+    np.testing.assert_array_equal(points[index], want_points[facing])
+    np.testing.assert_array_equal(normals, want_normals[facing])
+
+
 def test_a_registered_scan_is_downsampled_once_and_placed_with_its_pose():
     """``add(..., pose=)`` takes the copy ``register`` made of the same scan, placed with the pose
     (points and normals turned with it); a different scan with ``pose=`` is refused."""
