@@ -59,6 +59,19 @@ def test_loaded_policy_acts_as_the_trained_model(trained):
         assert policy.act(obs, info) == int(expected[0])
 
 
+def test_the_encoder_reads_the_labels_as_one_hot_channels():
+    """The encoder's in-place one-hot is torch's ``one_hot`` moved to channels, to the last bit:
+    labels out of range clamp to the nearest, float labels round."""
+    from policies.learned import N_LABELS
+
+    torch.manual_seed(0)
+    encoder, _ = build_network(NetworkConfig(voxel_shape=(16, 16, 8)))
+    labels = torch.randint(-1, N_LABELS + 1, (3, 16, 16, 8)).float() + 0.2
+    want = torch.nn.functional.one_hot(labels.round().long().clamp(0, N_LABELS - 1), N_LABELS)
+    want = encoder.net(want.permute(0, 4, 1, 2, 3).float())
+    assert torch.equal(encoder(labels), want)
+
+
 def test_scores_do_not_depend_on_the_slot():
     """Shared weights: swapping two candidates swaps their logits."""
     config = NetworkConfig()
