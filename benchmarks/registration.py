@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
+import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -408,7 +409,8 @@ def main() -> None:
         runs = [r for r in runs if r[0] in args.only]
     if not runs:
         parser.error("give --suite or --scene")
-    methods = args.methods.split(",")
+    # Commas inside [...] belong to a value (a list), not to the list of methods.
+    methods = re.split(r",(?![^\[]*\])", args.methods)
     for m in methods:
         make_method(m)  # unknown names fail before any episode runs
     stops = [tuple(map(float, s.split(","))) for s in args.stops.split(";")] if args.stops else None
