@@ -474,6 +474,21 @@ def test_load_default_is_the_packaged_model_or_a_clear_error():
             SEClassifier.load_default()
 
 
+def test_load_default_reads_the_file_once_and_hands_out_independent_copies(monkeypatch):
+    """Every reset asks for the shipped model: it is read and checked once, and each caller gets
+    its own copy (changing one changes neither the next nor the cached one)."""
+    from nbs_env.perception import structure
+
+    first = SEClassifier.load_default()
+    monkeypatch.setattr(SEClassifier, "_read_default", classmethod(lambda cls: pytest.fail("read again")))
+    first.support_vectors[:] = 0.0
+    first.training["tampered"] = True
+    second = SEClassifier.load_default()
+    assert second is not first and "tampered" not in second.training
+    assert np.any(second.support_vectors != 0.0)
+    assert structure._shipped_classifier.cache_info().currsize == 1
+
+
 # ----------------------------------------------------------------------------- point labels
 
 ROOM = np.array([[0.0, 0.0], [5.0, 0.0], [5.0, 4.0], [0.0, 4.0]])  # counter-clockwise
