@@ -165,7 +165,7 @@ class OdometryConfig(Config):
 
 @dataclass(frozen=True)
 class RegistrationConfig(Config):
-    """ICP of a new scan against the accumulated cloud S(t), METHOD §2 (small_gicp's GICP by default).
+    """ICP of a new scan against the accumulated cloud S(t), METHOD §2 (GICP by default).
 
     Attributes
     ----------
@@ -203,9 +203,10 @@ class RegistrationConfig(Config):
         different result; one thread costs about 1.7x the ICP time (see benchmarks/README.md).
     method : {"plane", "gicp", "open3d"}
         ``"plane"``: small_gicp's point-to-plane ICP with the target's normals estimated afresh
-        from its own points at each registration. ``"gicp"``: small_gicp's generalised ICP (plane
-        to plane; the scan's covariances too). ``"open3d"``: open3d's point-to-plane ICP with the
-        working copy's normals (the method before the study).
+        from its own points at each registration. ``"gicp"``: generalised ICP (plane to plane;
+        :mod:`nbs_env.sensing.gicp`, small_gicp's algorithm and k-d trees, with the covariances S(t)
+        keeps instead of ones estimated on the target at each registration). ``"open3d"``:
+        open3d's point-to-plane ICP with the working copy's normals (the method before the study).
     neighbours : int
         Nearest points for the normals and covariances: of each scan's copy (in the scan itself),
         and of the target for ``"plane"`` and ``"gicp"``.

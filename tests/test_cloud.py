@@ -68,3 +68,45 @@ def test_normals_are_summed_per_voxel_with_the_points():
         VoxelMeans(0.5).add(points, normals)
     with pytest.raises(ValueError, match="no normals"):
         _ = VoxelMeans(0.5).normal_sums
+
+
+def test_covariances_are_averaged_per_voxel_and_checked():
+    """With ``covariances=True`` a voxel's covariance is the mean of its points', over every scan
+    added, kept apart from the normals; a copy without them, or an add without them, is refused."""
+    rng = np.random.default_rng(4)
+    copy = VoxelMeans(0.5, normals=True, covariances=True)
+    parts = []
+    for _ in range(3):
+        points = rng.uniform(0, 2, (300, 3))
+        a = rng.normal(0, 1, (300, 3, 3))
+        covs = a @ a.transpose(0, 2, 1)
+        normals = rng.normal(0, 1, (300, 3))
+        copy.add(points, normals, covs)
+        parts.append((points, normals, covs))
+    points = np.concatenate([p for p, _, _ in parts])
+    normals = np.concatenate([n for _, n, _ in parts])
+    covs = np.concatenate([c for _, _, c in parts])
+    cells = np.floor(points / 0.5).astype(int)
+    means = copy.points
+    got = copy.covariances()
+    for k, mean in enumerate(means):
+        members = np.all(cells == np.floor(mean / 0.5).astype(int), axis=1)
+        np.testing.assert_allclose(got[k], covs[members].mean(axis=0), atol=1e-12)
+        np.testing.assert_allclose(copy.normal_sums[k], normals[members].sum(axis=0), atol=1e-12)
+    np.testing.assert_array_equal(copy.covariances(np.array([2, 0])), got[[2, 0]])
+    # A zero matrix is no estimate: it leaves a voxel's mean alone, and a voxel with none reads zero.
+    lone = VoxelMeans(0.5, normals=True, covariances=True)
+    lone.add(
+        np.array([[0.1, 0.1, 0.1], [0.2, 0.2, 0.2], [3.1, 3.1, 3.1]]),
+        np.ones((3, 3)),
+        np.stack([covs[0], 0 * covs[0], 0 * covs[0]]),
+    )
+    np.testing.assert_allclose(lone.covariances()[0], covs[0])
+    assert not lone.covariances()[1].any()
+    assert np.array_equal(copy.copy().covariances(), got)
+    with pytest.raises(ValueError, match="covariances must be given"):
+        copy.add(points[:5], normals[:5])
+    with pytest.raises(ValueError, match=r"\(n, 3, 3\)"):
+        copy.add(points[:5], normals[:5], covs[:4])
+    with pytest.raises(ValueError, match="keeps no covariances"):
+        VoxelMeans(0.5).covariances()

@@ -385,7 +385,7 @@ def test_the_compiled_target_selection_is_numpys():
 
 def test_a_registered_scan_is_downsampled_once_and_placed_with_its_pose():
     """``add(..., pose=)`` takes the copy ``register`` made of the same scan, placed with the pose
-    (points and normals turned with it); a different scan with ``pose=`` is refused."""
+    (points, normals and covariances turned with it); a different scan with ``pose=`` is refused."""
     scanner, rng, _, cloud = _l_room_first_scan(2)
     t1 = pose_from_xyz_rpy(2.4, 5.2, 1.5, 0.0, 0.0, 0.3)
     scan = scanner.scan(t1, rng)
@@ -394,9 +394,14 @@ def test_a_registered_scan_is_downsampled_once_and_placed_with_its_pose():
     copy = cloud._prepared
     before = len(cloud.working_points())
     cloud.add(scan.to_world(result.pose), result.pose[:3, 3], pose=result.pose)
-    placed, normals = copy.world()
-    np.testing.assert_allclose(placed, copy.points @ result.pose[:3, :3].T + result.pose[:3, 3])
-    np.testing.assert_allclose(normals, copy.normals @ result.pose[:3, :3].T)
+    placed, normals, covariances = copy.world()
+    R = result.pose[:3, :3]
+    np.testing.assert_allclose(placed, copy.points @ R.T + result.pose[:3, 3])
+    np.testing.assert_allclose(normals, copy.normals @ R.T)
+    # S(t) keeps the scan's covariances where the scan was dense, none (zero) elsewhere.
+    assert 0 < copy.dense.sum() < len(copy.dense)
+    kept = np.where(copy.dense[:, None, None], copy.covariances, 0.0)
+    np.testing.assert_allclose(covariances, R @ kept @ R.T, atol=1e-12)
     assert len(cloud.working_points()) > before
     # Normals face the scanner that measured them.
     work, facing = cloud.working_points(), cloud.working_normals()
@@ -417,6 +422,55 @@ def test_registration_config_checks_its_stages():
     with pytest.raises(ConfigError, match="convergence"):
         RegistrationConfig(convergence=0.0)
     RegistrationConfig(voxel_size=0.05, stage_voxels=None)
+
+
+def _box_room_samples(rng, n):
+    """(n, 3) points on the six faces of an 8 x 3 x 2.5 m box."""
+    face = rng.integers(0, 6, n)
+    u, v = rng.uniform(0, 1, n), rng.uniform(0, 1, n)
+    x, y, z = u * 8, v * 3, np.zeros(n)
+    x = np.where(face == 2, 0.0, np.where(face == 3, 8.0, x))
+    y = np.where(face >= 4, np.where(face == 4, 0.0, 3.0), np.where(face >= 2, u * 3, y))
+    z = np.where(face == 1, 2.5, np.where(face >= 2, v * 2.5, z))
+    x = np.where(face >= 4, u * 8, x)
+    return np.column_stack([x, y, z])
+
+
+def test_the_compiled_gicp_is_small_gicps():
+    """The covariances from given neighbours are small_gicp's ``estimate_covariances``, and an
+    alignment with them lands where ``small_gicp.align`` (GICP, one thread, the same settings) does."""
+    import small_gicp
+
+    from nbs_env.sensing import gicp
+
+    rng = np.random.default_rng(0)
+    target, source = _box_room_samples(rng, 20000), _box_room_samples(rng, 8000)
+    clouds = []
+    for points in (target, source):
+        cloud = small_gicp.PointCloud(points)
+        tree = small_gicp.KdTree(cloud, num_threads=1)
+        small_gicp.estimate_covariances(cloud, tree, num_neighbors=20, num_threads=1)
+        idx, _ = tree.batch_knn_search(points, 20, num_threads=1)
+        mine = gicp.covariances_from_neighbours(points, np.asarray(idx).astype(np.int64), 20)
+        theirs = np.array(cloud.covs())[:, :3, :3]
+        np.testing.assert_allclose(mine, theirs, atol=1e-9)
+        clouds.append((cloud, tree, mine))
+    (tcloud, ttree, tcov), (scloud, _, scov) = clouds
+    start = pose_from_xyz_rpy(0.3, -0.2, 0.05, 0.0, 0.0, 0.1)
+    want = small_gicp.align(
+        tcloud, scloud, ttree, init_T_target_source=start, registration_type="GICP",
+        max_correspondence_distance=0.5, num_threads=1, max_iterations=40,
+        rotation_epsilon=1e-4, translation_epsilon=1e-4,
+    ).T_target_source  # fmt: skip
+
+    def nearest(world):
+        idx, sq = ttree.batch_nearest_neighbor_search(world, num_threads=1)
+        return np.asarray(idx, dtype=np.int64), np.asarray(sq, dtype=float)
+
+    got = gicp.align(nearest, target, tcov, source, scov, start, 0.5, 40, 1e-4)
+    dt, dr = pose_error(got, np.asarray(want))
+    assert dt < 1e-6 and dr < 1e-5, (dt, dr)
+    assert pose_error(got, np.eye(4))[0] < 0.01  # and it is the right answer: the same room
 
 
 def test_a_refused_icp_after_a_large_turn_is_tried_again_from_the_walls_heading(monkeypatch):

@@ -5,11 +5,14 @@ voxel-downsampled working copy with normals (ICP's target), for the storey and p
 is downsampled once (10 cm voxel means), its normals estimated in the scan itself, and merged into
 world-anchored voxels.
 
-The default ICP is small_gicp's GICP, one thread, coarse to fine: the coarse stages align coarser
-copies of the scan (30 and 20 cm), the finest the 10 cm copy, against the target's 10 cm copy with
-its covariances estimated at each registration; it is restarted from the walls' heading when that
-disagrees with ICP's. A pose is judged by how much of the scan's overlap with S(t) lies on S(t)'s planes and
-by how much of S(t) it would have had to see through; a refused scan stays out of later targets.
+The default ICP is GICP (:mod:`nbs_env.sensing.gicp`, compiled, one thread, small_gicp's k-d trees),
+coarse to fine: the coarse stages align coarser copies of the scan (30 and 20 cm), the finest the
+10 cm copy, against the target's 10 cm copy with the covariances S(t) keeps: each scan's own, where
+the scan was dense enough to estimate one, averaged per voxel; only the voxels no scan saw densely
+get theirs from the target's own neighbours at the registration. It is restarted from the walls'
+heading when that disagrees with ICP's. A pose is judged by how much of the scan's overlap with
+S(t) lies on S(t)'s planes and by how much of S(t) it would have had to see through; a refused scan
+stays out of later targets.
 ``benchmarks/registration.py`` measures it against open3d's ICP on the same scans (figures in
 ``benchmarks/README.md``).
 """
@@ -27,6 +30,7 @@ import numpy as np
 
 from nbs_env.config import RegistrationConfig
 from nbs_env.mapping.cloud import VoxelMeans
+from nbs_env.sensing import gicp
 from nbs_env.sensing.pose import check_pose, pose_error, yaw_of
 from scenes._open3d import open3d
 
@@ -186,20 +190,34 @@ class _ScanCopy:
         self.sg = small_gicp.voxelgrid_sampling(points, voxel, num_threads=1) if len(points) else None
         self.points = np.asarray(self.sg.points())[:, :3].copy() if self.sg is not None else np.zeros((0, 3))
         self.normals = np.zeros_like(self.points)
+        #: (n, 3, 3) float GICP covariances (:func:`~nbs_env.sensing.gicp.covariances_from_neighbours`),
+        #: or None when not asked for.
+        self.covariances: np.ndarray | None = None
         self.pose: np.ndarray | None = None
+        #: (n,) bool: points whose covariance S(t) keeps (dense enough for a local estimate).
+        self.dense = np.zeros(len(self.points), dtype=bool)
+        if covariances:
+            self.covariances = np.tile(np.eye(3), (len(self.points), 1, 1))
         if len(self.points) < 5 or (normal_radius is None and not covariances):
             return
         threads = _point_threads()
         tree = small_gicp.KdTree(self.sg, num_threads=threads)
+        # One search serves the covariances and the normals.
+        idx, sq = tree.batch_knn_search(self.points, max(neighbours, _NORMAL_NEIGHBOURS), num_threads=threads)
+        idx, sq = np.asarray(idx).astype(np.int64), np.asarray(sq)
         if covariances:
-            small_gicp.estimate_covariances(self.sg, tree, num_neighbors=neighbours, num_threads=threads)
+            self.covariances = gicp.covariances_from_neighbours(self.points, idx, neighbours)
+            # Where the scan is sparse (fewer than six points within the normals' radius: far
+            # returns, grazing surfaces) its 20 nearest reach across corners and along scan rings,
+            # and its estimate is the scan's, not the surface's; S(t) keeps none for such points.
+            radius = normal_radius if normal_radius is not None else 0.15
+            self.dense = np.count_nonzero(sq[:, :_NORMAL_NEIGHBOURS] <= radius**2, axis=1) >= _MIN_NORMAL_NEIGHBOURS
         if normal_radius is not None:
-            idx, sq = tree.batch_knn_search(self.points, _NORMAL_NEIGHBOURS, num_threads=threads)
             reach = max(normal_radius, normal_reach or normal_radius)
             normals = _plane_normals(
                 self.points,
-                np.asarray(idx).astype(np.int64),
-                np.asarray(sq),
+                np.ascontiguousarray(idx[:, :_NORMAL_NEIGHBOURS]),
+                np.ascontiguousarray(sq[:, :_NORMAL_NEIGHBOURS]),
                 normal_radius**2,
                 reach**2,
                 _MIN_NORMAL_NEIGHBOURS,
@@ -207,12 +225,19 @@ class _ScanCopy:
             towards = (np.zeros(3) if origin is None else np.asarray(origin, dtype=float)) - self.points
             self.normals = np.where((np.einsum("ij,ij->i", normals, towards) < 0)[:, None], -normals, normals)
 
-    def world(self) -> tuple[np.ndarray, np.ndarray]:
-        """(points, normals), (n, 3) float each, placed with :attr:`pose` (identity when None)."""
+    def world(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """(points, normals, covariances or None), (n, 3), (n, 3) and (n, 3, 3) float, placed with
+        :attr:`pose` (identity when None); the covariances S(t) keeps, zero where the scan was
+        sparse (:attr:`dense`)."""
+        covariances = None
+        if self.covariances is not None:
+            covariances = np.where(self.dense[:, None, None], self.covariances, 0.0)
         if self.pose is None:
-            return self.points, self.normals
+            return self.points, self.normals, covariances
         R, t = self.pose[:3, :3], self.pose[:3, 3]
-        return self.points @ R.T + t, self.normals @ R.T
+        if covariances is not None:
+            covariances = np.matmul(np.matmul(R, covariances), R.T)
+        return self.points @ R.T + t, self.normals @ R.T, covariances
 
 
 class AccumulatedCloud:
@@ -234,6 +259,9 @@ class AccumulatedCloud:
 
     The working copies are world-anchored voxel means (:class:`~nbs_env.mapping.cloud.VoxelMeans`)
     of every scan's downsampled copy: adding a scan touches only its own voxels, not the storey's.
+    With normals, the storey's copy and ICP's target also keep GICP's covariances, each scan's own
+    (from its 20 nearest points in the scan, where at least six lie within ``normal_radius``)
+    placed with its pose and averaged per voxel.
     A voxel's normal is the mean of its points' normals made unit length; voxels whose normals
     disagree (mean length below 0.5: a corner, both faces of a thin board) are left out.
 
@@ -344,20 +372,23 @@ class AccumulatedCloud:
             return
         for k in self._pending:
             copy = self._copies.pop(k, None)
-            if copy is None:
-                copy = self._scan_copy(self._full[k], self._origins[k], covariances=False)
-            points, normals = copy.world()
+            if copy is None or (self.normals and copy.covariances is None):
+                copy = self._scan_copy(self._full[k], self._origins[k], covariances=self.normals)
+                copy.pose = None
+            points, normals, covariances = copy.world()
             if not len(points):
                 continue
             normals = normals if self.normals else None
+            # The covariances ride with the normals: both are ICP's, and S(t) without ICP keeps neither.
+            covariances = covariances if self.normals else None
             if self._storey is None:
-                self._storey = self._target = VoxelMeans(self.voxel_size, self.normals)
+                self._storey = self._target = VoxelMeans(self.voxel_size, self.normals, self.normals)
             if not self._registered[k] and self._target is self._storey:
                 # The first refused scan: from here on the target holds the registered scans only.
                 self._target = self._storey.copy()
-            self._storey.add(points, normals)
+            self._storey.add(points, normals, covariances)
             if self._registered[k] and self._target is not self._storey:
-                self._target.add(points, normals)
+                self._target.add(points, normals, covariances)
             if self.rooms:
                 room = self._rooms_of_scans[k]
                 self._room_copies.setdefault(room, VoxelMeans(self.voxel_size, self.normals)).add(points, normals)
@@ -489,7 +520,7 @@ def _select_target(cloud: AccumulatedCloud, centre: np.ndarray, cfg: Registratio
     """The part of S(t) a scan from ``centre`` can overlap: ICP's target (the accepted scans, or
     every scan when ``cfg.exclude_rejected`` is off) within ``target_radius`` and, given the scan's
     ``extent`` ((2, 3) world box at the prior), within ``crop_margin`` of it; surfaces facing the
-    scanner. (points, normals or None), or None when S(t) is empty."""
+    scanner. (points, normals or None, covariances or None), or None when S(t) is empty."""
     copy = cloud._copy("target" if cfg.exclude_rejected else None)
     if copy is None or len(copy) == 0:
         return None
@@ -502,12 +533,12 @@ def _select_target(cloud: AccumulatedCloud, centre: np.ndarray, cfg: Registratio
         # corridor, and the pose drifted along it by 25 cm).
         lo, hi = np.maximum(lo, extent[0] - cfg.crop_margin), np.minimum(hi, extent[1] + cfg.crop_margin)
     if not copy.has_normals:
-        return points[np.all((points >= lo) & (points <= hi), axis=1)], None
+        return points[np.all((points >= lo) & (points <= hi), axis=1)], None, None
     # Only surfaces that face the scanner can be in its scan. Without this, the far face of a wall
     # (scanned from the next room, 10-25 cm behind) offers ICP a parallel twin to lock onto:
     # measured on five_rooms, accepted poses 15 cm off, one wall thickness.
     index, normals = _facing_voxels(points, copy.normal_sums, copy.counts, lo, hi, np.asarray(centre, dtype=float))
-    return points[index], normals
+    return points[index], normals, (copy.covariances(index) if copy.has_covariances else None)
 
 
 @numba.njit(cache=True)
@@ -766,21 +797,48 @@ class _Target:
     the target is sparse: their neighbourhoods reach across a corner into the next surface (on a
     30 m corridor, 15-19 m from the scans of S(t), 60% of the overlap of a correctly placed scan
     lay on their planes against 87% on the working copy's, and a correct pose was refused).
-    ``method="gicp"``: small_gicp's point cloud with covariances from the ``neighbours`` nearest
-    points (plane-to-plane wants the local spread, not only the normal); ``"plane"``: small_gicp's
-    own normals; ``"open3d"``: open3d on the working copy.
+    ``method="gicp"``: small_gicp's k-d tree and the covariances S(t) keeps (plane-to-plane wants
+    the local spread, not only the normal), those S(t) lacks from the ``neighbours`` nearest target
+    points; ``"plane"``: small_gicp's own normals; ``"open3d"``: open3d on the working copy.
     """
 
-    def __init__(self, points: np.ndarray, normals: np.ndarray | None, cfg: RegistrationConfig, need_planes: bool):
+    def __init__(
+        self,
+        points: np.ndarray,
+        normals: np.ndarray | None,
+        covariances: np.ndarray | None,
+        cfg: RegistrationConfig,
+        need_planes: bool,
+    ):
         self.points = points
         self.method = cfg.method
         self.normals = np.zeros_like(points) if normals is None else normals
+        self.covariances = covariances
         if cfg.method != "open3d":
             small_gicp = _small_gicp()
             self.sg = small_gicp.PointCloud(self.points)
             self.tree = small_gicp.KdTree(self.sg, num_threads=_point_threads())
-            estimate = small_gicp.estimate_covariances if cfg.method == "gicp" else small_gicp.estimate_normals
-            estimate(self.sg, self.tree, num_neighbors=cfg.neighbours, num_threads=_point_threads())
+            if cfg.method == "plane":
+                small_gicp.estimate_normals(
+                    self.sg, self.tree, num_neighbors=cfg.neighbours, num_threads=_point_threads()
+                )
+            else:
+                # Where S(t) keeps no covariance (sparse in every scan, or a cloud without normals),
+                # the target's own nearest points give it, as small_gicp estimates a target's.
+                missing = (
+                    np.arange(len(points))
+                    if covariances is None
+                    else np.flatnonzero(~np.any(covariances.reshape(len(points), 9) != 0.0, axis=1))
+                )
+                if covariances is None:
+                    self.covariances = np.zeros((len(points), 3, 3))
+                if len(missing):
+                    idx, _ = self.tree.batch_knn_search(
+                        self.points[missing], cfg.neighbours, num_threads=_point_threads()
+                    )
+                    self.covariances[missing] = gicp.covariances_from_neighbours(
+                        self.points, np.asarray(idx).astype(np.int64), cfg.neighbours
+                    )
         else:
             self.cloud = _cloud(points, normals)
             self._kd = None
@@ -789,11 +847,16 @@ class _Target:
 
                 self._kd = cKDTree(self.points)
 
+    def nearest_squared(self, world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(index, squared distance) of the nearest target point to each of (m, 3) ``world``
+        (index -1 where none), from small_gicp's k-d tree."""
+        idx, sq = self.tree.batch_nearest_neighbor_search(world, num_threads=_point_threads())
+        return np.asarray(idx, dtype=np.int64), np.asarray(sq, dtype=float)
+
     def nearest(self, world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(distance, index) of the nearest target point to each of ``world``."""
         if self.method != "open3d":
-            idx, sq = self.tree.batch_nearest_neighbor_search(world, num_threads=_point_threads())
-            idx, sq = np.asarray(idx, dtype=np.int64), np.asarray(sq, dtype=float)
+            idx, sq = self.nearest_squared(world)
             dist = np.where(idx >= 0, np.sqrt(np.maximum(sq, 0.0)), np.inf)
             return dist, np.maximum(idx, 0)
         if self._kd is None:
@@ -848,7 +911,7 @@ def _register(points_sensor, initial, cloud, cfg: RegistrationConfig, travelled:
     # (small_gicp runs on one thread too).
     with _open3d_threads(1 if cfg.deterministic else None):
         target = _Target(*selected, cfg, cfg.min_agreement is not None or cfg.min_constraint > 0)
-        src = _Source(copy.points, cfg, np.asarray(points_sensor, dtype=float), copy.sg)
+        src = _Source(copy.points, cfg, np.asarray(points_sensor, dtype=float), copy.sg, copy.covariances)
         if cfg.stage_voxels is not None and cfg.method != "open3d":
             # The coarse stages only need to bring the pose within the next stage's reach, and
             # their time grows with the scan's points: they align coarser copies of it.
@@ -973,24 +1036,32 @@ class _RangeImage:
 
 
 class _Source:
-    """The downsampled scan (sensor frame), small_gicp's copy of it (with covariances for
-    ``method="gicp"``), the raw scan's range image for the see-through gate, and the coarser
-    copies the coarse stages align (``stages``, None: this one for every stage)."""
+    """The downsampled scan (sensor frame), small_gicp's copy of it and, for ``method="gicp"``, its
+    covariances, the raw scan's range image for the see-through gate, and the coarser copies the
+    coarse stages align (``stages``, None: this one for every stage)."""
 
-    def __init__(self, points: np.ndarray, cfg: RegistrationConfig, raw: np.ndarray | None = None, sg=None) -> None:
+    def __init__(
+        self,
+        points: np.ndarray,
+        cfg: RegistrationConfig,
+        raw: np.ndarray | None = None,
+        sg=None,
+        covariances: np.ndarray | None = None,
+    ) -> None:
         self.points = points
         self.stages: list[_Source] | None = None
         self.image = None if raw is None or cfg.max_see_through is None else _RangeImage(raw)
+        self.covariances = covariances
         if cfg.method == "open3d":
             self.cloud = _cloud(points)
             return
         small_gicp = _small_gicp()
-        if sg is None:
-            sg = small_gicp.PointCloud(points)
-            if cfg.method == "gicp":  # plane-to-plane needs the scan's covariances; point-to-plane does not
-                tree = small_gicp.KdTree(sg, num_threads=_point_threads())
-                small_gicp.estimate_covariances(sg, tree, num_neighbors=cfg.neighbours, num_threads=_point_threads())
-        self.sg = sg
+        self.sg = small_gicp.PointCloud(points) if sg is None else sg
+        if cfg.method == "gicp" and covariances is None:  # plane-to-plane needs the scan's covariances
+            tree = small_gicp.KdTree(self.sg, num_threads=_point_threads())
+            idx, _ = tree.batch_knn_search(points, cfg.neighbours, num_threads=_point_threads())
+            idx = np.asarray(idx).astype(np.int64)
+            self.covariances = gicp.covariances_from_neighbours(points, idx, cfg.neighbours)
 
     @classmethod
     def coarser(cls, points: np.ndarray, voxel: float, cfg: RegistrationConfig) -> _Source:
@@ -1022,7 +1093,22 @@ class _Attempt:
 def _align(src: _Source, target: _Target, start: np.ndarray, cfg: RegistrationConfig):
     """Coarse-to-fine ICP from ``start``: (pose, fitness, inlier RMSE, finest-stage pairs or None)."""
     pose = start.copy()
-    if cfg.method != "open3d":
+    if cfg.method == "gicp":
+        stages = src.stages or [src] * len(cfg.max_correspondence)
+        for distance, stage in zip(cfg.max_correspondence, stages, strict=True):
+            pose = gicp.align(
+                target.nearest_squared,
+                target.points,
+                target.covariances,
+                stage.points,
+                stage.covariances,
+                pose,
+                distance,
+                cfg.max_iterations,
+                cfg.convergence,
+            )
+        return pose, None, None, None
+    if cfg.method == "plane":
         small_gicp = _small_gicp()
         stages = src.stages or [src] * len(cfg.max_correspondence)
         for distance, stage in zip(cfg.max_correspondence, stages, strict=True):
@@ -1031,7 +1117,7 @@ def _align(src: _Source, target: _Target, start: np.ndarray, cfg: RegistrationCo
                 stage.sg,
                 target.tree,
                 init_T_target_source=pose,
-                registration_type="GICP" if cfg.method == "gicp" else "PLANE_ICP",
+                registration_type="PLANE_ICP",
                 max_correspondence_distance=distance,
                 num_threads=1,
                 max_iterations=cfg.max_iterations,
