@@ -31,13 +31,14 @@ _INNER = 10
 
 
 @numba.njit(cache=True)
-def _jacobi(A: np.ndarray, V: np.ndarray) -> None:
-    """Diagonalise the symmetric 3 x 3 ``A`` in place by cyclic Jacobi rotations; ``V`` receives
-    the eigenvectors (columns, in the order of ``A``'s diagonal)."""
+def jacobi(A: np.ndarray, V: np.ndarray) -> None:
+    """Diagonalise the symmetric 3 x 3 ``A`` in place by cyclic Jacobi rotations (at most 12 sweeps,
+    far more than a 3 x 3 needs); ``V`` receives the eigenvectors (columns, in the order of ``A``'s
+    diagonal). Also the plane normals' solver (:mod:`nbs_env.sensing.registration`)."""
     for i in range(3):
         for j in range(3):
             V[i, j] = 1.0 if i == j else 0.0
-    for _ in range(20):
+    for _ in range(12):
         off = A[0, 1] * A[0, 1] + A[0, 2] * A[0, 2] + A[1, 2] * A[1, 2]
         if off <= 1e-30 * (A[0, 0] * A[0, 0] + A[1, 1] * A[1, 1] + A[2, 2] * A[2, 2]):
             break
@@ -112,7 +113,7 @@ def covariances_from_neighbours(points: np.ndarray, idx: np.ndarray, k: int) -> 
         A[0, 0], A[0, 1], A[0, 2] = xx / count - mx * mx, xy / count - mx * my, xz / count - mx * mz
         A[1, 1], A[1, 2], A[2, 2] = yy / count - my * my, yz / count - my * mz, zz / count - mz * mz
         A[1, 0], A[2, 0], A[2, 1] = A[0, 1], A[0, 2], A[1, 2]
-        _jacobi(A, V)
+        jacobi(A, V)
         m = 0
         if A[1, 1] < A[m, m]:
             m = 1

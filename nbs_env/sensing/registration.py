@@ -78,33 +78,7 @@ _MIN_NORMAL_NEIGHBOURS = 6
 def _smallest_eigenvector(A: np.ndarray, V: np.ndarray) -> tuple[float, float, float]:
     """The eigenvector of the smallest eigenvalue of the symmetric 3 x 3 ``A`` (overwritten; ``V``
     is work space), by cyclic Jacobi rotations."""
-    for i in range(3):
-        for j in range(3):
-            V[i, j] = 1.0 if i == j else 0.0
-    for _ in range(12):
-        off = A[0, 1] * A[0, 1] + A[0, 2] * A[0, 2] + A[1, 2] * A[1, 2]
-        if off <= 1e-30 * (A[0, 0] * A[0, 0] + A[1, 1] * A[1, 1] + A[2, 2] * A[2, 2]):
-            break
-        for p, q in ((0, 1), (0, 2), (1, 2)):
-            apq = A[p, q]
-            if apq == 0.0:
-                continue
-            theta = (A[q, q] - A[p, p]) / (2.0 * apq)
-            t = (1.0 if theta >= 0 else -1.0) / (abs(theta) + np.sqrt(theta * theta + 1.0))
-            c = 1.0 / np.sqrt(t * t + 1.0)
-            s = t * c
-            for k in range(3):
-                akp, akq = A[k, p], A[k, q]
-                A[k, p] = c * akp - s * akq
-                A[k, q] = s * akp + c * akq
-            for k in range(3):
-                apk, aqk = A[p, k], A[q, k]
-                A[p, k] = c * apk - s * aqk
-                A[q, k] = s * apk + c * aqk
-            for k in range(3):
-                vkp, vkq = V[k, p], V[k, q]
-                V[k, p] = c * vkp - s * vkq
-                V[k, q] = s * vkp + c * vkq
+    gicp.jacobi(A, V)
     m = 0
     if A[1, 1] < A[m, m]:
         m = 1
@@ -1093,8 +1067,8 @@ class _Attempt:
 def _align(src: _Source, target: _Target, start: np.ndarray, cfg: RegistrationConfig):
     """Coarse-to-fine ICP from ``start``: (pose, fitness, inlier RMSE, finest-stage pairs or None)."""
     pose = start.copy()
+    stages = src.stages or [src] * len(cfg.max_correspondence)
     if cfg.method == "gicp":
-        stages = src.stages or [src] * len(cfg.max_correspondence)
         for distance, stage in zip(cfg.max_correspondence, stages, strict=True):
             pose = gicp.align(
                 target.nearest_squared,
@@ -1110,7 +1084,6 @@ def _align(src: _Source, target: _Target, start: np.ndarray, cfg: RegistrationCo
         return pose, None, None, None
     if cfg.method == "plane":
         small_gicp = _small_gicp()
-        stages = src.stages or [src] * len(cfg.max_correspondence)
         for distance, stage in zip(cfg.max_correspondence, stages, strict=True):
             result = small_gicp.align(
                 target.sg,
