@@ -532,8 +532,8 @@ class SEClassifier:
     @classmethod
     def load_default(cls) -> SEClassifier:
         """The classifier shipped with the package (``nbs_env/perception/data/se_svm.json``): a copy
-        of the one read and checked on the first call (each env reset asks for it; the check of
-        the file's numbers cost 5.7 ms a reset)."""
+        of the one read and checked on the first call (each env reset asks for it; reading and
+        checking the file cost 2.9 ms a reset, a copy 0.04 ms)."""
         return copy.deepcopy(_shipped_classifier(cls))
 
     @classmethod
