@@ -22,7 +22,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["align", "covariances_from_neighbours"]
+__all__ = ["align", "covariances_from_neighbours", "jacobi"]
 
 #: small_gicp's Levenberg-Marquardt settings: the initial damping, its factor, the inner tries.
 _LAMBDA = 1e-3
