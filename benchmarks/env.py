@@ -18,16 +18,9 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 
-
-def _pin(cores: int) -> None:
-    # Thread pools read these when they load, so they are set before numpy and open3d are imported.
-    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[var] = str(cores)
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, set(range(cores)))
+from _timing import pin_cores
 
 
 def main() -> None:
@@ -36,7 +29,7 @@ def main() -> None:
     parser.add_argument("--cores", type=int, default=1, help="CPU cores the process may use")
     parser.add_argument("--part", choices=("fast", "default", "both"), default="both")
     args = parser.parse_args()
-    _pin(args.cores)
+    pin_cores(args.cores)
 
     import nbs_env  # noqa: F401  (registers the ids)
     from policies import GreedyPolicy

@@ -13,10 +13,11 @@ Usage: PYTHONPATH=<checkout> python benchmarks/registration_pieces.py [--scene f
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import time
 from collections import defaultdict
+
+from _timing import pin_cores
 
 
 def main() -> None:
@@ -25,8 +26,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--cores", type=int, default=2, help="CPU cores the process may use")
     args = parser.parse_args()
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, set(range(args.cores)))
+    pin_cores(args.cores)
 
     import nbs_env.robot as robot_module
     from nbs_env.env import NBSEnv
