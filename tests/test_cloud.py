@@ -110,3 +110,45 @@ def test_covariances_are_averaged_per_voxel_and_checked():
         copy.add(points[:5], normals[:5], covs[:4])
     with pytest.raises(ValueError, match="keeps no covariances"):
         VoxelMeans(0.5).covariances()
+
+
+def _numpy_add(cloud: VoxelMeans, values: np.ndarray) -> None:
+    """The merge as numpy did it before the compiled one (the oracle): a sort, ``np.add.reduceat``
+    per voxel, and ``np.insert`` of the new voxels."""
+    cells = np.floor(values[:, :3] / cloud.voxel_size).astype(np.int64) + (1 << 20)
+    keys = (cells[:, 0] << 42) | (cells[:, 1] << 21) | cells[:, 2]
+    order = np.argsort(keys, kind="stable")
+    keys = keys[order]
+    starts = np.flatnonzero(np.concatenate([[True], keys[1:] != keys[:-1]]))
+    keys = keys[starts]
+    sums = np.add.reduceat(values[order], starts, axis=0)
+    counts = np.diff(np.append(starts, len(order)))
+    at = np.searchsorted(cloud._keys, keys)
+    held = at < len(cloud._keys)
+    held[held] = cloud._keys[at[held]] == keys[held]
+    cloud._sums[at[held]] += sums[held]
+    cloud._counts[at[held]] += counts[held]
+    new = ~held
+    cloud._keys = np.insert(cloud._keys, at[new], keys[new])
+    cloud._sums = np.insert(cloud._sums, at[new], sums[new], axis=0)
+    cloud._counts = np.insert(cloud._counts, at[new], counts[new])
+
+
+@pytest.mark.parametrize("size", [0.05, 0.5, 3.0])
+def test_the_compiled_merge_is_numpys_bit_for_bit(size):
+    """Sums of one to thousands of points per voxel (numpy's pairwise sum past 8 and past 128
+    points), negative zeros included, equal what numpy's reduceat and insert gave, bit for bit."""
+    rng = np.random.default_rng(3)
+    cloud, oracle = VoxelMeans(size, normals=True), VoxelMeans(size, normals=True)
+    for _ in range(4):
+        n = int(rng.integers(1, 20000))
+        points = rng.normal(size=(n, 3)) * rng.uniform(0.5, 6.0)
+        normals = rng.normal(size=(n, 3))
+        normals[rng.random(n) < 0.2] = -0.0
+        cloud.add(points, normals)
+        _numpy_add(oracle, np.hstack([points, normals]))
+        assert np.array_equal(cloud._keys, oracle._keys) and np.array_equal(cloud._counts, oracle._counts)
+        assert np.array_equal(cloud._sums, oracle._sums)
+        assert np.array_equal(np.signbit(cloud._sums), np.signbit(oracle._sums))
+    assert (cloud._counts == 1).any()
+    assert cloud._counts.max() > {0.05: 1, 0.5: 8, 3.0: 128}[size]  # each of numpy's three sums

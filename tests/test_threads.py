@@ -73,3 +73,23 @@ def test_carving_on_threads_gives_the_single_thread_labels(monkeypatch):
         labels[n] = grid.labels.copy()
     assert (labels["1"] == VoxelLabel.EMPTY).sum() > 1000
     assert np.array_equal(labels["2"], labels["1"]) and np.array_equal(labels["3"], labels["1"])
+
+
+def test_covariances_and_plane_normals_on_threads_are_the_single_thread_ones(monkeypatch):
+    from nbs_env.sensing import gicp
+    from nbs_env.sensing.registration import _plane_normals
+
+    rng = np.random.default_rng(9)
+    points = np.column_stack([rng.uniform(0, 6, 30000), rng.uniform(0, 4, 30000), rng.normal(0, 0.01, 30000)])
+    points[::7, 2] += 1.0  # a second layer: some neighbourhoods mix, some radii fall back
+    idx = np.argsort(rng.random((30000, 20)), axis=1).astype(np.int64) + np.arange(30000)[:, None] % 29000
+    idx[::11, 15:] = -1
+    sq = np.sort(rng.uniform(0, 0.5, size=idx.shape), axis=1)
+    results = {}
+    for n in ("1", "2", "3"):
+        monkeypatch.setenv("NBS_THREADS", n)
+        results[n] = (gicp.covariances_from_neighbours(points, idx, 20), _plane_normals(points, idx, sq, 0.02, 0.3, 6))
+    assert np.abs(results["1"][1]).sum() > 0 and not np.allclose(results["1"][0], np.eye(3))
+    for n in ("2", "3"):
+        for got, want in zip(results[n], results["1"], strict=True):
+            assert np.array_equal(got, want)

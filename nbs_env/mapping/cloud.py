@@ -3,6 +3,7 @@ updated scan by scan (the room's copy for perception, S(t)'s for registration)."
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 __all__ = ["VoxelMeans"]
@@ -94,21 +95,7 @@ class VoxelMeans:
         cells += _HALF
         keys = (cells[:, 0] << (2 * _BITS)) | (cells[:, 1] << _BITS) | cells[:, 2]
         order = np.argsort(keys, kind="stable")
-        keys = keys[order]
-        starts = np.flatnonzero(np.concatenate([[True], keys[1:] != keys[:-1]]))
-        keys = keys[starts]
-        sums = np.add.reduceat(values[order], starts, axis=0)
-        counts = np.diff(np.append(starts, len(order)))
-        at = np.searchsorted(self._keys, keys)
-        held = at < len(self._keys)
-        held[held] = self._keys[at[held]] == keys[held]
-        self._sums[at[held]] += sums[held]
-        self._counts[at[held]] += counts[held]
-        new = ~held
-        if new.any():
-            self._keys = np.insert(self._keys, at[new], keys[new])
-            self._sums = np.insert(self._sums, at[new], sums[new], axis=0)
-            self._counts = np.insert(self._counts, at[new], counts[new])
+        self._keys, self._sums, self._counts = _merge(self._keys, self._sums, self._counts, keys, order, values)
         self._points = None
 
     @property
@@ -151,3 +138,88 @@ class VoxelMeans:
         out._keys, out._sums, out._counts = self._keys.copy(), self._sums.copy(), self._counts.copy()
         out._points = None
         return out
+
+
+@numba.njit(cache=True)
+def _pairwise(values: np.ndarray, order: np.ndarray, first: int, n: int, column: int) -> float:
+    """numpy's pairwise sum (``pairwise_sum`` in its loops, the one ``np.add.reduceat`` runs) of
+    ``values[order[first:first + n], column]``: the same result, bit for bit."""
+    if n < 8:
+        res = -0.0  # numpy's start: -0.0 + x is x for every x, -0.0 included
+        for i in range(n):
+            res += values[order[first + i], column]
+        return res
+    if n <= 128:
+        r = np.empty(8)
+        for j in range(8):
+            r[j] = values[order[first + j], column]
+        i = 8
+        while i < n - (n % 8):
+            for j in range(8):
+                r[j] += values[order[first + i + j], column]
+            i += 8
+        res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+        while i < n:
+            res += values[order[first + i], column]
+            i += 1
+        return res
+    half = n // 2
+    half -= half % 8
+    return _pairwise(values, order, first, half, column) + _pairwise(values, order, first + half, n - half, column)
+
+
+@numba.njit(cache=True)
+def _merge(held_keys, held_sums, held_counts, keys, order, values):
+    """The voxels held merged with a scan's points (``keys`` per point, ``order`` sorting them):
+    new (keys, sums, counts), sorted by key. A voxel's sum of the scan's points is its first point
+    plus numpy's pairwise sum of the rest, as ``np.add.reduceat`` gives it, added to the sum held."""
+    n, m, width = len(order), len(held_keys), values.shape[1]
+    # The scan's voxels: the first point of each run of equal keys.
+    runs = np.empty(n + 1, dtype=np.int64)
+    count = 0
+    for i in range(n):
+        if i == 0 or keys[order[i]] != keys[order[i - 1]]:
+            runs[count] = i
+            count += 1
+    runs[count] = n
+    # How many of them are new.
+    fresh = 0
+    at = 0
+    for r in range(count):
+        key = keys[order[runs[r]]]
+        while at < m and held_keys[at] < key:
+            at += 1
+        if at == m or held_keys[at] != key:
+            fresh += 1
+    out_keys = np.empty(m + fresh, dtype=np.int64)
+    out_sums = np.empty((m + fresh, width))
+    out_counts = np.empty(m + fresh, dtype=np.int64)
+    at = 0
+    k = 0
+    for r in range(count):
+        first, size = runs[r], runs[r + 1] - runs[r]
+        key = keys[order[first]]
+        while at < m and held_keys[at] < key:
+            out_keys[k] = held_keys[at]
+            out_sums[k] = held_sums[at]
+            out_counts[k] = held_counts[at]
+            at += 1
+            k += 1
+        held = at < m and held_keys[at] == key
+        for c in range(width):
+            total = values[order[first], c]
+            if size > 1:
+                total += _pairwise(values, order, first + 1, size - 1, c)
+            out_sums[k, c] = held_sums[at, c] + total if held else total
+        out_keys[k] = key
+        out_counts[k] = (held_counts[at] if held else 0) + size
+        if held:
+            at += 1
+        k += 1
+    while at < m:
+        out_keys[k] = held_keys[at]
+        out_sums[k] = held_sums[at]
+        out_counts[k] = held_counts[at]
+        at += 1
+        k += 1
+    return out_keys, out_sums, out_counts

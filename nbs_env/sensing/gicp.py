@@ -12,7 +12,9 @@ scans estimated where they were dense (:class:`~nbs_env.mapping.cloud.VoxelMeans
 ``covariances=True``), so a registration reads them and estimates only the rest. The nearest
 neighbours still come from small_gicp's k-d tree.
 
-The sums run on one thread in a fixed order: the same inputs give the same pose, bit for bit.
+The normal equations are summed in fixed runs of :data:`CHUNK` source points, the runs' sums then
+added in order, whatever the number of threads computing them: the same inputs give the same pose,
+bit for bit, on one core or many.
 ``tests/test_registration.py`` checks the covariances against small_gicp's ``estimate_covariances``
 and an alignment against ``small_gicp.align`` on the same points.
 """
@@ -22,15 +24,19 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from nbs_env import threads
+
 __all__ = ["align", "covariances_from_neighbours", "jacobi"]
 
 #: small_gicp's Levenberg-Marquardt settings: the initial damping, its factor, the inner tries.
 _LAMBDA = 1e-3
 _LAMBDA_FACTOR = 10.0
 _INNER = 10
+#: Source points per run of the normal equations' sums (the unit of the threads' work).
+CHUNK = 4096
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def jacobi(A: np.ndarray, V: np.ndarray) -> None:
     """Diagonalise the symmetric 3 x 3 ``A`` in place by cyclic Jacobi rotations (at most 12 sweeps,
     far more than a 3 x 3 needs); ``V`` receives the eigenvectors (columns, in the order of ``A``'s
@@ -64,7 +70,6 @@ def jacobi(A: np.ndarray, V: np.ndarray) -> None:
                 V[k, q] = s * vkp + c * vkq
 
 
-@numba.njit(cache=True)
 def covariances_from_neighbours(points: np.ndarray, idx: np.ndarray, k: int) -> np.ndarray:
     """Plane-regularised covariances, as small_gicp's ``estimate_covariances``.
 
@@ -83,8 +88,21 @@ def covariances_from_neighbours(points: np.ndarray, idx: np.ndarray, k: int) -> 
         eigenvalues): a flat disc along the local surface. The identity where fewer than five
         neighbours were found.
     """
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    idx = np.ascontiguousarray(idx, dtype=np.int64)
+    out = np.zeros((idx.shape[0], 3, 3))
+
+    def rows(part: slice) -> None:
+        # Each point's covariance is its own: the runs write disjoint rows.
+        _covariances(points, idx[part], int(k), out[part])
+
+    threads.split(rows, len(idx), cost=20 * min(int(k), idx.shape[1]) * len(idx), interleave=False)
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _covariances(points: np.ndarray, idx: np.ndarray, k: int, out: np.ndarray) -> None:
     n = idx.shape[0]
-    out = np.zeros((n, 3, 3))
     A = np.empty((3, 3))
     V = np.empty((3, 3))
     for i in range(n):
@@ -123,10 +141,9 @@ def covariances_from_neighbours(points: np.ndarray, idx: np.ndarray, k: int) -> 
         for a in range(3):
             for b in range(3):
                 out[i, a, b] = (1.0 if a == b else 0.0) - (1.0 - 1e-3) * V[a, m] * V[b, m]
-    return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _inverse3(C: np.ndarray, M: np.ndarray) -> None:
     a, b, c = C[0, 0], C[0, 1], C[0, 2]
     d, e, f = C[1, 0], C[1, 1], C[1, 2]
@@ -138,7 +155,7 @@ def _inverse3(C: np.ndarray, M: np.ndarray) -> None:
     M[2, 0], M[2, 1], M[2, 2] = m20 / det, (b * g - a * h) / det, (a * e - b * d) / det
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _residual(T, s, q):
     R, t = T[:3, :3], T[:3, 3]
     r0 = q[0] - (R[0, 0] * s[0] + R[0, 1] * s[1] + R[0, 2] * s[2] + t[0])
@@ -147,7 +164,7 @@ def _residual(T, s, q):
     return r0, r1, r2
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _mahalanobis(M, r0, r1, r2) -> float:
     return (
         r0 * (M[0, 0] * r0 + M[0, 1] * r1 + M[0, 2] * r2)

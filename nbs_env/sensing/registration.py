@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from nbs_env import threads
 from nbs_env.config import RegistrationConfig
 from nbs_env.mapping.cloud import VoxelMeans
 from nbs_env.sensing import gicp
@@ -74,7 +75,7 @@ _NORMAL_NEIGHBOURS = 20
 _MIN_NORMAL_NEIGHBOURS = 6
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _smallest_eigenvector(A: np.ndarray, V: np.ndarray) -> tuple[float, float, float]:
     """The eigenvector of the smallest eigenvalue of the symmetric 3 x 3 ``A`` (overwritten; ``V``
     is work space), by cyclic Jacobi rotations."""
@@ -87,15 +88,27 @@ def _smallest_eigenvector(A: np.ndarray, V: np.ndarray) -> tuple[float, float, f
     return V[0, m], V[1, m], V[2, m]
 
 
-@numba.njit(cache=True)
 def _plane_normals(
     points: np.ndarray, idx: np.ndarray, sq: np.ndarray, radius2: float, reach2: float, least: int
 ) -> np.ndarray:
     """Per point, the normal of the plane through its nearest points (``idx``, ``sq``: their indices
     and squared distances, ascending, -1 past the last): those within ``radius2``, or within
     ``reach2`` when fewer than ``least`` lie within ``radius2``. Zero with fewer than three."""
+    out = np.zeros((idx.shape[0], 3))
+
+    def rows(part: slice) -> None:
+        # Each point's normal is its own: the runs write disjoint rows.
+        _plane_normal_rows(points, idx[part], sq[part], radius2, reach2, least, out[part])
+
+    threads.split(rows, len(idx), cost=20 * idx.shape[1] * len(idx), interleave=False)
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _plane_normal_rows(
+    points: np.ndarray, idx: np.ndarray, sq: np.ndarray, radius2: float, reach2: float, least: int, out: np.ndarray
+) -> None:
     n, k = idx.shape
-    out = np.zeros((n, 3))
     A = np.empty((3, 3))
     V = np.empty((3, 3))
     for i in range(n):
@@ -130,7 +143,6 @@ def _plane_normals(
         a, b, c = _smallest_eigenvector(A, V)
         norm = np.sqrt(a * a + b * b + c * c)
         out[i, 0], out[i, 1], out[i, 2] = a / norm, b / norm, c / norm
-    return out
 
 
 class _ScanCopy:
@@ -174,10 +186,10 @@ class _ScanCopy:
             self.covariances = np.tile(np.eye(3), (len(self.points), 1, 1))
         if len(self.points) < 5 or (normal_radius is None and not covariances):
             return
-        threads = _point_threads()
-        tree = small_gicp.KdTree(self.sg, num_threads=threads)
+        workers = _point_threads()
+        tree = small_gicp.KdTree(self.sg, num_threads=workers)
         # One search serves the covariances and the normals.
-        idx, sq = tree.batch_knn_search(self.points, max(neighbours, _NORMAL_NEIGHBOURS), num_threads=threads)
+        idx, sq = tree.batch_knn_search(self.points, max(neighbours, _NORMAL_NEIGHBOURS), num_threads=workers)
         idx, sq = np.asarray(idx).astype(np.int64), np.asarray(sq)
         if covariances:
             self.covariances = gicp.covariances_from_neighbours(self.points, idx, neighbours)
