@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
-__all__ = ["cores", "split"]
+__all__ = ["beside", "cores", "split"]
 
 _POOL: ThreadPoolExecutor | None = None
 _POOL_SIZE = 0
+_BESIDE: ThreadPoolExecutor | None = None
 
 
 def cores() -> int:
@@ -54,3 +55,21 @@ def split(
     if _POOL is None or n > _POOL_SIZE:
         _POOL, _POOL_SIZE = ThreadPoolExecutor(max_workers=n, thread_name_prefix="nbs-kernel"), n
     return list(_POOL.map(work, parts if not interleave else [slice(k, None, n) for k in range(n)]))
+
+
+def beside(work: Callable[[], Any]) -> Future:
+    """``work()`` on a thread of its own while the caller goes on, when the process has more than
+    one core (else at once, on the caller's); ``.result()`` of the returned future waits for it and
+    raises what it raised. For work that releases the GIL beside work that does too (numpy's
+    random fills beside Embree's cast)."""
+    global _BESIDE
+    if cores() <= 1:
+        done: Future = Future()
+        try:
+            done.set_result(work())
+        except Exception as exc:  # handed to the caller through .result(), as a thread would
+            done.set_exception(exc)
+        return done
+    if _BESIDE is None:
+        _BESIDE = ThreadPoolExecutor(max_workers=1, thread_name_prefix="nbs-beside")
+    return _BESIDE.submit(work)

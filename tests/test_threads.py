@@ -93,3 +93,32 @@ def test_covariances_and_plane_normals_on_threads_are_the_single_thread_ones(mon
     for n in ("2", "3"):
         for got, want in zip(results[n], results["1"], strict=True):
             assert np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("n", ["1", "2"])
+def test_beside_runs_the_work_and_hands_back_its_result_or_error(monkeypatch, n):
+    monkeypatch.setenv("NBS_THREADS", n)
+    assert threads.beside(lambda: 6 * 7).result() == 42
+
+    def fails():
+        raise KeyError("the work's own error")
+
+    with pytest.raises(KeyError, match="own error"):
+        threads.beside(fails).result()
+
+
+def test_the_noise_drawn_beside_the_cast_is_the_noise_drawn_after_it(monkeypatch):
+    """A noisy scan on two threads (the noise drawn while Embree casts) is the one-thread scan."""
+    from nbs_env.sensing.pose import pose_from_xyz_rpy
+    from nbs_env.sensing.scanner import Scanner
+    from scenes import load_scene
+
+    scanner = Scanner(load_scene("l_room"), ScannerConfig(angular_step=1.0, range_noise=0.005))
+    pose = pose_from_xyz_rpy(3.0, 4.5, 1.5, 0.0, 0.0, 0.3)
+    scans = {}
+    for n in ("1", "2"):
+        monkeypatch.setenv("NBS_THREADS", n)
+        scans[n] = scanner.scan(pose, np.random.default_rng(5))
+    assert np.array_equal(scans["1"].ranges, scans["2"].ranges)
+    assert np.array_equal(scans["1"].points, scans["2"].points)
+    assert 0.002 < np.std(scans["1"].ranges - scans["1"].truth.ranges) < 0.01  # the noise is there
