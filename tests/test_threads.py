@@ -122,3 +122,26 @@ def test_the_noise_drawn_beside_the_cast_is_the_noise_drawn_after_it(monkeypatch
     assert np.array_equal(scans["1"].ranges, scans["2"].ranges)
     assert np.array_equal(scans["1"].points, scans["2"].points)
     assert 0.002 < np.std(scans["1"].ranges - scans["1"].truth.ranges) < 0.01  # the noise is there
+
+
+def test_an_episode_on_two_threads_is_the_one_thread_episode(monkeypatch):
+    """The meter running beside the plan, the noise beside the cast and the split kernels change
+    no decision and no figure: a greedy fast episode on two threads records what one thread does."""
+    import gymnasium as gym
+
+    import nbs_env  # noqa: F401  (registers the ids)
+    from policies import GreedyPolicy
+
+    records = {}
+    for n in ("1", "2"):
+        monkeypatch.setenv("NBS_THREADS", n)
+        env = gym.make("nbs_env/NBS-Fast-v0")
+        obs, info = env.reset(seed=3)
+        policy, steps = GreedyPolicy(), []
+        for _ in range(6):
+            obs, reward, terminated, truncated, info = env.step(policy.act(obs, info))
+            steps.append((reward, info["structure_sensed_pct"], env.unwrapped.storey.robot.pose.tobytes()))
+            if terminated or truncated:
+                break
+        records[n] = steps
+    assert len(records["1"]) > 2 and records["1"] == records["2"]
