@@ -145,3 +145,35 @@ def test_an_episode_on_two_threads_is_the_one_thread_episode(monkeypatch):
                 break
         records[n] = steps
     assert len(records["1"]) > 2 and records["1"] == records["2"]
+
+
+def test_s_of_t_merged_beside_is_the_s_of_t_merged_when_asked(monkeypatch):
+    """Three registered scans of l_room: with two threads each scan's merge into S(t) runs beside
+    (and waits before the next add, the next registration, and pickling); the poses and the working
+    copies are those of one thread, bit for bit."""
+    import pickle
+
+    from nbs_env.sensing.pose import pose_from_xyz_rpy
+    from nbs_env.sensing.registration import AccumulatedCloud, register
+    from nbs_env.sensing.scanner import Scanner
+    from scenes import load_scene
+
+    scanner = Scanner(load_scene("l_room"), ScannerConfig(angular_step=1.0))
+    stops = [pose_from_xyz_rpy(3.0, 4.5, 1.5), pose_from_xyz_rpy(2.0, 5.5, 1.5, 0, 0, 0.5)]
+    stops.append(pose_from_xyz_rpy(4.0, 3.5, 1.5, 0, 0, -0.4))
+    results = {}
+    for n in ("1", "2"):
+        monkeypatch.setenv("NBS_THREADS", n)
+        rng, cloud, poses = np.random.default_rng(2), AccumulatedCloud(voxel_size=0.05), []
+        for k, truth in enumerate(stops):
+            scan = scanner.scan(truth, rng)
+            prior = truth.copy()
+            prior[:2, 3] += [0.04, -0.03]
+            pose = register(scan.points, prior, cloud).pose if k else truth
+            cloud.add(scan.to_world(pose), pose[:3, 3], pose=pose if k else None)
+            poses.append(pose)
+        copy = pickle.loads(pickle.dumps(cloud))._copy(None)  # waits for the last merge
+        results[n] = (np.array(poses), copy._keys, copy._sums, cloud._copy(0)._sums)
+    assert len(results["1"][1]) > 1000
+    for got, want in zip(results["2"], results["1"], strict=True):
+        assert np.array_equal(got, want)

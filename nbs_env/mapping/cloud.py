@@ -140,7 +140,7 @@ class VoxelMeans:
         return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _pairwise(values: np.ndarray, order: np.ndarray, first: int, n: int, column: int) -> float:
     """numpy's pairwise sum (``pairwise_sum`` in its loops, the one ``np.add.reduceat`` runs) of
     ``values[order[first:first + n], column]``: the same result, bit for bit."""
@@ -168,7 +168,7 @@ def _pairwise(values: np.ndarray, order: np.ndarray, first: int, n: int, column:
     return _pairwise(values, order, first, half, column) + _pairwise(values, order, first + half, n - half, column)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _merge(held_keys, held_sums, held_counts, keys, order, values):
     """The voxels held merged with a scan's points (``keys`` per point, ``order`` sorting them):
     new (keys, sums, counts), sorted by key. A voxel's sum of the scan's points is its first point

@@ -23,6 +23,7 @@ import contextlib
 import os
 import time
 from collections.abc import Iterator
+from concurrent.futures import Future
 from dataclasses import dataclass
 
 import numba
@@ -287,6 +288,8 @@ class AccumulatedCloud:
         # scans' copies waiting to be merged: each scan is downsampled, and its normals estimated, once.
         self._prepared: _ScanCopy | None = None
         self._copies: dict[int, _ScanCopy] = {}
+        # The merge of the scans added last, running beside the robot's next work (see ``add``).
+        self._merging: Future | None = None
 
     def __len__(self) -> int:
         return len(self._full)
@@ -333,6 +336,7 @@ class AccumulatedCloud:
         points_world = np.asarray(points_world, dtype=np.float64)
         if points_world.ndim != 2 or points_world.shape[1] != 3 or not np.all(np.isfinite(points_world)):
             raise ValueError(f"points_world must be a finite (n, 3) array, got shape {points_world.shape}")
+        self._settle()
         if registered is None:
             registered = True if self._verdict is None else self._verdict
         self._verdict = None
@@ -350,8 +354,22 @@ class AccumulatedCloud:
         self._rooms_of_scans.append(int(room))
         self._origins.append(np.asarray(origin, dtype=float))
         self._registered.append(bool(registered))
-        # The working copies are merged when first asked for: a robot without ICP never asks.
+        # The working copies are merged when first asked for: a robot without ICP never asks. With
+        # ICP, and a second core, the merge starts now beside the robot's perception of the scan
+        # (numpy and the compiled merge release the GIL), off the next registration's path.
         self._pending.append(len(self._full) - 1)
+        if self.normals and threads.cores() > 1:
+            self._merging = threads.beside(self._update)
+
+    def _settle(self) -> None:
+        """Wait for a merge running beside (and raise what it raised)."""
+        merging, self._merging = self._merging, None
+        if merging is not None:
+            merging.result()
+
+    def __getstate__(self) -> dict:
+        self._settle()
+        return self.__dict__.copy()
 
     def _update(self) -> None:
         if not self._pending:
@@ -388,6 +406,7 @@ class AccumulatedCloud:
 
     def _copy(self, key) -> VoxelMeans | None:
         """The storey's copy (``None``), a room's (its index) or the target's (``"target"``), updated."""
+        self._settle()
         self._update()
         return self._target if key == "target" else self._storey if key is None else self._room_copies.get(key)
 
