@@ -200,3 +200,26 @@ def test_a_room_under_the_sky_has_no_ceiling_and_its_walls_top_the_prism():
         assert Polygon(roi.polygon).intersection(inside).area >= 0.9 * inside.area, roi.polygon
         # The prism ends under the ceiling, or at the top of the walls (2.6 m) under the sky.
         assert roi.ceiling_z == pytest.approx(2.6, abs=0.25)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_fallback_outline_is_skimages_douglas_peucker(seed):
+    """The fallback's own Douglas-Peucker keeps the vertices skimage's approximate_polygon keeps
+    (bit for bit), on the traced outline of a noisy room image and on a random walk."""
+    from skimage.measure import approximate_polygon, find_contours
+
+    from nbs_env.perception.roi import _douglas_peucker
+
+    rng = np.random.default_rng(seed)
+    image = np.zeros((120, 160), dtype=bool)
+    rows, cols = fill_polygon([10, 10, 60, 60, 110, 110], [10, 150, 150, 80, 80, 10], image.shape)
+    image[rows, cols] = True
+    image ^= rng.random(image.shape) < 0.02
+    contour = max(find_contours(image.astype(float), 0.5), key=len)
+    walk = np.cumsum(rng.normal(size=(500, 2)), axis=0)
+    for chain in (contour, walk):
+        for tolerance in (0.0, 0.5, 2.0, 7.5):
+            want = approximate_polygon(chain, tolerance)
+            got = _douglas_peucker(chain, tolerance)
+            assert np.array_equal(got, want)
+        assert 3 < len(_douglas_peucker(chain, 2.0)) < len(chain) // 2

@@ -659,15 +659,53 @@ def _merge_collinear(lines: list, max_deg: float, max_offset: float) -> list:
 
 def _fallback(boundary: np.ndarray, pixel: float) -> np.ndarray:
     """Douglas-Peucker outline when corners and lines do not close a valid polygon."""
-    from skimage.measure import approximate_polygon
-
-    poly = approximate_polygon(boundary, tolerance=2.0 * pixel)
+    poly = _douglas_peucker(boundary, tolerance=2.0 * pixel)
     out = Polygon(poly)
     if not out.is_valid:
         out = out.buffer(0)
         if out.geom_type != "Polygon":
             out = max(out.geoms, key=lambda g: g.area)
     return np.asarray(orient(out, 1.0).exterior.coords)[:-1]
+
+
+def _douglas_peucker(coords: np.ndarray, tolerance: float) -> np.ndarray:
+    """The (k, 2) chain ``coords`` simplified by Ramer-Douglas-Peucker: the vertices kept, in order.
+
+    The same vertices as ``skimage.measure.approximate_polygon`` (the tests' oracle), whose module
+    imports ``scipy.signal`` (a quarter of a second, paid at the first fallback outline of every
+    process, mid-episode). A point's distance is to the segment's line where it projects inside
+    the segment, else to the nearer end; the farthest point beyond ``tolerance`` splits the segment.
+    """
+    coords = np.asarray(coords, dtype=float)
+    if tolerance <= 0:
+        return coords
+    keep = np.zeros(len(coords), dtype=bool)
+    keep[0] = keep[-1] = True
+    distances = np.zeros(len(coords))
+    segments = [(0, len(coords) - 1)]
+    while segments:
+        start, end = segments.pop()
+        r0, c0 = coords[start]
+        r1, c1 = coords[end]
+        dr, dc = r1 - r0, c1 - c0
+        angle = -np.arctan2(dr, dc)
+        offset = c0 * np.sin(angle) + r0 * np.cos(angle)
+        inner = coords[start + 1 : end]
+        d = distances[start + 1 : end]
+        dr0, dc0 = inner[:, 0] - r0, inner[:, 1] - c0
+        dr1, dc1 = inner[:, 0] - r1, inner[:, 1] - c1
+        across = (dr0 * dr + dc0 * dc > 0) & (-dr1 * dr - dc1 * dc > 0)
+        d[across] = np.abs(inner[across, 0] * np.cos(angle) + inner[across, 1] * np.sin(angle) - offset)
+        beyond = ~across
+        d[beyond] = np.minimum(
+            np.sqrt(dc0[beyond] ** 2 + dr0[beyond] ** 2), np.sqrt(dc1[beyond] ** 2 + dr1[beyond] ** 2)
+        )
+        if np.any(d > tolerance):
+            split = start + int(np.argmax(d)) + 1
+            segments.append((split, end))
+            segments.append((start, split))
+            keep[split] = True
+    return coords[keep]
 
 
 def roi_iou(polygon: np.ndarray, truth: np.ndarray) -> float:
