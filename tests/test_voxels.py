@@ -389,3 +389,70 @@ def test_tracing_the_low_rays_ray_by_ray_marks_what_every_sample_marks(seed):
     want = _trace_low_plain(grid, points, centre, 0.0)
     assert want.any()
     np.testing.assert_array_equal(grid.crossed, want)
+
+
+def _numpy_occlusion(grid, polygon, floor_z, ceiling_z, se_faces, ceiling, frontier, reach):
+    """update_occlusion as numpy did it before the compiled pass (the oracle): whole-grid masks,
+    one per SE face. Returns (labels, speculative flat indices)."""
+    import shapely
+    from shapely.geometry import Polygon
+
+    from nbs_env.mapping.voxels import frontier_strips
+
+    s = grid.voxel_size
+    lo = np.array([*np.min(polygon, axis=0), floor_z]) - s
+    hi = np.array([*np.max(polygon, axis=0), ceiling_z]) + s
+    strips = frontier_strips(frontier, reach)
+    for strip in strips:
+        corners = np.asarray(strip.exterior.coords)
+        lo[:2], hi[:2] = np.minimum(lo[:2], corners.min(axis=0) - s), np.maximum(hi[:2], corners.max(axis=0) + s)
+    grid.ensure_covers(lo, hi)
+    labels = grid.labels.copy()
+    labels[(labels == VoxelLabel.OCCLUDED_CLUTTER) | (labels == VoxelLabel.OCCLUDED_STRUCTURE)] = VoxelLabel.UNKNOWN
+    xs, ys, zs = (grid.origin[a] + (np.arange(labels.shape[a]) + 0.5) * s for a in range(3))
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    in_plan = shapely.contains_xy(Polygon(polygon).buffer(s / 2), gx, gy)
+    inside = in_plan[:, :, None] & ((zs >= floor_z - s / 2) & (zs <= ceiling_z + s / 2))[None, None, :]
+    half = s / 2 * (1 + 1e-6)
+    near = (np.abs(zs - floor_z) <= half) | ((np.abs(zs - ceiling_z) <= half) & ceiling)
+    slab = in_plan[:, :, None] & near[None, None, :]
+    past = np.zeros(labels.shape, dtype=bool)
+    if strips:
+        beyond = shapely.contains_xy(shapely.union_all(strips), gx, gy) & ~in_plan
+        past = beyond[:, :, None] & near[None, None, :] & (labels == VoxelLabel.UNKNOWN)
+        labels[past] = VoxelLabel.OCCLUDED_STRUCTURE
+    for face in se_faces:
+        rel_x, rel_y = gx - face.p0[0], gy - face.p0[1]
+        u = rel_x * face.direction[0] + rel_y * face.direction[1]
+        w = rel_x * face.normal[0] + rel_y * face.normal[1]
+        on = (np.abs(w) <= half) & (u >= -half) & (u <= face.length + half)
+        slab |= on[:, :, None] & ((zs >= face.z0 - half) & (zs <= face.z1 + half))[None, None, :]
+    unsensed = labels == VoxelLabel.UNKNOWN
+    labels[inside & unsensed & slab] = VoxelLabel.OCCLUDED_STRUCTURE
+    labels[inside & unsensed & ~slab] = VoxelLabel.OCCLUDED_CLUTTER
+    return labels, np.flatnonzero(past)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_compiled_occlusion_pass_is_the_numpy_one(seed):
+    """Random labels, a random concave RoI, slanted SE faces (some on voxel boundaries), frontier
+    faces and the ceiling on or off: the compiled relabelling writes numpy's labels and speculative
+    voxels, bit for bit, including after the grid grows."""
+    rng = np.random.default_rng(seed)
+    s = (0.05, 0.1)[seed % 2]
+    grid = VoxelGrid.covering([-0.5, -0.5, -0.2], [3.2, 3.0, 2.6], s)  # the frontier reaches past it
+    grid.labels[:] = rng.choice(6, size=grid.labels.shape, p=[0.4, 0.3, 0.05, 0.05, 0.1, 0.1]).astype(np.uint8)
+    polygon = np.array([[0.0, 0.0], [3.0, 0.0], [3.0, 1.2], [1.5, 1.2], [1.2, 2.5], [0.0, 2.5]])
+    polygon += rng.normal(0, 0.02, polygon.shape)
+    faces = [WallFace(polygon[k], polygon[(k + 1) % 6], 0.0, 2.4) for k in range(6) if rng.random() < 0.7]
+    faces.append(WallFace(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.3, 1.1))  # on voxel boundaries
+    frontier = [WallFace(polygon[1], polygon[2], 0.0, 2.4)] if seed % 3 else []
+    ceiling = bool(seed % 2)
+    shape = grid.shape
+    want, speculative = _numpy_occlusion(grid, polygon, 0.0, 2.4, faces, ceiling, frontier, 0.8)
+    grid.update_occlusion(polygon, 0.0, 2.4, faces, ceiling=ceiling, frontier=frontier, frontier_reach=0.8)
+    assert np.array_equal(grid.labels, want)
+    assert np.array_equal(grid._speculative, speculative)
+    assert (want == VoxelLabel.OCCLUDED_STRUCTURE).any() and (want == VoxelLabel.OCCLUDED_CLUTTER).any()
+    assert bool(len(speculative)) == bool(frontier)
+    assert (grid.shape != shape) == bool(frontier)  # the grid grew to hold the strip past the frontier

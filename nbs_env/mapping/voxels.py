@@ -586,9 +586,6 @@ class VoxelGrid:
             corners = np.asarray(strip.exterior.coords)
             lo[:2], hi[:2] = np.minimum(lo[:2], corners.min(axis=0) - s), np.maximum(hi[:2], corners.max(axis=0) + s)
         self.ensure_covers(lo, hi)
-        labels = self.labels
-        occluded = (labels == VoxelLabel.OCCLUDED_CLUTTER) | (labels == VoxelLabel.OCCLUDED_STRUCTURE)
-        labels[occluded] = VoxelLabel.UNKNOWN
         nx, ny, nz = self.shape
         xs = self.origin[0] + (np.arange(nx) + 0.5) * s
         ys = self.origin[1] + (np.arange(ny) + 0.5) * s
@@ -597,28 +594,25 @@ class VoxelGrid:
         prism = Polygon(polygon).buffer(s / 2)
         in_plan = shapely.contains_xy(prism, gx, gy)  # (nx, ny)
         in_height = (zs >= floor_z - s / 2) & (zs <= ceiling_z + s / 2)
-        inside = in_plan[:, :, None] & in_height[None, None, :]
         # A face "passes through" a voxel when it comes within half a voxel of its centre.
-        slab = np.zeros(self.shape, dtype=bool)
         half = s / 2 * (1 + 1e-6)  # a face on a voxel boundary passes through both voxels
         near_floor = np.abs(zs - floor_z) <= half
         near_ceiling = (np.abs(zs - ceiling_z) <= half) & ceiling
-        slab |= in_plan[:, :, None] & (near_floor | near_ceiling)[None, None, :]
-        self._speculative = np.zeros(0, dtype=np.int64)
+        beyond = np.zeros((nx, ny), dtype=bool)
         if strips:
             beyond = shapely.contains_xy(shapely.union_all(strips), gx, gy) & ~in_plan
-            past = beyond[:, :, None] & (near_floor | near_ceiling)[None, None, :] & (labels == VoxelLabel.UNKNOWN)
-            labels[past] = VoxelLabel.OCCLUDED_STRUCTURE
-            self._speculative = np.flatnonzero(past)
-        for face in se_faces:
-            rel_x, rel_y = gx - face.p0[0], gy - face.p0[1]
-            u = rel_x * face.direction[0] + rel_y * face.direction[1]
-            w = rel_x * face.normal[0] + rel_y * face.normal[1]
-            on = (np.abs(w) <= half) & (u >= -half) & (u <= face.length + half)
-            slab |= on[:, :, None] & ((zs >= face.z0 - half) & (zs <= face.z1 + half))[None, None, :]
-        unsensed = labels == VoxelLabel.UNKNOWN
-        labels[inside & unsensed & slab] = VoxelLabel.OCCLUDED_STRUCTURE
-        labels[inside & unsensed & ~slab] = VoxelLabel.OCCLUDED_CLUTTER
+        faces = np.array([[*f.p0[:2], *f.direction[:2], *f.normal[:2], f.length] for f in se_faces], dtype=float)
+        face_z = np.array([(zs >= f.z0 - half) & (zs <= f.z1 + half) for f in se_faces], dtype=bool)
+        slab = near_floor | near_ceiling
+        labels = self.labels
+        fields = (xs, ys, in_plan, in_height, slab, beyond, faces.reshape(-1, 7), face_z.reshape(-1, nz), half)
+
+        def relabel(part: slice) -> np.ndarray:
+            return _occlusion_labels(labels[part], part.start, *fields)
+
+        # One compiled pass over the grid, in slabs along x on the kernels' threads (the numpy
+        # version, whole-grid masks and one per face, is the tests' oracle): the same labels.
+        self._speculative = np.concatenate(threads.split(relabel, nx, cost=labels.size, interleave=False))
 
     def speculative(self, points: np.ndarray) -> np.ndarray:
         """(n,) bool: which of the (n, 3) world points lie in a voxel the last
@@ -667,3 +661,57 @@ class VoxelGrid:
         path = Path(path)
         cloud.export(path)
         return path
+
+
+@numba.njit(cache=True, nogil=True)
+def _occlusion_labels(labels, first, xs, ys, in_plan, in_height, near_slab, beyond, faces, face_z, half):
+    """:meth:`VoxelGrid.update_occlusion`'s relabelling of the slabs ``labels`` (x from ``first``
+    on, of a grid whose columns' centres are ``xs``, ``ys``): occluded voxels back to UNKNOWN;
+    UNKNOWN voxels past a frontier (``beyond``, at floor or ceiling height) OCCLUDED_STRUCTURE;
+    then UNKNOWN voxels inside the RoI prism OCCLUDED_STRUCTURE where the floor, the ceiling or one
+    of ``faces`` ((f, 7): p0 xy, direction xy, normal xy, length; ``face_z`` (f, nz) the heights
+    each spans) passes within ``half`` of the centre, else OCCLUDED_CLUTTER. Returns the flat
+    indices (in the whole grid) made OCCLUDED_STRUCTURE past a frontier, ascending."""
+    nx, ny, nz = labels.shape
+    past = np.empty(16, dtype=np.int64)
+    count = 0
+    on = np.zeros(len(faces), dtype=np.bool_)
+    slab = np.empty(nz, dtype=np.bool_)
+    for i in range(nx):
+        x = xs[first + i]
+        for j in range(ny):
+            column = labels[i, j]
+            plan, past_frontier = in_plan[first + i, j], beyond[first + i, j]
+            if not plan and not past_frontier:
+                for k in range(nz):
+                    if column[k] == 4 or column[k] == 5:
+                        column[k] = 0
+                continue
+            touched = False
+            for f in range(len(faces)):
+                rel_x, rel_y = x - faces[f, 0], ys[j] - faces[f, 1]
+                u = rel_x * faces[f, 2] + rel_y * faces[f, 3]
+                w = rel_x * faces[f, 4] + rel_y * faces[f, 5]
+                on[f] = abs(w) <= half and u >= -half and u <= faces[f, 6] + half
+                touched |= on[f]
+            for k in range(nz):
+                slab[k] = near_slab[k]
+            if touched:
+                for f in range(len(faces)):
+                    if on[f]:
+                        for k in range(nz):
+                            slab[k] |= face_z[f, k]
+            for k in range(nz):
+                label = column[k]
+                if label == 4 or label == 5:
+                    label = 0
+                if label == 0 and past_frontier and near_slab[k]:
+                    label = 5
+                    if count == len(past):
+                        past = np.concatenate((past, np.empty(len(past), dtype=np.int64)))
+                    past[count] = ((first + i) * ny + j) * nz + k
+                    count += 1
+                elif label == 0 and plan and in_height[k]:
+                    label = 5 if slab[k] else 4
+                column[k] = label
+    return past[:count].copy()
