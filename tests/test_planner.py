@@ -121,3 +121,33 @@ def test_a_gain_model_of_the_wrong_shape_is_reported(toy_model):
         predict_gains(
             labels, np.zeros(3), 0.1, np.ones((4, 2)), 0.0, RobotConfig().scanner, GainConfig(model=toy_model)
         )
+
+
+def test_within_roi_tests_the_free_cells_as_the_whole_grid_test_did():
+    """The polygon test of only the free cells the robot did not stand on gives the whole grid's."""
+    import shapely
+    from shapely.geometry import Polygon
+
+    from nbs_env.planning.navigation import TraversabilityMap
+    from nbs_env.planning.planner import within_roi
+
+    rng = np.random.default_rng(4)
+    shape = (90, 70)
+    tmap = TraversabilityMap(
+        free=rng.random(shape) < 0.6,
+        clearance=np.full(shape, np.inf),
+        obstacle=np.zeros(shape, dtype=bool),
+        column_empty=np.ones(shape, dtype=bool),
+        visited=rng.random(shape) < 0.05,
+        origin=np.array([-1.03, 0.51]),
+        voxel_size=0.05,
+        robot_radius=0.3,
+        required_clearance=0.4,
+    )
+    polygon = np.array([[0.0, 1.0], [3.0, 1.0], [3.0, 2.5], [1.2, 2.5], [1.2, 3.9], [0.0, 3.9]])
+    i, j = np.meshgrid(np.arange(shape[0]), np.arange(shape[1]), indexing="ij")
+    centres = tmap.centre_of(np.column_stack([i.ravel(), j.ravel()]))
+    inside = shapely.contains_xy(Polygon(polygon), centres[:, 0], centres[:, 1]).reshape(shape)
+    got = within_roi(tmap, polygon).free
+    assert np.array_equal(got, tmap.free & (inside | tmap.visited))
+    assert got.any() and (tmap.free & ~got).any() and (got & ~inside).any()  # visited cells kept outside

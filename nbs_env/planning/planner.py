@@ -304,11 +304,12 @@ def within_roi(tmap: TraversabilityMap, polygon: np.ndarray) -> TraversabilityMa
     through a door, the box holds floor of other rooms that the scans saw, and an NVP there would
     scan the wrong room (measured on corpus:open_plan: a bathroom's first NVP lay in the living room
     it was entered from, and the RoI followed the robot there)."""
-    nx, ny = tmap.shape
-    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
-    centres = tmap.centre_of(np.column_stack([i.ravel(), j.ravel()]))
-    inside = shapely.contains_xy(Polygon(polygon), centres[:, 0], centres[:, 1]).reshape(nx, ny)
-    return replace(tmap, free=tmap.free & (inside | tmap.visited))
+    # Only free cells that the robot did not stand on can change: the polygon test is theirs alone.
+    test = tmap.free & ~tmap.visited
+    centres = tmap.centre_of(np.argwhere(test))
+    free = tmap.free.copy()
+    free[test] = shapely.contains_xy(Polygon(polygon), centres[:, 0], centres[:, 1])
+    return replace(tmap, free=free)
 
 
 def blocked_directions(belief, stops) -> list[np.ndarray] | None:
