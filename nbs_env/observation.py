@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 
+import numba
 import numpy as np
 
 from nbs_env.config import Config, ScannerConfig, _finite, _require
@@ -191,23 +192,34 @@ def pool_labels(labels: np.ndarray, cell_of: tuple[np.ndarray, np.ndarray, np.nd
     (shape) uint8
         VoxelLabel values; UNKNOWN where no voxel falls.
     """
-    out = np.zeros(tuple(shape), dtype=np.uint8)
-    ranks = _RANK[labels]
-    slices, targets = [], []
-    for axis in range(3):
-        c = np.asarray(cell_of[axis])
-        inside = np.flatnonzero((c >= 0) & (c < shape[axis]))
-        if not len(inside):
-            return out
-        lo, hi = int(inside[0]), int(inside[-1]) + 1
-        sub = c[lo:hi]
-        starts = np.flatnonzero(np.r_[True, sub[1:] != sub[:-1]])
-        slices.append((lo, hi, starts))
-        targets.append(sub[starts])
-    block = ranks[slices[0][0] : slices[0][1], slices[1][0] : slices[1][1], slices[2][0] : slices[2][1]]
-    for axis in range(3):
-        block = np.maximum.reduceat(block, slices[axis][2], axis=axis)
-    out[np.ix_(targets[0], targets[1], targets[2])] = _LABEL_OF_RANK[block]
+    c = [np.ascontiguousarray(cell_of[a], dtype=np.int64) for a in range(3)]
+    for a in range(3):
+        if len(c[a]) != labels.shape[a]:
+            raise ValueError(f"cell_of[{a}] has {len(c[a])} entries for {labels.shape[a]} voxels")
+    ranks = _pool_ranks(labels, c[0], c[1], c[2], tuple(int(n) for n in shape), _RANK)
+    return _LABEL_OF_RANK[ranks]
+
+
+@numba.njit(cache=True, nogil=True)
+def _pool_ranks(labels, cx, cy, cz, shape, rank):
+    """Per output cell, the highest priority rank of the voxels that fall in it (0: none)."""
+    out = np.zeros(shape, dtype=np.uint8)
+    nx, ny, nz = labels.shape
+    for i in range(nx):
+        a = cx[i]
+        if a < 0 or a >= shape[0]:
+            continue
+        for j in range(ny):
+            b = cy[j]
+            if b < 0 or b >= shape[1]:
+                continue
+            for k in range(nz):
+                d = cz[k]
+                if d < 0 or d >= shape[2]:
+                    continue
+                r = rank[labels[i, j, k]]
+                if r > out[a, b, d]:
+                    out[a, b, d] = r
     return out
 
 

@@ -139,6 +139,42 @@ def test_pooling_keeps_the_highest_priority_label():
     assert out[1, 0, 0] == VoxelLabel.STRUCTURE and (out[0] == VoxelLabel.UNKNOWN).all()
 
 
+def _numpy_pool(labels, cell_of, shape):
+    """pool_labels as numpy did it before the compiled pass (the oracle): ranks, then a maximum
+    reduced along each axis over the runs of equal cells."""
+    from nbs_env.observation import _LABEL_OF_RANK, _RANK
+
+    out = np.zeros(tuple(shape), dtype=np.uint8)
+    ranks = _RANK[labels]
+    slices, targets = [], []
+    for axis in range(3):
+        c = np.asarray(cell_of[axis])
+        inside = np.flatnonzero((c >= 0) & (c < shape[axis]))
+        if not len(inside):
+            return out
+        lo, hi = int(inside[0]), int(inside[-1]) + 1
+        sub = c[lo:hi]
+        starts = np.flatnonzero(np.r_[True, sub[1:] != sub[:-1]])
+        slices.append((lo, hi, starts))
+        targets.append(sub[starts])
+    block = ranks[slices[0][0] : slices[0][1], slices[1][0] : slices[1][1], slices[2][0] : slices[2][1]]
+    for axis in range(3):
+        block = np.maximum.reduceat(block, slices[axis][2], axis=axis)
+    out[np.ix_(targets[0], targets[1], targets[2])] = _LABEL_OF_RANK[block]
+    return out
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_pooling_is_the_numpy_pooling(seed):
+    """Random labels, windows that cut the grid and windows wider than it, 1 to 5 voxels a cell."""
+    rng = np.random.default_rng(seed)
+    labels = rng.choice(6, size=(37, 29, 13), p=[0.3, 0.4, 0.1, 0.05, 0.1, 0.05]).astype(np.uint8)
+    per = int(rng.integers(1, 6))
+    shape = (int(rng.integers(3, 20)), int(rng.integers(3, 20)), int(rng.integers(2, 8)))
+    cell_of = tuple(np.floor((np.arange(n) - int(rng.integers(-8, 8))) / per).astype(np.int64) for n in labels.shape)
+    assert np.array_equal(pool_labels(labels, cell_of, shape), _numpy_pool(labels, cell_of, shape))
+
+
 def test_masked_action_is_penalised_without_a_scan_and_bad_actions_raise():
     env = gym.make("nbs_env/NBS-Fast-v0", scene="office")  # 45 of its 64 slots are real NVPs
     obs, info = env.reset(seed=0)
