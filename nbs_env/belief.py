@@ -162,7 +162,9 @@ class RoomBelief:
             return []
         return [f for f, s in zip(self.roi.wall_faces, self.se, strict=True) if s]
 
-    def add_scan(self, scan: Scan, pose: np.ndarray, keep_direction: np.ndarray | None = None) -> BeliefUpdate:
+    def add_scan(
+        self, scan: Scan, pose: np.ndarray, keep_direction: np.ndarray | None = None, world: np.ndarray | None = None
+    ) -> BeliefUpdate:
         """Take in a registered scan: RoI, SE classification, point labels, V(t).
 
         Parameters
@@ -173,10 +175,12 @@ class RoomBelief:
             The robot's estimate of the scan's pose (after registration).
         keep_direction : (2,) float, optional
             For the first scan of a room taken in its door frame: the direction into the room.
+        world : (n, 3) float, optional
+            The scan placed with ``pose`` (``scan.to_world(pose)``), when the caller has it.
         """
         times: dict[str, float] = {}
         t = time.perf_counter()
-        new = RoIScan.from_scan(scan, pose, keep_direction)
+        new = RoIScan.from_scan(scan, pose, keep_direction, world)
         self.scans.append(new)
         self.cloud.add(new.points)
         roi = compute_roi(self.scans, self.roi_config, self.exclude)

@@ -167,8 +167,9 @@ class Robot:
             self.unregistered_m = 0.0 if result.accepted else travelled
         times["registration"] = time.perf_counter() - t
         world = scan.to_world(self.pose)
+        world.flags.writeable = False  # shared by S(t), the belief's RoI scan and the step's report
         self.cloud.add(world, self.pose[:3, 3], room=self.room_index, pose=None if result is None else self.pose)
-        update = self.belief.add_scan(scan, self.pose, keep_direction)
+        update = self.belief.add_scan(scan, self.pose, keep_direction, world)
         nav = self.config.navigation
         self.belief.cover(self.pose[:2, 3], nav.robot_radius + nav.safety_distance + 2 * self.config.voxel_size)
         times.update(update.times)

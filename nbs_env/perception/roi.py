@@ -192,8 +192,11 @@ class RoIScan:
     sky: bool = False
 
     @classmethod
-    def from_scan(cls, scan, pose: np.ndarray, keep_direction: np.ndarray | None = None) -> RoIScan:
-        """Build from a :class:`~nbs_env.sensing.scanner.Scan` and the robot's estimate of its pose."""
+    def from_scan(
+        cls, scan, pose: np.ndarray, keep_direction: np.ndarray | None = None, world: np.ndarray | None = None
+    ) -> RoIScan:
+        """Build from a :class:`~nbs_env.sensing.scanner.Scan` and the robot's estimate of its pose;
+        ``world``, (n, 3) float: ``scan.to_world(pose)`` when the caller has placed it already."""
         from nbs_env.sensing.scanner import ray_pattern
 
         directions, _, _ = ray_pattern(scan.config)
@@ -202,7 +205,9 @@ class RoIScan:
         up = ~returned & (directions[:, 2] > 0)
         low = ~returned & (directions[:, 2] < np.sin(np.radians(LOW_ELEVATION_DEG)))
         pose = np.asarray(pose, dtype=float)
-        points = scan.to_world(pose)
+        points = scan.to_world(pose) if world is None else np.asarray(world, dtype=float)
+        if points.shape != (len(scan), 3):
+            raise ValueError(f"world must be the scan's {len(scan)} points placed, got shape {points.shape}")
         return cls(
             points=points,
             origin=pose[:3, 3].copy(),
