@@ -81,8 +81,9 @@ def fast(args, policy) -> None:
     env = gym.make("nbs_env/NBS-Fast-v0")
     step_times, reset_times, stages = [], [], {s: [] for s in (*STAGES, "evaluation")}
     casts: list[float] = []
+    moves: list[bool] = []
     for seed in range(args.episodes):
-        reset, steps = _play(env, policy, seed, stages, casts)
+        reset, steps = _play(env, policy, seed, stages, casts, moves)
         reset_times.append(reset)
         step_times.extend(steps)
     total = sum(step_times)
@@ -94,6 +95,10 @@ def fast(args, policy) -> None:
     print(f"  raw cast of one scan ({rays:,} rays): {1e3 * cast:.2f} ms; a mean step is {mean / cast:.0f}x it")
     for s, values in stages.items():
         print(f"    {s:15s} {1e3 * statistics.median(values):7.1f} ms median")
+    for label, kind in (("within a room", False), ("ending a room", True)):
+        some = [t for t, moved in zip(step_times, moves, strict=True) if moved == kind]
+        if some:
+            print(f"  steps {label}: {len(some)}, mean {1e3 * statistics.mean(some):.0f} ms")
 
 
 def default(args, policy) -> None:
@@ -118,6 +123,8 @@ def default(args, policy) -> None:
         print(f"  {s:15s} {1e3 * m:10.1f} {m / cast:11.1f}")
     m = statistics.median(steps)
     print(f"  {'whole step':15s} {1e3 * m:10.1f} {m / cast:11.1f}")
+    order = " ".join(f"{1e3 * t:.0f}{'*' * e}" for t, e in zip(steps, moves, strict=True))
+    print(f"  steps in order (ms; * ends a room): {order}")
     # The median over steps depends on how many of them end a room, which the trajectory decides:
     # the two kinds apart compare runs whose trajectories differ.
     for label, kind in (("within a room", False), ("ending a room", True)):
