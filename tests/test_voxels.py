@@ -400,13 +400,8 @@ def _numpy_occlusion(grid, polygon, floor_z, ceiling_z, se_faces, ceiling, front
     from nbs_env.mapping.voxels import frontier_strips
 
     s = grid.voxel_size
-    lo = np.array([*np.min(polygon, axis=0), floor_z]) - s
-    hi = np.array([*np.max(polygon, axis=0), ceiling_z]) + s
     strips = frontier_strips(frontier, reach)
-    for strip in strips:
-        corners = np.asarray(strip.exterior.coords)
-        lo[:2], hi[:2] = np.minimum(lo[:2], corners.min(axis=0) - s), np.maximum(hi[:2], corners.max(axis=0) + s)
-    grid.ensure_covers(lo, hi)
+    grid._cover_prism(polygon, floor_z, ceiling_z, strips)
     labels = grid.labels.copy()
     labels[(labels == VoxelLabel.OCCLUDED_CLUTTER) | (labels == VoxelLabel.OCCLUDED_STRUCTURE)] = VoxelLabel.UNKNOWN
     xs, ys, zs = (grid.origin[a] + (np.arange(labels.shape[a]) + 0.5) * s for a in range(3))

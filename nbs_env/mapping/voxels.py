@@ -579,13 +579,8 @@ class VoxelGrid:
         would see past the edge has a gain and the RoI can grow.
         """
         s = self.voxel_size
-        lo = np.array([*np.min(polygon, axis=0), floor_z]) - s
-        hi = np.array([*np.max(polygon, axis=0), ceiling_z]) + s
         strips = frontier_strips(frontier, frontier_reach)
-        for strip in strips:
-            corners = np.asarray(strip.exterior.coords)
-            lo[:2], hi[:2] = np.minimum(lo[:2], corners.min(axis=0) - s), np.maximum(hi[:2], corners.max(axis=0) + s)
-        self.ensure_covers(lo, hi)
+        self._cover_prism(polygon, floor_z, ceiling_z, strips)
         nx, ny, nz = self.shape
         xs = self.origin[0] + (np.arange(nx) + 0.5) * s
         ys = self.origin[1] + (np.arange(ny) + 0.5) * s
@@ -613,6 +608,16 @@ class VoxelGrid:
         # One compiled pass over the grid, in slabs along x on the kernels' threads (the numpy
         # version, whole-grid masks and one per face, is the tests' oracle): the same labels.
         self._speculative = np.concatenate(threads.split(relabel, nx, cost=labels.size, interleave=False))
+
+    def _cover_prism(self, polygon: np.ndarray, floor_z: float, ceiling_z: float, strips: Sequence[Polygon]) -> None:
+        """Grow the grid over the RoI prism and the frontier ``strips``, a voxel to spare."""
+        s = self.voxel_size
+        lo = np.array([*np.min(polygon, axis=0), floor_z]) - s
+        hi = np.array([*np.max(polygon, axis=0), ceiling_z]) + s
+        for strip in strips:
+            corners = np.asarray(strip.exterior.coords)
+            lo[:2], hi[:2] = np.minimum(lo[:2], corners.min(axis=0) - s), np.maximum(hi[:2], corners.max(axis=0) + s)
+        self.ensure_covers(lo, hi)
 
     def speculative(self, points: np.ndarray) -> np.ndarray:
         """(n,) bool: which of the (n, 3) world points lie in a voxel the last
