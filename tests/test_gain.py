@@ -186,3 +186,21 @@ def test_predicted_gain_ranks_like_realised_conversions_on_generated_rooms():
     assert np.mean(rho) >= 0.5 and np.median(rho) >= 0.6, rho
     # Few NVPs lie inside furniture the robot never measured (the blind zone taken as free).
     assert sum(r["inside_obstacles"] for r in rows) <= 0.1 * sum(r["candidates"] for r in rows)
+
+
+@pytest.mark.parametrize("clutter_blocks", [False, True])
+def test_the_models_compiled_read_of_the_labels_is_numpys(clutter_blocks):
+    """Blocking voxels, their coarse cells and the Occluded-structure targets, as numpy's masks,
+    ``argwhere`` and the padded reshape gave them."""
+    from nbs_env.labels import is_occupied
+
+    rng = np.random.default_rng(11)
+    labels = rng.choice(6, size=(23, 17, 11), p=[0.3, 0.3, 0.1, 0.1, 0.1, 0.1]).astype(np.uint8)
+    model = VisibilityModel(labels, np.array([0.3, -1.2, 0.0]), 0.1, GainConfig(occluded_clutter_blocks=clutter_blocks))
+    blocking = is_occupied(labels) | (clutter_blocks & (labels == VoxelLabel.OCCLUDED_CLUTTER))
+    padded = np.zeros((24, 20, 12), dtype=bool)
+    padded[:23, :17, :11] = blocking
+    assert np.array_equal(model.blocking, blocking)
+    assert np.array_equal(model.coarse, padded.reshape(6, 4, 5, 4, 3, 4).any(axis=(1, 3, 5)))
+    targets = np.argwhere(labels == VoxelLabel.OCCLUDED_STRUCTURE)
+    assert np.array_equal(model.targets, np.array([0.3, -1.2, 0.0]) + (targets + 0.5) * 0.1)

@@ -16,7 +16,7 @@ import numpy as np
 
 from nbs_env import threads
 from nbs_env.config import Config, ScannerConfig, _finite_fields, _integer, _require
-from nbs_env.labels import VoxelLabel, is_occupied
+from nbs_env.labels import VoxelLabel
 
 __all__ = ["COARSE", "GainConfig", "VisibilityModel", "coarse_blocking"]
 
@@ -66,6 +66,9 @@ class GainConfig(Config):
 #: Edge of the coarse cells of the traversal, in voxels: a line of sight crosses a coarse cell that
 #: holds no blocking voxel in one step (see :func:`_clear`).
 COARSE = 4
+# The labels as plain integers, for the compiled pass (numba reads module globals as constants).
+_CLUTTER, _STRUCTURE = int(VoxelLabel.CLUTTER), int(VoxelLabel.STRUCTURE)
+_OCCLUDED_CLUTTER, _OCCLUDED_STRUCTURE = int(VoxelLabel.OCCLUDED_CLUTTER), int(VoxelLabel.OCCLUDED_STRUCTURE)
 
 
 def coarse_blocking(blocking: np.ndarray, block: int = COARSE) -> np.ndarray:
@@ -79,11 +82,49 @@ def coarse_blocking(blocking: np.ndarray, block: int = COARSE) -> np.ndarray:
     -------
     (ceil(nx / block), ceil(ny / block), ceil(nz / block)) bool
     """
-    shape = tuple(-(-n // block) * block for n in blocking.shape)
-    padded = np.zeros(shape, dtype=bool)
-    padded[: blocking.shape[0], : blocking.shape[1], : blocking.shape[2]] = blocking
-    cells = padded.reshape(shape[0] // block, block, shape[1] // block, block, shape[2] // block, block)
-    return cells.any(axis=(1, 3, 5))
+    return _coarse(np.ascontiguousarray(blocking, dtype=np.bool_), int(block))
+
+
+@numba.njit(cache=True, nogil=True)
+def _coarse(blocking: np.ndarray, block: int) -> np.ndarray:
+    nx, ny, nz = blocking.shape
+    out = np.zeros((-(-nx // block), -(-ny // block), -(-nz // block)), dtype=np.bool_)
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                if blocking[i, j, k]:
+                    out[i // block, j // block, k // block] = True
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _read_labels(labels: np.ndarray, clutter_blocks: bool, block: int):
+    """One pass over V(t)'s labels: which voxels block a line of sight (occupied, and Occluded-
+    clutter when ``clutter_blocks``), the ``block``³ cells holding one (:func:`coarse_blocking`),
+    and the (n, 3) indices of the Occluded-structure voxels in C order (``np.argwhere``'s)."""
+    nx, ny, nz = labels.shape
+    blocking = np.zeros((nx, ny, nz), dtype=np.bool_)
+    coarse = np.zeros((-(-nx // block), -(-ny // block), -(-nz // block)), dtype=np.bool_)
+    count = 0
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                label = labels[i, j, k]
+                occupied = (label == _CLUTTER) | (label == _STRUCTURE)
+                if occupied or (clutter_blocks and label == _OCCLUDED_CLUTTER):
+                    blocking[i, j, k] = True
+                    coarse[i // block, j // block, k // block] = True
+                elif label == _OCCLUDED_STRUCTURE:
+                    count += 1
+    targets = np.empty((count, 3), dtype=np.int64)
+    n = 0
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                if labels[i, j, k] == _OCCLUDED_STRUCTURE:
+                    targets[n, 0], targets[n, 1], targets[n, 2] = i, j, k
+                    n += 1
+    return blocking, coarse, targets
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -232,10 +273,11 @@ class VisibilityModel:
         self.config = config or GainConfig()
         self.origin = np.asarray(origin, dtype=float)
         self.voxel_size = float(voxel_size)
-        blocking = is_occupied(labels)
-        if self.config.occluded_clutter_blocks:
-            blocking |= labels == VoxelLabel.OCCLUDED_CLUTTER
-        targets = np.argwhere(labels == VoxelLabel.OCCLUDED_STRUCTURE)
+        # One compiled pass for what numpy took five (is_occupied, ==, argwhere, the coarse cells):
+        # the same arrays (tests/test_gain.py).
+        blocking, coarse, targets = _read_labels(
+            np.ascontiguousarray(labels, dtype=np.uint8), bool(self.config.occluded_clutter_blocks), COARSE
+        )
         self.targets = self.origin + (targets + 0.5) * self.voxel_size  # (n, 3) world centres
         # Groups of voxels share one line of sight (see GainConfig.group).
         g = max(1, int(self.config.group))
@@ -253,8 +295,8 @@ class VisibilityModel:
         else:
             self.group_centres = np.zeros((0, 3))
             self.group_counts = np.zeros(0, dtype=np.int64)
-        self.blocking = np.ascontiguousarray(blocking)
-        self.coarse = coarse_blocking(self.blocking)
+        self.blocking = blocking
+        self.coarse = coarse
 
     def _seen(self, sensors: np.ndarray, targets: np.ndarray, scanner: ScannerConfig) -> np.ndarray:
         """(c, n) bool: which of the (n, 3) targets each of the (c, 3) sensors sees."""
