@@ -847,8 +847,6 @@ def assume_blind_zone_free(
     sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
     if blocked is not None and len(blocked) != len(sensors):
         raise ValueError(f"{len(blocked)} blocked-direction sets for {len(sensors)} stops")
-    # Freeing a voxel never makes another one unsensed, so the stops may share one mask.
-    unsensed = (out == VoxelLabel.UNKNOWN) | (out == VoxelLabel.OCCLUDED_CLUTTER)
     grid = (tuple(float(v) for v in np.asarray(origin, dtype=float)), float(voxel_size), out.shape)
     for k, sensor in enumerate(sensors):
         directions = None
@@ -858,7 +856,10 @@ def assume_blind_zone_free(
         if cone is None:
             continue
         window, below = cone
-        out[window][below & unsensed[window]] = VoxelLabel.EMPTY
+        # Only the window is read: freeing a voxel never makes another one unsensed, so an earlier
+        # stop's freeing changes nothing for this one.
+        part = out[window]
+        part[below & ((part == VoxelLabel.UNKNOWN) | (part == VoxelLabel.OCCLUDED_CLUTTER))] = VoxelLabel.EMPTY
     return out
 
 
