@@ -177,3 +177,35 @@ def test_s_of_t_merged_beside_is_the_s_of_t_merged_when_asked(monkeypatch):
     assert len(results["1"][1]) > 1000
     for got, want in zip(results["2"], results["1"], strict=True):
         assert np.array_equal(got, want)
+
+
+def test_the_cast_waits_until_the_noise_draw_has_begun(monkeypatch):
+    """open3d's cast holds the GIL and numpy's draw releases it: the scan starts the cast only once
+    the draw beside it has begun, so the two overlap (else the draw would begin after the cast).
+    The draw's thread is made to start late, as a busy machine may."""
+    import time
+
+    from nbs_env.sensing.pose import pose_from_xyz_rpy
+    from nbs_env.sensing.scanner import Scanner
+    from scenes import load_scene
+
+    monkeypatch.setenv("NBS_THREADS", "2")
+    scanner = Scanner(load_scene("l_room"), ScannerConfig(angular_step=1.0, range_noise=0.005))
+    pose = pose_from_xyz_rpy(3.0, 4.5, 1.5)
+    scanner.scan(pose, np.random.default_rng(0))  # the kernels loaded: the cast comes at once
+    casts = []
+    draw, cast, beside = np.random.default_rng(5).standard_normal, scanner.cast, threads.beside
+
+    class Watched:
+        def standard_normal(self, *args, **kwargs):
+            self.casts_before = len(casts)
+            return draw(*args, **kwargs)
+
+    def late(work):
+        return beside(lambda: (time.sleep(0.05), work())[1])
+
+    monkeypatch.setattr(threads, "beside", late)
+    monkeypatch.setattr(scanner, "cast", lambda rays: (casts.append(1), cast(rays))[1])
+    rng = Watched()
+    scanner.scan(pose, rng)
+    assert casts == [1] and rng.casts_before == 0

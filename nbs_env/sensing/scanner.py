@@ -8,6 +8,7 @@ measured part of a :class:`Scan` (points in the sensor frame, ranges, pattern in
 from __future__ import annotations
 
 import functools
+import threading
 from dataclasses import dataclass, field
 
 import numba
@@ -276,8 +277,17 @@ class Scanner:
         # Reused buffers: fresh multi-megabyte arrays cost page faults on every scan.
         noise = self._noise_buffer
         if cfg.range_noise > 0:
-            # Drawn while Embree casts (both release the GIL): a tenth of a scan's time otherwise.
-            drawn = threads.beside(lambda: rng.standard_normal(dtype=np.float32, out=noise))
+            # Drawn while Embree casts: a tenth of a scan's time otherwise. numpy's draw releases the
+            # GIL, open3d's cast holds it, so the cast waits until the draw has begun (else the draw
+            # could only begin after the cast).
+            started = threading.Event()
+
+            def draw() -> None:
+                started.set()
+                rng.standard_normal(dtype=np.float32, out=noise)
+
+            drawn = threads.beside(draw)
+            started.wait()
         t_hit, prim = self.cast(self._place(T, self._ray_buffer))
         if cfg.range_noise > 0:
             drawn.result()
