@@ -26,7 +26,7 @@ import numpy as np
 
 from nbs_env import threads
 
-__all__ = ["align", "covariances_from_neighbours", "jacobi"]
+__all__ = ["align", "covariances_from_neighbours", "jacobi", "smallest_eigenvector"]
 
 #: small_gicp's Levenberg-Marquardt settings: the initial damping, its factor, the inner tries.
 _LAMBDA = 1e-3
@@ -40,7 +40,7 @@ CHUNK = 4096
 def jacobi(A: np.ndarray, V: np.ndarray) -> None:
     """Diagonalise the symmetric 3 x 3 ``A`` in place by cyclic Jacobi rotations (at most 12 sweeps,
     far more than a 3 x 3 needs); ``V`` receives the eigenvectors (columns, in the order of ``A``'s
-    diagonal). Also the plane normals' solver (:mod:`nbs_env.sensing.registration`)."""
+    diagonal). The solver of :func:`smallest_eigenvector`, for the covariances and the plane normals."""
     for i in range(3):
         for j in range(3):
             V[i, j] = 1.0 if i == j else 0.0
@@ -101,6 +101,19 @@ def covariances_from_neighbours(points: np.ndarray, idx: np.ndarray, k: int) -> 
 
 
 @numba.njit(cache=True, nogil=True)
+def smallest_eigenvector(A: np.ndarray, V: np.ndarray) -> tuple[float, float, float]:
+    """The eigenvector of the smallest eigenvalue of the symmetric 3 x 3 ``A`` (overwritten; ``V``
+    is work space), by :func:`jacobi`. Also the plane normals' (:mod:`nbs_env.sensing.registration`)."""
+    jacobi(A, V)
+    m = 0
+    if A[1, 1] < A[m, m]:
+        m = 1
+    if A[2, 2] < A[m, m]:
+        m = 2
+    return V[0, m], V[1, m], V[2, m]
+
+
+@numba.njit(cache=True, nogil=True)
 def _covariances(points: np.ndarray, idx: np.ndarray, k: int, out: np.ndarray) -> None:
     n = idx.shape[0]
     A = np.empty((3, 3))
@@ -131,16 +144,11 @@ def _covariances(points: np.ndarray, idx: np.ndarray, k: int, out: np.ndarray) -
         A[0, 0], A[0, 1], A[0, 2] = xx / count - mx * mx, xy / count - mx * my, xz / count - mx * mz
         A[1, 1], A[1, 2], A[2, 2] = yy / count - my * my, yz / count - my * mz, zz / count - mz * mz
         A[1, 0], A[2, 0], A[2, 1] = A[0, 1], A[0, 2], A[1, 2]
-        jacobi(A, V)
-        m = 0
-        if A[1, 1] < A[m, m]:
-            m = 1
-        if A[2, 2] < A[m, m]:
-            m = 2
+        v = smallest_eigenvector(A, V)
         # V diag(1e-3, 1, 1) Vᵀ = I - (1 - 1e-3) v vᵀ, v the eigenvector of the least eigenvalue.
         for a in range(3):
             for b in range(3):
-                out[i, a, b] = (1.0 if a == b else 0.0) - (1.0 - 1e-3) * V[a, m] * V[b, m]
+                out[i, a, b] = (1.0 if a == b else 0.0) - (1.0 - 1e-3) * v[a] * v[b]
 
 
 @numba.njit(cache=True, nogil=True)

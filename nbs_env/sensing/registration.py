@@ -20,7 +20,6 @@ stays out of later targets.
 from __future__ import annotations
 
 import contextlib
-import os
 import time
 from collections.abc import Iterator
 from concurrent.futures import Future
@@ -47,15 +46,6 @@ def _cloud(points: np.ndarray, normals: np.ndarray | None = None):
     return pc
 
 
-def _point_threads() -> int:
-    """Threads for the steps that compute each point on its own (k-d trees, nearest neighbours,
-    covariances, normals): their results do not depend on the thread count, unlike ICP's sums."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
-
-
 @contextlib.contextmanager
 def _open3d_threads(n: int | None) -> Iterator[None]:
     """Run open3d with ``n`` threads (None: leave as is), restoring the previous count afterwards."""
@@ -74,19 +64,6 @@ def _open3d_threads(n: int | None) -> Iterator[None]:
 #: Nearest points a normal reads at most, and the fewest within ``normal_radius`` for a trusted one.
 _NORMAL_NEIGHBOURS = 20
 _MIN_NORMAL_NEIGHBOURS = 6
-
-
-@numba.njit(cache=True, nogil=True)
-def _smallest_eigenvector(A: np.ndarray, V: np.ndarray) -> tuple[float, float, float]:
-    """The eigenvector of the smallest eigenvalue of the symmetric 3 x 3 ``A`` (overwritten; ``V``
-    is work space), by cyclic Jacobi rotations."""
-    gicp.jacobi(A, V)
-    m = 0
-    if A[1, 1] < A[m, m]:
-        m = 1
-    if A[2, 2] < A[m, m]:
-        m = 2
-    return V[0, m], V[1, m], V[2, m]
 
 
 def _plane_normals(
@@ -141,7 +118,7 @@ def _plane_normal_rows(
         A[0, 0], A[0, 1], A[0, 2] = xx, xy, xz
         A[1, 0], A[1, 1], A[1, 2] = xy, yy, yz
         A[2, 0], A[2, 1], A[2, 2] = xz, yz, zz
-        a, b, c = _smallest_eigenvector(A, V)
+        a, b, c = gicp.smallest_eigenvector(A, V)
         norm = np.sqrt(a * a + b * b + c * c)
         out[i, 0], out[i, 1], out[i, 2] = a / norm, b / norm, c / norm
 
@@ -187,7 +164,7 @@ class _ScanCopy:
             self.covariances = np.tile(np.eye(3), (len(self.points), 1, 1))
         if len(self.points) < 5 or (normal_radius is None and not covariances):
             return
-        workers = _point_threads()
+        workers = threads.cores()
         tree = small_gicp.KdTree(self.sg, num_threads=workers)
         # One search serves the covariances and the normals.
         idx, sq = tree.batch_knn_search(self.points, max(neighbours, _NORMAL_NEIGHBOURS), num_threads=workers)
@@ -822,10 +799,10 @@ class _Target:
         if cfg.method != "open3d":
             small_gicp = _small_gicp()
             self.sg = small_gicp.PointCloud(self.points)
-            self.tree = small_gicp.KdTree(self.sg, num_threads=_point_threads())
+            self.tree = small_gicp.KdTree(self.sg, num_threads=threads.cores())
             if cfg.method == "plane":
                 small_gicp.estimate_normals(
-                    self.sg, self.tree, num_neighbors=cfg.neighbours, num_threads=_point_threads()
+                    self.sg, self.tree, num_neighbors=cfg.neighbours, num_threads=threads.cores()
                 )
             else:
                 # Where S(t) keeps no covariance (sparse in every scan, or a cloud without normals),
@@ -838,11 +815,8 @@ class _Target:
                 if covariances is None:
                     self.covariances = np.zeros((len(points), 3, 3))
                 if len(missing):
-                    idx, _ = self.tree.batch_knn_search(
-                        self.points[missing], cfg.neighbours, num_threads=_point_threads()
-                    )
-                    self.covariances[missing] = gicp.covariances_from_neighbours(
-                        self.points, np.asarray(idx).astype(np.int64), cfg.neighbours
+                    self.covariances[missing] = _neighbour_covariances(
+                        self.tree, self.points, self.points[missing], cfg.neighbours
                     )
         else:
             self.cloud = _cloud(points, normals)
@@ -855,7 +829,7 @@ class _Target:
     def nearest_squared(self, world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(index, squared distance) of the nearest target point to each of (m, 3) ``world``
         (index -1 where none), from small_gicp's k-d tree."""
-        idx, sq = self.tree.batch_nearest_neighbor_search(world, num_threads=_point_threads())
+        idx, sq = self.tree.batch_nearest_neighbor_search(world, num_threads=threads.cores())
         return np.asarray(idx, dtype=np.int64), np.asarray(sq, dtype=float)
 
     def nearest(self, world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -870,6 +844,13 @@ class _Target:
             self._kd = cKDTree(self.points)
         dist, idx = self._kd.query(world)
         return dist, idx
+
+
+def _neighbour_covariances(tree, points: np.ndarray, queries: np.ndarray, k: int) -> np.ndarray:
+    """(m, 3, 3) float: GICP's covariance of each of the (m, 3) ``queries`` from its ``k`` nearest
+    among the (n, 3) ``points`` (small_gicp's k-d ``tree`` of them)."""
+    idx, _ = tree.batch_knn_search(queries, k, num_threads=threads.cores())
+    return gicp.covariances_from_neighbours(points, np.asarray(idx).astype(np.int64), k)
 
 
 def _small_gicp():
@@ -1063,10 +1044,8 @@ class _Source:
         small_gicp = _small_gicp()
         self.sg = small_gicp.PointCloud(points) if sg is None else sg
         if cfg.method == "gicp" and covariances is None:  # plane-to-plane needs the scan's covariances
-            tree = small_gicp.KdTree(self.sg, num_threads=_point_threads())
-            idx, _ = tree.batch_knn_search(points, cfg.neighbours, num_threads=_point_threads())
-            idx = np.asarray(idx).astype(np.int64)
-            self.covariances = gicp.covariances_from_neighbours(points, idx, cfg.neighbours)
+            tree = small_gicp.KdTree(self.sg, num_threads=threads.cores())
+            self.covariances = _neighbour_covariances(tree, points, points, cfg.neighbours)
 
     @classmethod
     def coarser(cls, points: np.ndarray, voxel: float, cfg: RegistrationConfig) -> _Source:
