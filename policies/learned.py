@@ -156,13 +156,16 @@ def build_network(config: NetworkConfig):
                 nn.Linear(c3 * 32, config.grid_dim),
                 nn.ReLU(),
             )
+            # Not in the state dict: checkpoints keep their keys.
+            self.register_buffer("codes", torch.arange(N_LABELS, dtype=torch.float32), persistent=False)
 
         def forward(self, labels):
-            # One-hot channels written in place: one_hot() then permute and float() made two more
-            # copies of the window, 8-byte integers among them (129 against 54 ms for 64 windows).
-            index = labels.round().long().clamp(0, N_LABELS - 1).unsqueeze(1)
-            one_hot = torch.zeros((labels.shape[0], N_LABELS, *labels.shape[1:]), device=labels.device)
-            return self.net(one_hot.scatter_(1, index, 1.0))
+            # The one-hot built as (B, X, Y, Z, label) and read as (B, label, X, Y, Z): channels-last
+            # memory, in which oneDNN's 3-D convolutions train in 119 ms for 64 windows on two
+            # cores against 197 ms channels-first (the backward pass halves), the same values.
+            index = labels.round().clamp(0, N_LABELS - 1)
+            one_hot = (index.unsqueeze(-1) == self.codes).to(torch.float32)
+            return self.net(one_hot.permute(0, 4, 1, 2, 3))
 
     class CandidateScorer(nn.Module):
         """(B, grid_dim + K·F) → (B, actions) logits; one MLP shared by every candidate slot."""

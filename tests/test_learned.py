@@ -60,7 +60,7 @@ def test_loaded_policy_acts_as_the_trained_model(trained):
 
 
 def test_the_encoder_reads_the_labels_as_one_hot_channels():
-    """The encoder's in-place one-hot is torch's ``one_hot`` moved to channels, to the last bit:
+    """The encoder's one-hot is torch's ``one_hot`` moved to channels, to the last bit:
     labels out of range clamp to the nearest, float labels round."""
     from policies.learned import N_LABELS
 
@@ -68,8 +68,18 @@ def test_the_encoder_reads_the_labels_as_one_hot_channels():
     encoder, _ = build_network(NetworkConfig(voxel_shape=(16, 16, 8)))
     labels = torch.randint(-1, N_LABELS + 1, (3, 16, 16, 8)).float() + 0.2
     want = torch.nn.functional.one_hot(labels.round().long().clamp(0, N_LABELS - 1), N_LABELS)
-    want = encoder.net(want.permute(0, 4, 1, 2, 3).float())
-    assert torch.equal(encoder(labels), want)
+    want = want.permute(0, 4, 1, 2, 3).float()
+    assert torch.equal(encoder(labels), encoder.net(want))
+    # Channels-last memory is a matter of speed: channels-first gives the same values and gradients.
+    got = encoder(labels)
+    got.square().sum().backward()
+    grads = [p.grad.clone() for p in encoder.parameters()]
+    encoder.zero_grad()
+    first = encoder.net(want.contiguous())
+    first.square().sum().backward()
+    assert torch.allclose(got, first, rtol=1e-5, atol=1e-6)
+    for g, w in zip(grads, encoder.parameters(), strict=True):
+        assert torch.allclose(g, w.grad, rtol=1e-4, atol=1e-6)
 
 
 def test_scores_do_not_depend_on_the_slot():
