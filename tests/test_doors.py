@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -264,3 +266,42 @@ def test_the_point_index_finds_what_a_mask_over_every_point_finds():
         want = np.flatnonzero((x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1]))
         np.testing.assert_array_equal(index.within(lo, hi), want)
     assert len(PointIndex(np.zeros((0, 3))).within(np.zeros(2), np.ones(2))) == 0
+
+
+def _outline(*corners: tuple[float, float]) -> list[WallFace]:
+    """The faces of an open outline through the given (x, y) corners, 2.6 m high."""
+    return [WallFace(np.array(a, float), np.array(b, float), 0.0, 2.6) for a, b in itertools.pairwise(corners)]
+
+
+def test_a_door_under_a_bulge_of_the_outline_is_found_on_the_bridge_over_it():
+    # corpus:large_storey: the corridor's outline bulges 0.35 m through a door (a scan stood in
+    # front of it), its lintel is seen in stripes too far apart for either face's line to be
+    # followed across it, and the room behind it was never entered. The faces on either side of
+    # the bulge are one wall: searched as one, the door is found.
+    faces = _outline((0.0, 0.0), (0.9, 0.0), (1.2, -0.35), (1.7, -0.35), (2.0, 0.0), (6.0, 0.0))
+    scans = wall_scan((1.0, 1.9), None, through=True, lintel_stripes=0.2)
+    doors = detect_doors(faces, scans)
+    assert len(doors) == 1
+    assert np.allclose(doors[0].centre[:2], [1.45, 0.0], atol=0.05)
+    assert doors[0].width == pytest.approx(0.9, abs=0.051)
+    assert np.allclose(doors[0].outward, [0.0, -1.0], atol=0.01)
+    # The two faces alone are no outline (nothing joins them): followed, neither reaches across.
+    assert detect_doors([faces[0], faces[-1]], scans) == []
+
+
+def test_only_a_shallow_outward_bulge_between_faces_on_one_line_is_bridged():
+    from nbs_env.perception.doors import _bridges
+
+    door = _outline((0.0, 0.0), (0.9, 0.0), (1.2, -0.35), (1.7, -0.35), (2.0, 0.0), (6.0, 0.0))
+    assert [pair for _, pair in _bridges(door, 4.0)] == [(0, 4)]
+    bridge = _bridges(door, 4.0)[0][0]
+    assert np.allclose(bridge.p0, [0.0, 0.0]) and np.allclose(bridge.p1, [3.0, 0.0])  # a metre into the far face
+    # The room going on: an arm as deep as 3 m behind a 1.1 m gap.
+    arm = _outline((0.0, 0.0), (0.9, 0.0), (0.9, -3.0), (2.0, -3.0), (2.0, 0.0), (6.0, 0.0))
+    assert _bridges(arm, 4.0) == []
+    # Into the room (a pillar's notch), farther than the door's widest, or turned off the line.
+    notch = _outline((0.0, 0.0), (0.9, 0.0), (1.2, 0.35), (1.7, 0.35), (2.0, 0.0), (6.0, 0.0))
+    assert _bridges(notch, 4.0) == []
+    assert _bridges(door, 1.0) == []
+    turned = _outline((0.0, 0.0), (0.9, 0.0), (1.2, -0.35), (1.7, -0.35), (2.0, 0.0), (6.0, 1.0))
+    assert _bridges(turned, 4.0) == []

@@ -26,7 +26,9 @@ Two things the robot's own scans do to a door, which the search allows for:
   stops short of the door. Each face is therefore first moved onto the wall its points show (a
   line fitted to them) and then followed along that line beyond its ends for as long as measured
   points continue on it (a wall does, and so does an opening whose lintel was seen), at most
-  ``max_extension`` farther.
+  ``max_extension`` farther. Where the lintel was seen in stripes too far apart to follow the
+  line across, the two faces either side of the bulge are searched as one (a bridge), when the
+  outline between them leaves their line outward only, no deeper than the gap is wide.
 
 An opening onto the outside (METHOD §8) has no ceiling beyond it: the scanner's upward rays through
 it return nothing. Of the rising rays of the room's scans that cross the opening farther than the
@@ -213,6 +215,8 @@ _BAND = 0.10
 #: line 0.4 m into a door whose lintel showed in columns two pixels apart, and the room behind it was
 #: never entered).
 _FOLLOW_GAP = 0.15
+#: Most faces an outline's bulge through a door is walked over (:func:`_bridges`).
+_BULGE_FACES = 8
 
 
 def _fill_row_gaps(image: np.ndarray, gap: int) -> np.ndarray:
@@ -600,14 +604,15 @@ def detect_doors(
     cfg = config or DoorConfig()
     points = np.concatenate([np.asarray(p, dtype=float) for p, _ in scans]) if scans else np.zeros((0, 3))
     index = PointIndex(points)
-    doors: list[DetectedDoor] = []
-    measured: cKDTree | None = None  # built for the first opening whose rays are counted
+    measured: list[cKDTree] = []  # built for the first opening whose rays are counted
     px = cfg.pixel
     gap = int(np.floor(cfg.fill_gap / px + 1e-9))
-    for k, given in enumerate(faces):
+
+    def search(k: int, given: WallFace, others: list[WallFace]) -> list[DetectedDoor]:
+        """The openings on the wall of ``given``, reported as on face ``k``."""
+        doors: list[DetectedDoor] = []
         face = _refit(given, index, _BAND, cfg.floor_gap)
         # The image's rows run from the floor, its columns along the (followed) face.
-        others = [f for j, f in enumerate(faces) if j != k]
         face, image = _followed(face, others, index, px, gap, cfg.max_extension, cfg.floor_gap)
         rows = image.shape[0]
         # Height of the empty run from the floor (allowing a threshold) in every column.
@@ -648,9 +653,9 @@ def detect_doors(
                 continue
             covered = float("nan")
             if no_return is not None:
-                if measured is None:
-                    measured = cKDTree(_within(index, [o for _, o in scans], min_range + 2 * _CLEARANCE))
-                hits, misses = _rising_rays(face, scans, no_return, u0, u1, height, min_range, others, measured)
+                if not measured:
+                    measured.append(cKDTree(_within(index, [o for _, o in scans], min_range + 2 * _CLEARANCE)))
+                hits, misses = _rising_rays(face, scans, no_return, u0, u1, height, min_range, others, measured[0])
                 if hits + misses >= cfg.min_rising_rays:
                     covered = hits / (hits + misses)
             width = width + px  # the run counts whole pixels; the opening's edges fall inside its end pixels
@@ -668,7 +673,84 @@ def detect_doors(
                     exterior=bool(covered < cfg.covered_share),
                 )
             )
-    return _distinct(doors, cfg.min_width / 2)
+        return doors
+
+    doors = _distinct(
+        [d for k, f in enumerate(faces) for d in search(k, f, [o for j, o in enumerate(faces) if j != k])],
+        cfg.min_width / 2,
+    )
+    # The bridges over the outline's bulges (module docstring) add the openings no face held whole;
+    # a face's door stays as it is found without them.
+    bridged = [
+        d
+        for bridge, (k, j) in _bridges(faces, cfg.max_width)
+        for d in search(k, bridge, [o for m, o in enumerate(faces) if m not in (k, j)])
+        if _in_gap(d.centre[:2], faces[k], faces[j])
+    ]
+    found = len(doors)
+    for door in _distinct(bridged, cfg.min_width / 2):
+        if not any(_same_opening(door, other, cfg.min_width / 2) for other in doors[:found]):
+            doors.append(door)
+    return doors
+
+
+def _bridges(faces: Sequence[WallFace], reach: float) -> list[tuple[WallFace, tuple[int, int]]]:
+    """Faces joined over a bulge of the outline: ``(bridge, (k, j))`` where, walking the outline on
+    from face k's end (each next face starts where the last ended), the faces leave k's line
+    outward only and return to it within ``reach`` metres along it, at face j, which continues the
+    line (parallel within :data:`_MAX_TURN`, starting within :data:`_BAND` of it), and the bulge is
+    no deeper than the gap is wide.
+
+    Where the RoI outline bulges through a door, the wall's faces stop at the bulge on both sides
+    of it, and following each along its line stops at the first run of empty columns of the door's
+    lintel (``corpus:large_storey``: the lintel seen only at grazing incidence from the corridor's
+    far scans, in stripes three pixels apart; neither face's image then held the whole opening).
+    The bridge runs on k's line from k's start to a metre into j: its image holds the opening whole.
+    Faces that do not make an outline (no face starts where another ends) have no bridges.
+    """
+    turn = np.cos(np.radians(_MAX_TURN))
+    starts = np.array([np.asarray(f.p0, dtype=float) for f in faces]).reshape(-1, 2)
+    out = []
+    for k, face in enumerate(faces):
+        if face.length < _MIN_LINE:
+            continue
+        at, depth = k, 0.0
+        for bulge in range(_BULGE_FACES + 1):  # bulge: the faces walked before this one
+            nxt = np.flatnonzero(np.linalg.norm(starts - np.asarray(faces[at].p1, dtype=float), axis=1) < 1e-6)
+            if len(nxt) != 1 or nxt[0] == k:
+                break
+            at = int(nxt[0])
+            other = faces[at]
+            (ua, _, wa), (ub, _, wb) = face.local(np.array([[*other.p0, face.z0], [*other.p1, face.z0]]))
+            if max(wa, wb) > _BAND or min(ua, ub) > face.length + reach:
+                break  # into the room, or too far along to be a door's bulge
+            back = abs(wa) <= _BAND and ub > ua > face.length
+            # A bulge through a door is shallow (the RoI's band seen under the lintel): deeper than
+            # the gap is wide, it is the room going on (corpus:large_storey, the corridor's 2 m wide
+            # arm 3.9 m deep, where a bridge found a door into the corridor itself).
+            shallow = depth <= ua - face.length
+            if back and bulge and shallow and other.length >= _MIN_LINE and face.direction @ other.direction >= turn:
+                # Into j by at most a metre: j may be turned off k's line by up to _MAX_TURN.
+                p1 = np.asarray(face.p0, dtype=float) + min(ub, ua + 1.0) * face.direction
+                out.append((WallFace(face.p0, p1, min(face.z0, other.z0), max(face.z1, other.z1)), (k, at)))
+                break
+            if back:
+                break  # on the line again without a bulge, too deep a one, or too short to say which way it runs
+            depth = max(depth, -wa, -wb)
+    return out
+
+
+def _in_gap(point: np.ndarray, face: WallFace, other: WallFace) -> bool:
+    """Whether ``point`` lies, along ``face``'s line, between its end and the start of ``other``:
+    a bridge's doors are those of its bulge (elsewhere the faces were searched themselves)."""
+    u = (np.asarray(point, dtype=float) - np.asarray(face.p0, dtype=float)) @ face.direction
+    gap = (np.asarray(other.p0, dtype=float) - np.asarray(face.p0, dtype=float)) @ face.direction
+    return bool(face.length <= u <= gap)
+
+
+def _same_opening(door: DetectedDoor, other: DetectedDoor, distance: float) -> bool:
+    """Two detections of one opening: closer than ``distance``, opening the same way."""
+    return bool(np.linalg.norm(door.centre[:2] - other.centre[:2]) < distance and door.outward @ other.outward > 0.9)
 
 
 def _distinct(doors: list[DetectedDoor], distance: float) -> list[DetectedDoor]:
@@ -676,9 +758,6 @@ def _distinct(doors: list[DetectedDoor], distance: float) -> list[DetectedDoor]:
     ``distance`` to each other and opening the same way, the one seen through most."""
     kept: list[DetectedDoor] = []
     for door in sorted(doors, key=lambda d: -d.behind_points):
-        if not any(
-            np.linalg.norm(door.centre[:2] - other.centre[:2]) < distance and door.outward @ other.outward > 0.9
-            for other in kept
-        ):
+        if not any(_same_opening(door, other, distance) for other in kept):
             kept.append(door)
     return [d for d in doors if any(d is k for k in kept)]
