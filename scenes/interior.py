@@ -129,15 +129,20 @@ def _probe_is_inside(caster: _Caster, q: np.ndarray) -> np.ndarray:
         if not len(todo):
             break
         t_f, _, n_f = caster.cast(q[todo], d)
-        t_b, _, n_b = caster.cast(q[todo], -d)
+        across = n_f[:, :2] @ d[:2]
         # Inside a wall, both rays meet the wall's own two faces: parallel planes, close together.
         # In a room's corner the two faces met are different walls at an angle, which is no wall.
-        both = np.isfinite(t_f) & np.isfinite(t_b)
-        upright = (np.abs(n_f[:, 2]) < 0.3) & (np.abs(n_b[:, 2]) < 0.3)
-        parallel = np.abs(np.einsum("ij,ij->i", n_f, n_b)) > 0.95
-        span = np.where(both, t_f + t_b, 0.0)
-        gap = np.where(both, np.abs(span * (n_f[:, :2] @ d[:2])), np.inf)
-        enclosed = both & upright & parallel & (gap < MIN_SPAN)
+        # The gap is (t_f + t_b)·|across| >= t_f·|across|: a probe whose forward hit alone is that
+        # far off is not enclosed, and casts no backward ray (most probes: floors and ceilings).
+        hit = np.isfinite(t_f)
+        reach = np.abs(np.where(hit, t_f, 0.0) * across)
+        near = np.flatnonzero(hit & (np.abs(n_f[:, 2]) < 0.3) & (reach < MIN_SPAN))
+        enclosed = np.zeros(len(todo), dtype=bool)
+        if len(near):
+            t_b, _, n_b = caster.cast(q[todo[near]], -d)
+            parallel = np.abs(np.einsum("ij,ij->i", n_f[near], n_b)) > 0.95
+            gap = np.abs((t_f[near] + t_b) * across[near])
+            enclosed[near] = np.isfinite(t_b) & (np.abs(n_b[:, 2]) < 0.3) & parallel & (gap < MIN_SPAN)
         ok[todo[enclosed]] = False
         todo = todo[~enclosed]
     return ok

@@ -75,3 +75,40 @@ def test_a_mesh_with_and_without_room_names_reports_the_same_coverage(tmp_path):
         run_episode(env, make_policy("greedy", 0), seed=0, options={"scene": scene, "start": start})
         coverage.append([s.structure_sensed_pct for s in env.storey.scans])
     assert coverage[0] == coverage[1] and coverage[0][-1] > 20
+
+
+def test_the_probe_test_casts_backward_rays_only_where_they_can_tell_a_wall():
+    """The probe test skips the backward ray where the forward hit alone is too far off for a
+    wall's thickness; the plain test, both rays for every probe, keeps the same probes. FZK-Haus's
+    IFC walls are solids a probe may stand inside and still see the floor below: some probes are
+    told from the rooms by the horizontal rays alone."""
+    from scenes import interior
+
+    def plain(caster, q, horizontal=True):
+        t_down, below, _ = caster.cast(q, np.array([0.0, 0.0, -1.0]))
+        ok = (below == SurfaceClass.FLOOR) & (t_down <= interior.MAX_DROP)
+        up = np.array([0.0, 0.0, 1.0])
+        t_up, _, _ = caster.cast(q, up)
+        t_floor, _, _ = caster.cast(q, up, floors_only=True)
+        ok &= ~(np.isfinite(t_floor) & (t_floor <= t_up + 1e-3)) & (np.isfinite(t_up) if caster.has_ceiling else True)
+        todo = np.flatnonzero(ok)
+        for d in interior._HORIZONTAL if horizontal else ():
+            t_f, _, n_f = caster.cast(q[todo], d)
+            t_b, _, n_b = caster.cast(q[todo], -d)
+            both = np.isfinite(t_f) & np.isfinite(t_b)
+            upright = (np.abs(n_f[:, 2]) < 0.3) & (np.abs(n_b[:, 2]) < 0.3)
+            parallel = np.abs(np.einsum("ij,ij->i", n_f, n_b)) > 0.95
+            span = np.where(both, t_f + t_b, 0.0)
+            gap = np.where(both, np.abs(span * (n_f[:, :2] @ d[:2])), np.inf)
+            enclosed = both & upright & parallel & (gap < interior.MIN_SPAN)
+            ok[todo[enclosed]] = False
+            todo = todo[~enclosed]
+        return ok
+
+    scene = load_scene("corpus:fzk_haus_eg")
+    lo, hi = scene.mesh.bounds
+    q = np.random.default_rng(0).uniform([lo[0], lo[1], lo[2] + 0.3], [hi[0], hi[1], lo[2] + 2.0], size=(50_000, 3))
+    caster = interior._Caster(scene)
+    want = plain(caster, q)
+    assert 0 < want.sum() < plain(caster, q, horizontal=False).sum()  # the horizontal rays reject some
+    assert np.array_equal(interior._probe_is_inside(caster, q), want)
