@@ -119,12 +119,14 @@ class _Caster:
 def _probe_is_inside(caster: _Caster, q: np.ndarray) -> np.ndarray:
     t_down, below, _ = caster.cast(q, np.array([0.0, 0.0, -1.0]))
     ok = (below == SurfaceClass.FLOOR) & (t_down <= MAX_DROP)
-    up = np.array([0.0, 0.0, 1.0])
-    t_up, _, _ = caster.cast(q, up)
-    t_floor, _, _ = caster.cast(q, up, floors_only=True)
-    under_floor = np.isfinite(t_floor) & (t_floor <= t_up + 1e-3)  # inside or under the storey's own slab
-    ok &= ~under_floor & (np.isfinite(t_up) if caster.has_ceiling else True)
-    todo = np.flatnonzero(ok)
+    todo = np.flatnonzero(ok)  # the rays up only for probes above a floor
+    if len(todo):
+        up = np.array([0.0, 0.0, 1.0])
+        t_up, _, _ = caster.cast(q[todo], up)
+        t_floor, _, _ = caster.cast(q[todo], up, floors_only=True)
+        under_floor = np.isfinite(t_floor) & (t_floor <= t_up + 1e-3)  # inside or under the storey's own slab
+        ok[todo] = ~under_floor & (np.isfinite(t_up) if caster.has_ceiling else True)
+        todo = np.flatnonzero(ok)
     for d in _HORIZONTAL:
         if not len(todo):
             break
