@@ -1,9 +1,9 @@
 """Benchmark: where ``nbs train``'s time goes, the rollouts (env steps in the workers) against PPO's updates.
 
-The setup of ``nbs train`` (MaskablePPO, the bundled network, generated storeys of 1-5 rooms on
-``NBS-Fast-v0`` settings, one ``SubprocVecEnv`` worker per env), timed by stable-baselines3's
-callbacks at each rollout's start and end. The reference in the same run is the rollouts' own time:
-the updates are printed as a ratio of it.
+The setup of ``nbs train`` (MaskablePPO, the bundled network, ``train.ppo.make_training_envs``:
+generated storeys of 1-5 rooms on ``NBS-Fast-v0`` settings, one ``SubprocVecEnv`` worker per env),
+timed by stable-baselines3's callbacks at each rollout's start and end. The reference in the same
+run is the rollouts' own time: the updates are printed as a ratio of it.
 
 Usage: python benchmarks/training.py [--timesteps 1024] [--envs 2] [--n-steps 128] [--torch-threads N]
 """
@@ -25,17 +25,14 @@ def main() -> None:
     import torch
     from sb3_contrib import MaskablePPO
     from stable_baselines3.common.callbacks import BaseCallback
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     from policies.learned import NetworkConfig
-    from train.ppo import _env_factory, _policy_class
+    from train.ppo import TrainConfig, _policy_class, make_training_envs
 
     if args.torch_threads:
         torch.set_num_threads(args.torch_threads)
-    factory = _env_factory((1, 5), 40)
-    workers = [factory] * args.envs
-    venv = SubprocVecEnv(workers, start_method="spawn") if args.envs > 1 else DummyVecEnv(workers)
-    venv.seed(0)
+    # nbs train's own envs and workers (each worker's share of the cores included).
+    venv = make_training_envs(TrainConfig(envs=args.envs, rooms=(1, 5), max_episode_steps=40, seed=0))
     model = MaskablePPO(
         _policy_class(),
         venv,

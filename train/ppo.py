@@ -203,27 +203,13 @@ def evaluate(policy_fn, storeys: list[int], max_episode_steps: int) -> dict[str,
     }
 
 
-def train(config: TrainConfig, out: str | Path, progress: bool = True):
-    """Train, write checkpoints and the final policy into ``out``.
-
-    Returns
-    -------
-    (Path, MaskablePPO)
-        The final checkpoint's ``policy.json`` and the trained model.
-    """
+def make_training_envs(config: TrainConfig):
+    """The vector env ``nbs train`` steps: ``config.envs`` generated-storey envs, each in a worker
+    process of its own (``SubprocVecEnv``) when there are several, seeded with ``config.seed``."""
     _require_rl()
-    import torch
-    from sb3_contrib import MaskablePPO
-    from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
-    from tqdm import tqdm
 
-    from policies import GreedyPolicy
-
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    factory = _env_factory(config.rooms, config.max_episode_steps, config.metre_cost)
-    workers = [factory] * config.envs
+    workers = [_env_factory(config.rooms, config.max_episode_steps, config.metre_cost)] * config.envs
     if config.envs > 1:
         # Each worker's kernels share the cores with the others' (nbs_env.threads): a worker gets
         # its share, unless NBS_THREADS says otherwise. The workers read it when they start.
@@ -237,6 +223,28 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
     else:
         venv = DummyVecEnv(workers)
     venv.seed(config.seed)
+    return venv
+
+
+def train(config: TrainConfig, out: str | Path, progress: bool = True):
+    """Train, write checkpoints and the final policy into ``out``.
+
+    Returns
+    -------
+    (Path, MaskablePPO)
+        The final checkpoint's ``policy.json`` and the trained model.
+    """
+    _require_rl()
+    import torch
+    from sb3_contrib import MaskablePPO
+    from stable_baselines3.common.callbacks import BaseCallback
+    from tqdm import tqdm
+
+    from policies import GreedyPolicy
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    venv = make_training_envs(config)
     network = NetworkConfig()
     device = "cuda" if torch.cuda.is_available() else "cpu"
     model = MaskablePPO(
