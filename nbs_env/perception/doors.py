@@ -604,12 +604,13 @@ def detect_doors(
     cfg = config or DoorConfig()
     points = np.concatenate([np.asarray(p, dtype=float) for p, _ in scans]) if scans else np.zeros((0, 3))
     index = PointIndex(points)
-    measured: list[cKDTree] = []  # built for the first opening whose rays are counted
+    measured: cKDTree | None = None  # built for the first opening whose rays are counted
     px = cfg.pixel
     gap = int(np.floor(cfg.fill_gap / px + 1e-9))
 
     def search(k: int, given: WallFace, others: list[WallFace]) -> list[DetectedDoor]:
         """The openings on the wall of ``given``, reported as on face ``k``."""
+        nonlocal measured
         doors: list[DetectedDoor] = []
         face = _refit(given, index, _BAND, cfg.floor_gap)
         # The image's rows run from the floor, its columns along the (followed) face.
@@ -653,9 +654,9 @@ def detect_doors(
                 continue
             covered = float("nan")
             if no_return is not None:
-                if not measured:
-                    measured.append(cKDTree(_within(index, [o for _, o in scans], min_range + 2 * _CLEARANCE)))
-                hits, misses = _rising_rays(face, scans, no_return, u0, u1, height, min_range, others, measured[0])
+                if measured is None:
+                    measured = cKDTree(_within(index, [o for _, o in scans], min_range + 2 * _CLEARANCE))
+                hits, misses = _rising_rays(face, scans, no_return, u0, u1, height, min_range, others, measured)
                 if hits + misses >= cfg.min_rising_rays:
                     covered = hits / (hits + misses)
             width = width + px  # the run counts whole pixels; the opening's edges fall inside its end pixels
@@ -743,8 +744,7 @@ def _bridges(faces: Sequence[WallFace], reach: float) -> list[tuple[WallFace, tu
 def _in_gap(point: np.ndarray, face: WallFace, other: WallFace) -> bool:
     """Whether ``point`` lies, along ``face``'s line, between its end and the start of ``other``:
     a bridge's doors are those of its bulge (elsewhere the faces were searched themselves)."""
-    u = (np.asarray(point, dtype=float) - np.asarray(face.p0, dtype=float)) @ face.direction
-    gap = (np.asarray(other.p0, dtype=float) - np.asarray(face.p0, dtype=float)) @ face.direction
+    u, gap = face.local(np.array([[*point[:2], face.z0], [*other.p0, face.z0]]))[:, 0]
     return bool(face.length <= u <= gap)
 
 
