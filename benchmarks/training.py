@@ -20,19 +20,22 @@ def main() -> None:
     parser.add_argument("--envs", type=int, default=2)
     parser.add_argument("--n-steps", type=int, default=128)
     parser.add_argument("--torch-threads", type=int, default=0, help="0: torch's default")
+    parser.add_argument(
+        "--completion", choices=("gain", "policy"), default="gain", help="gain: as every figure before issue 19"
+    )
     args = parser.parse_args()
 
     import torch
     from sb3_contrib import MaskablePPO
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from policies.learned import NetworkConfig
     from train.ppo import TrainConfig, _policy_class, make_training_envs
 
     if args.torch_threads:
         torch.set_num_threads(args.torch_threads)
     # nbs train's own envs and workers (each worker's share of the cores included).
-    venv = make_training_envs(TrainConfig(envs=args.envs, rooms=(1, 5), max_episode_steps=40, seed=0))
+    config = TrainConfig(envs=args.envs, rooms=(1, 5), max_episode_steps=40, seed=0, completion=args.completion)
+    venv = make_training_envs(config)
     model = MaskablePPO(
         _policy_class(),
         venv,
@@ -40,7 +43,7 @@ def main() -> None:
         batch_size=64,
         seed=0,
         device="cpu",
-        policy_kwargs={"network": NetworkConfig()},
+        policy_kwargs={"network": config.network},
         verbose=0,
     )
     marks: list[tuple[str, float]] = []

@@ -17,7 +17,7 @@ import numpy as np
 from gymnasium import spaces
 
 from nbs_env.errors import ConfigError, InvalidActionError
-from nbs_env.observation import CANDIDATE_FEATURES, BeliefView, candidate_table_of, observe
+from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES, BeliefView, candidate_table_of, observe
 from nbs_env.settings import PRESETS, EnvConfig, RewardConfig, make_config
 from nbs_env.storey import STAGES, StageTimes, StepOutcome, Storey, resolve_scene
 from scenes import Scene
@@ -72,6 +72,10 @@ class NBSEnv(gym.Env):
       world axes, from the robot), geodesic path length (m), predicted conversions as a share of
       the room's structural voxels, valid (1/0); zeros for padding.
     - `pose`: (4,) float32, the robot's pose estimate: x, y, z (m) and yaw (rad).
+    - `room`: (5,) float32, the room being scanned (`nbs_env.observation.RoomColumn`): scans taken
+      in it, the share of its structural voxels sensed (Structure over Structure +
+      Occluded-structure), its structural surface as mapped (m²), the length of its frontier faces
+      (m) and the rooms completed before it.
 
     Everything in the observation comes from the robot's own measurements and pose estimate. The
     shapes are those stable-baselines3 takes without a warning: `voxels` is image-like (its default
@@ -141,6 +145,7 @@ class NBSEnv(gym.Env):
                 # Flat, because stable-baselines3 accepts 1-D and image-like arrays only.
                 "candidates": spaces.Box(-1e4, 1e4, shape=(k * len(CANDIDATE_FEATURES),), dtype=np.float32),
                 "pose": spaces.Box(-1e4, 1e4, shape=(4,), dtype=np.float32),
+                "room": spaces.Box(-1e4, 1e4, shape=(len(ROOM_FEATURES),), dtype=np.float32),
             }
         )
         self._scene_cache: dict[str, Scene] = {}
@@ -233,6 +238,11 @@ class NBSEnv(gym.Env):
             mask[0] = True
         return mask
 
+    def gain_rule_done(self) -> bool:
+        """Whether the robot's gain rule would end the room now (:meth:`Storey.gain_rule_done`):
+        what the greedy declares by with ``completion="policy"``; also ``info["gain_rule_done"]``."""
+        return self.storey is not None and self.storey.gain_rule_done()
+
     def candidate_gains(self) -> np.ndarray:
         """(K,) int64: predicted Occluded-structure→Structure conversions of each candidate, from the
         robot's own grid (the paper's greedy criterion); 0 for padding."""
@@ -262,6 +272,7 @@ class NBSEnv(gym.Env):
             "door_events": list(storey.door_events),
             "action_mask": self.action_masks(),
             "candidate_gains": self.candidate_gains(),
+            "gain_rule_done": self.gain_rule_done(),
             "invalid_action": invalid_action,
             "conversions": self._last.conversions,
             "complete": storey.complete,

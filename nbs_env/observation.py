@@ -31,13 +31,16 @@ from nbs_env.perception.roi import RoI
 
 __all__ = [
     "CANDIDATE_FEATURES",
+    "ROOM_FEATURES",
     "BeliefView",
     "CandidateColumn",
     "ObservationConfig",
+    "RoomColumn",
     "candidate_table",
     "candidate_table_of",
     "observe",
     "pool_labels",
+    "room_features",
     "voxel_window",
 ]
 
@@ -68,6 +71,21 @@ class CandidateColumn(IntEnum):
 
 #: Names of the candidate table's columns, in order.
 CANDIDATE_FEATURES = tuple(c.name.lower() for c in CandidateColumn)
+
+
+class RoomColumn(IntEnum):
+    """The entries of the observation's ``room`` vector: the state of the room being scanned, for a
+    policy that decides when the room is done (``completion="policy"``)."""
+
+    SCANS_IN_ROOM = 0  # scans taken in the room, its door-frame scan included
+    STRUCTURE_SENSED_SHARE = 1  # Structure / (Structure + Occluded-structure) voxels of the room's V(t)
+    STRUCTURE_AREA = 2  # (Structure + Occluded-structure) voxels × voxel face, m²: the room's size as mapped
+    FRONTIER_LENGTH = 3  # metres of RoI faces along which no wall was measured yet
+    ROOMS_DONE = 4  # rooms completed before this one
+
+
+#: Names of the ``room`` vector's entries, in order.
+ROOM_FEATURES = tuple(c.name.lower() for c in RoomColumn)
 
 
 @dataclass(frozen=True)
@@ -117,6 +135,10 @@ class BeliefView:
         ``gains`` as shares of the room's structural voxels.
     scanner : ScannerConfig
         The scanner's pattern and limits.
+    scans_in_room : int
+        Scans the robot took in the current room (its door-frame scan included).
+    rooms_done : int
+        Rooms the robot has completed.
     """
 
     pose: np.ndarray
@@ -134,6 +156,8 @@ class BeliefView:
     gains: np.ndarray
     gain_share: np.ndarray
     scanner: ScannerConfig
+    scans_in_room: int = 0
+    rooms_done: int = 0
 
     @property
     def count(self) -> int:
@@ -278,14 +302,32 @@ def candidate_table_of(obs: dict[str, np.ndarray]) -> np.ndarray:
     return flat.reshape(*flat.shape[:-1], -1, len(CandidateColumn))
 
 
+def room_features(view: BeliefView) -> np.ndarray:
+    """(5,) float32: the room's state, entries :class:`RoomColumn`, from the robot's own grid, RoI
+    and scan count (zeros but the counts when the room has no grid yet)."""
+    out = np.zeros(len(RoomColumn), dtype=np.float32)
+    out[RoomColumn.SCANS_IN_ROOM] = view.scans_in_room
+    out[RoomColumn.ROOMS_DONE] = view.rooms_done
+    grid = view.grid
+    if grid is not None:
+        counts = np.bincount(grid.labels.ravel(), minlength=256)
+        sensed = int(counts[int(VoxelLabel.STRUCTURE)])
+        structural = sensed + int(counts[int(VoxelLabel.OCCLUDED_STRUCTURE)])
+        out[RoomColumn.STRUCTURE_SENSED_SHARE] = sensed / max(1, structural)
+        out[RoomColumn.STRUCTURE_AREA] = structural * grid.voxel_size**2
+    out[RoomColumn.FRONTIER_LENGTH] = sum(face.length for face in view.frontier)
+    return out
+
+
 def observe(view: BeliefView, config: ObservationConfig) -> dict[str, np.ndarray]:
-    """The env's observation of a belief: ``voxels``, ``candidates`` (flat) and ``pose``.
+    """The env's observation of a belief: ``voxels``, ``candidates`` (flat), ``pose`` and ``room``.
 
     Returns
     -------
     dict
         ``voxels`` ``config.shape`` uint8; ``candidates`` (K·5,) float32; ``pose`` (4,) float32 x, y,
-        z (m) and yaw (rad); all clipped to the observation space's ±1e4.
+        z (m) and yaw (rad); ``room`` (5,) float32 (:func:`room_features`); all clipped to the
+        observation space's ±1e4.
     """
     pose = view.pose
     xy = pose[:2, 3]
@@ -298,4 +340,5 @@ def observe(view: BeliefView, config: ObservationConfig) -> dict[str, np.ndarray
         "voxels": voxels,
         "candidates": np.clip(table, -1e4, 1e4).reshape(-1),
         "pose": np.clip(pose_vec, -1e4, 1e4),
+        "room": np.clip(room_features(view), -1e4, 1e4),
     }

@@ -282,6 +282,14 @@ class Storey:
         """Metres driven."""
         return self.robot.path_length
 
+    def gain_rule_done(self) -> bool:
+        """Whether the robot's own gain rule (METHOD §7: no NVP predicts ``robot.completion_fraction``
+        of the room's structural voxels) would end the current room now; False once the episode is
+        over. With ``completion="gain"`` the session ends the room itself when this holds; with
+        ``"policy"`` it is what the greedy (and the behaviour-cloning teacher) declares by. Reads
+        the robot's plan only, never ground truth."""
+        return self.open and self.plan.gain_below(self.robot.config.completion_fraction)
+
     def coverage_pct(self) -> float:
         """True structural surface sensed, % of the storey's (evaluation side)."""
         return self.meter.percent()
@@ -327,6 +335,8 @@ class Storey:
             gains=gains,
             gain_share=share,
             scanner=robot.config.scanner,
+            scans_in_room=robot.scans_in_room,
+            rooms_done=len(robot.rooms_done),
         )
 
     # ------------------------------------------------------------------ decisions

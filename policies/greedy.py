@@ -22,7 +22,11 @@ __all__ = ["GreedyPolicy", "scan_storey"]
 
 class GreedyPolicy:
     """The paper's NBS as a policy: argmax of ``info["candidate_gains"]`` (predicted conversions the
-    env computes from the robot's own voxel grid) over the mask, ties to the shorter path."""
+    env computes from the robot's own voxel grid) over the mask, ties to the shorter path.
+
+    In an env with ``completion="policy"`` (a "room done" action after the K candidates) it
+    declares the room done where the robot's gain rule would end it (``info["gain_rule_done"]``),
+    so that it scans as with ``completion="gain"``."""
 
     name = "greedy"
     #: Keeps only the SE points (the paper's processed-point measure).
@@ -35,8 +39,12 @@ class GreedyPolicy:
         if "candidate_gains" not in info:
             raise KeyError("GreedyPolicy needs info['candidate_gains'], which NBSEnv's reset and step provide")
         mask = mask_of(obs, info)
+        gains = np.asarray(info["candidate_gains"])
+        k = len(gains)
+        if len(mask) > k and (info.get("gain_rule_done", False) or not mask[:k].any()):
+            return k  # the "room done" action of completion="policy"
         path = candidate_table_of(obs)[:, CandidateColumn.PATH_LENGTH]
-        return int(greedy_order(info["candidate_gains"], path, mask)[0])
+        return int(greedy_order(gains, path, mask[:k])[0])
 
 
 def scan_storey(storey: Storey, max_rooms: int | None = None) -> int:

@@ -95,6 +95,9 @@ class NetworkConfig(Config):
         F, the columns of the candidate table.
     actions : int
         K, or K + 1 with a "room done" action (completion="policy").
+    room_features : int
+        0, or the length of the observation's ``room`` vector (:data:`~nbs_env.observation.ROOM_FEATURES`),
+        which the candidate MLP and the "room done" head then also read.
     channels : (int, int, int)
         Channels of the three stride-2 3-D convolutions.
     grid_dim : int
@@ -107,6 +110,7 @@ class NetworkConfig(Config):
     candidates: int = 64
     features: int = 5
     actions: int = 64
+    room_features: int = 0
     channels: tuple[int, int, int] = (8, 16, 32)
     grid_dim: int = 64
     hidden: int = 64
@@ -122,6 +126,7 @@ class NetworkConfig(Config):
             )
         for name in ("candidates", "features", "actions", "grid_dim", "hidden"):
             _integer(self, name, 1)
+        _integer(self, "room_features", 0)
         _require(
             self.actions in (self.candidates, self.candidates + 1),
             f"actions must be candidates ({self.candidates}) or candidates + 1, got {self.actions}",
@@ -129,8 +134,9 @@ class NetworkConfig(Config):
 
     @property
     def latent_dim(self) -> int:
-        """Length of the features the policy's heads read: g and the flat candidate table."""
-        return self.grid_dim + self.candidates * self.features
+        """Length of the features the policy's heads read: g, the flat candidate table and the room
+        vector."""
+        return self.grid_dim + self.candidates * self.features + self.room_features
 
 
 def build_network(config: NetworkConfig):
@@ -168,29 +174,50 @@ def build_network(config: NetworkConfig):
             return self.net(one_hot.permute(0, 4, 1, 2, 3))
 
     class CandidateScorer(nn.Module):
-        """(B, grid_dim + K·F) → (B, actions) logits; one MLP shared by every candidate slot."""
+        """(B, grid_dim + K·F + R) → (B, actions) logits; one MLP shared by every candidate slot,
+        and with completion="policy" a "room done" head on g, the room vector and a summary of
+        the candidates' predicted gains."""
 
         def __init__(self) -> None:
             super().__init__()
+            r = config.room_features
             self.mlp = nn.Sequential(
-                nn.Linear(config.grid_dim + config.features + 2, config.hidden),
+                nn.Linear(config.grid_dim + config.features + 2 + r, config.hidden),
                 nn.ReLU(),
                 nn.Linear(config.hidden, config.hidden),
                 nn.ReLU(),
                 nn.Linear(config.hidden, 1),
             )
-            self.stop = nn.Linear(config.grid_dim, 1) if config.actions > config.candidates else None
+            self.stop = None
+            if config.actions > config.candidates:
+                self.stop = nn.Sequential(
+                    nn.Linear(config.grid_dim + r + 3, config.hidden),
+                    nn.ReLU(),
+                    nn.Linear(config.hidden, 1),
+                )
 
         def forward(self, latent):
-            g = latent[:, : config.grid_dim]
-            c = latent[:, config.grid_dim :].reshape(len(latent), config.candidates, config.features)
+            k, f, g_dim = config.candidates, config.features, config.grid_dim
+            g = latent[:, :g_dim]
+            c = latent[:, g_dim : g_dim + k * f].reshape(len(latent), k, f)
+            # Counts and lengths on a log scale: a room's scans, area and frontier vary tenfold.
+            room = torch.log1p(latent[:, g_dim + k * f :].clamp(min=0))
             # Each candidate's gain and path relative to the best gain and the longest path of its
             # step: the raw gain share is small (1e-3 to 1e-1) and its scale varies with the room.
             rel = [c[..., col] / (c[..., col].amax(dim=1, keepdim=True) + 1e-6) for col in _RELATIVE]
-            pair = torch.cat([g[:, None, :].expand(-1, config.candidates, -1), c, *[r[..., None] for r in rel]], dim=-1)
-            logits = self.mlp(pair).squeeze(-1)
+            parts = [g[:, None, :].expand(-1, k, -1), c, *[x[..., None] for x in rel]]
+            if config.room_features:
+                parts.append(room[:, None, :].expand(-1, k, -1))
+            logits = self.mlp(torch.cat(parts, dim=-1)).squeeze(-1)
             if self.stop is not None:
-                logits = torch.cat([logits, self.stop(g)], dim=-1)
+                # Whether the room is done turns on what is left to gain: the largest and the summed
+                # predicted gain shares (log scale) and the share of slots that are real NVPs.
+                gain = c[..., int(CandidateColumn.PREDICTED_GAIN)].clamp(min=0)
+                valid = c[..., int(CandidateColumn.VALID)]
+                summary = torch.stack(
+                    [torch.log(gain.amax(dim=1) + 1e-4), torch.log(gain.sum(dim=1) + 1e-4), valid.mean(dim=1)], dim=1
+                )
+                logits = torch.cat([logits, self.stop(torch.cat([g, room, summary], dim=1))], dim=-1)
             return logits
 
     return VoxelEncoder(), CandidateScorer()
@@ -322,10 +349,19 @@ class LearnedPolicy:
         if table.shape != (self.config.candidates, self.config.features):
             raise ValueError(f"observation has {table.shape} candidates, the network reads "
                              f"({self.config.candidates}, {self.config.features})")  # fmt: skip
+        parts = [table.reshape(1, -1)]
+        if self.config.room_features:
+            if "room" not in obs:
+                raise ValueError("the network reads the observation's 'room' vector, which this observation lacks")
+            room = np.asarray(obs["room"], dtype=np.float32).reshape(1, -1)
+            if room.shape[1] != self.config.room_features:
+                raise ValueError(f"observation room vector has {room.shape[1]} entries, the network reads "
+                                 f"{self.config.room_features}")  # fmt: skip
+            parts.append(room)
         with torch.no_grad():
             g = self.encoder(torch.as_tensor(voxels[None].astype(np.float32)))
-            latent = torch.cat([g, torch.as_tensor(table.reshape(1, -1), dtype=torch.float32)], dim=1)
-            return self.scorer(latent)[0].numpy()
+            flat = torch.as_tensor(np.concatenate(parts, axis=1), dtype=torch.float32)
+            return self.scorer(torch.cat([g, flat], dim=1))[0].numpy()
 
     def act(self, obs: dict[str, np.ndarray], info: dict[str, Any]) -> int:
         mask = mask_of(obs, info)

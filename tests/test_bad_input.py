@@ -58,6 +58,8 @@ CASES = [
     ("train --learning-rate nan --out t", EXIT_USAGE, "learning_rate must be a finite number"),
     ("train --learning-rate -1 --out t", EXIT_USAGE, "learning_rate must be > 0"),
     ("train --metre-cost inf --out t", EXIT_USAGE, "metre_cost must be a finite number"),
+    ("train --completion never --out t", EXIT_USAGE, "--completion: invalid choice: 'never'"),
+    ("train --max-episode-steps 0 --out t", EXIT_USAGE, "max_episode_steps must be an integer >= 1"),
     ("train --rooms 9-12 --out t", EXIT_USAGE, "rooms must be (A, B) with 1 <= A <= B <= 8"),
     ("train --rooms x --out t", EXIT_USAGE, "expected N or A-B"),
     ("train --timesteps -5 --out t", EXIT_USAGE, "timesteps must be an integer >= 1"),

@@ -13,7 +13,7 @@ import nbs_env
 from nbs_env.env import NBSEnv
 from nbs_env.errors import ConfigError, InvalidActionError, InvalidPoseError
 from nbs_env.labels import VoxelLabel
-from nbs_env.observation import CandidateColumn, ObservationConfig, candidate_table_of, pool_labels
+from nbs_env.observation import CandidateColumn, ObservationConfig, RoomColumn, candidate_table_of, pool_labels
 from nbs_env.settings import make_config
 from policies import GreedyPolicy, RandomPolicy
 from scenes.corpus import corpus_entry
@@ -121,6 +121,51 @@ def test_observation_matches_the_robot_belief():
     assert (voxels[:, :, 1] == VoxelLabel.STRUCTURE).sum() > 100
     assert (voxels[cx - 15 : cx + 15, cy - 15 : cy + 15, 5] == VoxelLabel.EMPTY).sum() > 100
     np.testing.assert_allclose(obs["pose"][:2], robot.pose[:2, 3], atol=1e-4)
+    # The room vector is the robot's own grid and counts.
+    labels = robot.belief.grid.labels
+    sensed = np.count_nonzero(labels == VoxelLabel.STRUCTURE)
+    structural = sensed + np.count_nonzero(labels == VoxelLabel.OCCLUDED_STRUCTURE)
+    room = obs["room"]
+    assert room[RoomColumn.SCANS_IN_ROOM] == robot.scans_in_room == 1 and room[RoomColumn.ROOMS_DONE] == 0
+    assert room[RoomColumn.STRUCTURE_SENSED_SHARE] == pytest.approx(sensed / structural, rel=1e-6)
+    assert 0.2 < room[RoomColumn.STRUCTURE_SENSED_SHARE] < 1.0
+    assert room[RoomColumn.STRUCTURE_AREA] == pytest.approx(structural * robot.belief.grid.voxel_size**2, rel=1e-5)
+    frontier = sum(face.length for face in robot.belief.frontier)
+    assert room[RoomColumn.FRONTIER_LENGTH] == pytest.approx(frontier, rel=1e-5)
+    obs, _, _, _, _ = env.step(int(np.flatnonzero(info["action_mask"])[0]))
+    assert obs["room"][RoomColumn.SCANS_IN_ROOM] in (2, 1)  # 1 when that scan ended the room
+    assert obs["room"][RoomColumn.STRUCTURE_SENSED_SHARE] > 0
+
+
+@pytest.mark.parametrize("scene", ["generated:20000002", "l_room"])
+def test_the_greedy_declaring_rooms_done_scans_as_the_gain_rule(scene):
+    """With completion="policy" the greedy declares each room done where the robot's gain rule
+    ends it (info["gain_rule_done"]): the same scans, coverage and path as with completion="gain",
+    one "room done" step more per room; the rule is the robot's plan, not ground truth."""
+    runs = {}
+    for completion in ("gain", "policy"):
+        env = NBSEnv("fast", scene=scene, completion=completion)
+        obs, info = env.reset(seed=0)
+        policy, steps, declared = GreedyPolicy(), 0, 0
+        while True:
+            storey = env.storey
+            assert info["gain_rule_done"] == (
+                storey.open and storey.plan.gain_below(storey.robot.config.completion_fraction)
+            )
+            if completion == "gain":
+                assert not info["gain_rule_done"]  # the session ended such rooms itself
+            action = policy.act(obs, info)
+            declared += action == env.stop_action
+            obs, _, terminated, truncated, info = env.step(action)
+            steps += 1
+            if terminated or truncated:
+                break
+        positions = [tuple(np.round(s.estimated_position, 6)) for s in env.storey.scans]
+        runs[completion] = (positions, info["structure_sensed_pct"], info["path_length_m"], steps, declared)
+    (gain_pos, gain_pct, gain_path, gain_steps, _), (pos, pct, path, steps, declared) = runs["gain"], runs["policy"]
+    assert pos == gain_pos and pct == gain_pct and path == gain_path
+    reasons = [end["reason"] for end in env.storey.room_ends]
+    assert declared == reasons.count("declared") >= 1 and steps == gain_steps + declared
 
 
 def test_pooling_keeps_the_highest_priority_label():

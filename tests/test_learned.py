@@ -17,18 +17,20 @@ from policies import make_policy  # noqa: E402
 from policies.learned import LearnedPolicy, NetworkConfig, build_network, save_checkpoint  # noqa: E402
 
 
-@pytest.fixture(scope="module")
-def trained(tmp_path_factory):
+@pytest.fixture(scope="module", params=["policy", "gain"])
+def trained(request, tmp_path_factory):
     from train.ppo import TrainConfig, train
 
     out = tmp_path_factory.mktemp("ppo")
-    config = TrainConfig(timesteps=256, envs=2, seed=0, rooms=(1, 1), n_steps=32, batch_size=32)
+    config = TrainConfig(
+        timesteps=256, envs=2, seed=0, rooms=(1, 1), n_steps=32, batch_size=32, completion=request.param, bc_steps=4
+    )
     path, model = train(config, out, progress=False)
     return path, model
 
 
-def observations(n: int = 4):
-    env = NBSEnv("fast", scene="l_room")
+def observations(n: int = 4, completion: str = "gain"):
+    env = NBSEnv("fast", scene="l_room", completion=completion)
     obs, info = env.reset(seed=0)
     out = [(obs, info)]
     for k in range(n - 1):
@@ -47,12 +49,24 @@ def test_training_smoke_run_writes_a_safe_checkpoint(trained):
     # Tensors only: loadable with weights_only=True (no pickle to trust).
     state = torch.load(path.parent / document["weights"], weights_only=True)
     assert any(k.startswith("encoder.") for k in state) and any(k.startswith("scorer.") for k in state)
+    # completion="policy" trains the "room done" action and the room vector; "gain" the K candidates.
+    completion = document["training"]["completion"]
+    network = document["network"]
+    if completion == "policy":
+        assert network["actions"] == network["candidates"] + 1 and network["room_features"] == 5
+        assert any(k.startswith("scorer.stop.") for k in state)
+        assert document["training"]["behaviour_cloning"]["samples"] == 8
+    else:
+        assert network["actions"] == network["candidates"] and network["room_features"] == 0
+        assert not any(k.startswith("scorer.stop.") for k in state)
 
 
 def test_loaded_policy_acts_as_the_trained_model(trained):
     path, model = trained
     policy = make_policy(f"ppo:{path.parent}")
-    for obs, info in observations():
+    completion = json.loads(path.read_text())["training"]["completion"]
+    assert getattr(policy, "env_overrides", {}).get("completion", "gain") == completion
+    for obs, info in observations(completion=completion):
         expected, _ = model.predict(
             {k: v[None] for k, v in obs.items()}, deterministic=True, action_masks=info["action_mask"][None]
         )
@@ -92,6 +106,43 @@ def test_scores_do_not_depend_on_the_slot():
     c[[3, 7]] = c[[7, 3]]
     a, b = scorer(latent)[0], scorer(swapped)[0]
     assert torch.allclose(a[3], b[7]) and torch.allclose(a[7], b[3]) and torch.allclose(a[0], b[0])
+
+
+def test_the_room_done_head_reads_the_room_and_what_is_left_to_gain():
+    """The "room done" logit moves with the room vector and with the candidates' predicted gains
+    but not with their slots; the candidates' logits read the room vector too."""
+    torch.manual_seed(0)
+    config = NetworkConfig(actions=65, room_features=5)
+    _, scorer = build_network(config)
+    latent = torch.rand(1, config.latent_dim)
+    base = scorer(latent)[0]
+    assert base.shape == (65,)
+    room = latent.clone()
+    room[0, -5:] += torch.tensor([3.0, 0.2, 40.0, 5.0, 1.0])
+    moved = scorer(room)[0]
+    assert not torch.allclose(moved[64], base[64]) and not torch.allclose(moved[:64], base[:64])
+    gains = latent.clone()
+    table = gains[0, config.grid_dim : config.grid_dim + 64 * 5].view(64, 5)
+    table[:, 3] *= 0.01  # little left to gain
+    assert not torch.allclose(scorer(gains)[0][64], base[64])
+    swapped = latent.clone()
+    table = swapped[0, config.grid_dim : config.grid_dim + 64 * 5].view(64, 5)
+    table[[3, 7]] = table[[7, 3]]
+    after = scorer(swapped)[0]
+    assert torch.allclose(after[64], base[64]) and torch.allclose(after[3], base[7])
+
+
+def test_a_policy_reading_the_room_vector_refuses_an_observation_without_it(tmp_path):
+    config = NetworkConfig(actions=65, room_features=5)
+    encoder, scorer = build_network(config)
+    state = {f"encoder.{k}": v for k, v in encoder.state_dict().items()}
+    state.update({f"scorer.{k}": v for k, v in scorer.state_dict().items()})
+    policy = LearnedPolicy(save_checkpoint(tmp_path, config, state))
+    assert policy.env_overrides == {"completion": "policy"}
+    (obs, info), *_ = observations(completion="policy")
+    assert 0 <= policy.act(obs, info) <= 64
+    with pytest.raises(ValueError, match="'room' vector"):
+        policy.logits({k: v for k, v in obs.items() if k != "room"})
 
 
 def test_the_learned_policy_never_picks_a_masked_action(tmp_path):

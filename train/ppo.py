@@ -25,6 +25,7 @@ import numpy as np
 from nbs_env import threads
 from nbs_env.config import Config, _finite, _integer, _require
 from nbs_env.errors import ConfigError
+from nbs_env.observation import ROOM_FEATURES
 from policies.learned import NetworkConfig, build_network, save_checkpoint
 from train.arguments import parse_range
 
@@ -81,6 +82,10 @@ class TrainConfig(Config):
         Vector steps of greedy play to behaviour-clone from before PPO (0: none).
     metre_cost : float
         Reward subtracted per metre driven.
+    completion : {"policy", "gain"}
+        Who ends a room: ``"policy"``, the agent through its "room done" action (K + 1 actions; the
+        network also reads the observation's ``room`` vector); ``"gain"``, the robot's gain rule
+        (the agent only chooses where to scan).
     """
 
     timesteps: int = 2048
@@ -96,6 +101,7 @@ class TrainConfig(Config):
     max_episode_steps: int = 40
     bc_steps: int = 0
     metre_cost: float = 0.05
+    completion: str = "policy"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "rooms", tuple(self.rooms))
@@ -112,9 +118,19 @@ class TrainConfig(Config):
         _finite(learning_rate=self.learning_rate, metre_cost=self.metre_cost)
         _require(self.learning_rate > 0, f"learning_rate must be > 0, got {self.learning_rate}")
         _require(self.metre_cost >= 0, f"metre_cost must be >= 0, got {self.metre_cost}")
+        _require(
+            self.completion in ("policy", "gain"), f"completion must be 'policy' or 'gain', got {self.completion!r}"
+        )
+
+    @property
+    def network(self) -> NetworkConfig:
+        """The network this run trains: K + 1 actions and the room vector with ``completion="policy"``."""
+        if self.completion == "policy":
+            return NetworkConfig(actions=NetworkConfig().candidates + 1, room_features=len(ROOM_FEATURES))
+        return NetworkConfig()
 
 
-def _env_factory(rooms: tuple[int, int], max_episode_steps: int, metre_cost: float = 0.05):
+def _env_factory(rooms: tuple[int, int], max_episode_steps: int, metre_cost: float = 0.05, completion: str = "gain"):
     def make():
         import gymnasium as gym
         from stable_baselines3.common.monitor import Monitor
@@ -124,7 +140,10 @@ def _env_factory(rooms: tuple[int, int], max_episode_steps: int, metre_cost: flo
 
         config = make_config("fast")
         config = replace(
-            config, generator=GeneratorConfig(rooms=rooms), reward=replace(config.reward, metre_cost=metre_cost)
+            config,
+            generator=GeneratorConfig(rooms=rooms),
+            reward=replace(config.reward, metre_cost=metre_cost),
+            completion=completion,
         )
         # Monitor puts each episode's return in info["episode"], for the learning-curve log.
         return Monitor(gym.make("nbs_env:nbs_env/NBS-Fast-v0", config=config, max_episode_steps=max_episode_steps))
@@ -141,12 +160,16 @@ def _policy_class():
 
         def __init__(self, observation_space, network: NetworkConfig) -> None:
             super().__init__(observation_space, features_dim=network.latent_dim)
+            self.network = network
             self.encoder, _ = build_network(network)
 
         def forward(self, obs):
             import torch
 
-            return torch.cat([self.encoder(obs["voxels"]), obs["candidates"].float()], dim=1)
+            parts = [self.encoder(obs["voxels"]), obs["candidates"].float()]
+            if self.network.room_features:
+                parts.append(obs["room"].float())
+            return torch.cat(parts, dim=1)
 
     class ScanNetPolicy(MaskableMultiInputActorCriticPolicy):
         """MaskablePPO's policy with :mod:`policies.learned`'s slot-independent candidate scorer."""
@@ -180,14 +203,15 @@ def _layout(model) -> str:
     return "xyz" if shape == (64, 64, 16) else "zxy"
 
 
-def evaluate(policy_fn, storeys: list[int], max_episode_steps: int) -> dict[str, float]:
-    """Mean scans, SE % and path of a policy over held-out generated storeys (the fast preset)."""
+def evaluate(policy_fn, storeys: list[int], max_episode_steps: int, completion: str = "gain") -> dict[str, float]:
+    """Mean scans, SE % and path of a policy over held-out generated storeys (the fast preset, with
+    ``completion``)."""
     from nbs_env.env import NBSEnv
     from nbs_env.settings import make_config
 
     scans, pct, path = [], [], []
     for seed in storeys:
-        env = NBSEnv(make_config("fast", scene=f"generated:{seed}", max_scans=max_episode_steps))
+        env = NBSEnv(make_config("fast", scene=f"generated:{seed}", max_scans=max_episode_steps, completion=completion))
         obs, info = env.reset(seed=seed)
         while True:
             obs, _, terminated, truncated, info = env.step(policy_fn(obs, info))
@@ -209,7 +233,7 @@ def make_training_envs(config: TrainConfig):
     _require_rl()
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-    workers = [_env_factory(config.rooms, config.max_episode_steps, config.metre_cost)] * config.envs
+    workers = [_env_factory(config.rooms, config.max_episode_steps, config.metre_cost, config.completion)] * config.envs
     if config.envs > 1:
         # Each worker's kernels share the cores with the others' (nbs_env.threads): a worker gets
         # its share, unless NBS_THREADS says otherwise. The workers read it when they start.
@@ -245,7 +269,7 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     venv = make_training_envs(config)
-    network = NetworkConfig()
+    network = config.network
     device = "cuda" if torch.cuda.is_available() else "cpu"
     model = MaskablePPO(
         _policy_class(),
@@ -263,7 +287,9 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
     log = out / "learning_curve.jsonl"
     log.write_text("")
     greedy = GreedyPolicy()
-    baseline = evaluate(greedy.act, held_out, config.max_episode_steps) if config.eval_every else None
+    baseline = None
+    if config.eval_every:
+        baseline = evaluate(greedy.act, held_out, config.max_episode_steps, config.completion)
 
     class Progress(BaseCallback):
         def _on_training_start(self) -> None:
@@ -298,7 +324,8 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
                 )
                 return int(action[0])
 
-            record = {"timesteps": n, "learned": evaluate(act, held_out, config.max_episode_steps), "greedy": baseline}
+            learned = evaluate(act, held_out, config.max_episode_steps, config.completion)
+            record = {"timesteps": n, "learned": learned, "greedy": baseline}
             record["train_return"] = float(np.mean(self.episodes[-20:])) if self.episodes else None
             with log.open("a") as f:
                 f.write(json.dumps(record) + "\n")
@@ -331,7 +358,9 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
 
 def behaviour_clone(model, steps: int, epochs: int = 30, batch_size: int = 64, progress: bool = False) -> dict:
     """Warm-start the policy on the greedy's decisions: play the greedy in the training envs for
-    ``steps`` vector steps, then fit the masked logits to its choices by cross-entropy.
+    ``steps`` vector steps, then fit the masked logits to its choices by cross-entropy. With a
+    "room done" action (completion="policy") the greedy declares the room done where the robot's
+    gain rule would end it (``NBSEnv.gain_rule_done``, the robot's own plan).
 
     Returns ``{"samples", "loss_first", "loss_last", "agreement"}``: agreement is the share of the
     samples where the policy's masked argmax equals the greedy's choice after fitting.
@@ -348,9 +377,15 @@ def behaviour_clone(model, steps: int, epochs: int = 30, batch_size: int = 64, p
     for _ in range(steps):
         masks = get_action_masks(venv)
         gains = np.stack(venv.env_method("candidate_gains"))
+        k = gains.shape[1]
+        done = venv.env_method("gain_rule_done") if masks.shape[1] > k else [False] * len(masks)
         path = candidate_table_of(obs)[..., CandidateColumn.PATH_LENGTH]
-        actions = np.array([int(greedy_order(gains[i], path[i], masks[i][: gains.shape[1]])[0])
-                            for i in range(len(masks))])  # fmt: skip
+        actions = np.array(
+            [
+                k if done[i] or not masks[i][:k].any() else int(greedy_order(gains[i], path[i], masks[i][:k])[0])
+                for i in range(len(masks))
+            ]
+        )
         samples.append(({k: v.copy() for k, v in obs.items()}, masks.copy(), actions))
         obs, _, _, _ = venv.step(actions)
     policy = model.policy
@@ -433,6 +468,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--learning-rate", type=float, default=3e-4)
     p.add_argument("--n-steps", type=int, default=64, help="steps per worker between PPO updates")
     p.add_argument("--metre-cost", type=float, default=0.05, help="reward per metre driven, subtracted")
+    p.add_argument(
+        "--completion",
+        choices=("policy", "gain"),
+        default="policy",
+        help="who ends a room: the agent's 'room done' action (policy) or the robot's gain rule (gain)",
+    )
+    p.add_argument("--max-episode-steps", type=int, default=40, help="decisions per episode at the most")
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--quiet", action="store_true")
     return p
@@ -458,6 +500,8 @@ def main(argv: list[str] | None = None) -> int:
             learning_rate=args.learning_rate,
             n_steps=args.n_steps,
             metre_cost=args.metre_cost,
+            completion=args.completion,
+            max_episode_steps=args.max_episode_steps,
         )
     except ConfigError as exc:
         print(f"nbs train: error: {exc}", file=sys.stderr)
