@@ -230,7 +230,8 @@ def test_bad_checkpoints_raise_clear_errors(tmp_path):
         "since 5a530aa (issue 18: the gain's lines of sight traversed through the voxels) the greedy "
         "finds a room on generated:20000001 that it missed before and ppo:reference still misses "
         "(95.8% against 80.4%): the mean over the four validation storeys is 92.0% against 95.7%. "
-        "On the 20 test storeys the policy stays within 0.3 points (README); issue 19 retrains it."
+        "On the 20 test storeys the policy stays within 0.3 points (README). Issue 19's room-ending "
+        "policy was not shipped (it loses 4.6 points on the corpus, README)."
     ),
 )
 def test_the_bundled_reference_policy_keeps_its_standing_against_the_greedy():
@@ -259,8 +260,10 @@ def test_the_bundled_reference_policy_keeps_its_standing_against_the_greedy():
         return action
 
     storeys = [VALIDATION_BASE + k for k in range(training["eval_storeys"])]
-    replay = evaluate(act, storeys, training["max_episode_steps"])
-    greedy = evaluate(GreedyPolicy().act, storeys, training["max_episode_steps"])
+    # A policy trained before issue 19 has no "completion" in its record: the gain rule ended its rooms.
+    completion = training.get("completion", "gain")
+    replay = evaluate(act, storeys, training["max_episode_steps"], completion)
+    greedy = evaluate(GreedyPolicy().act, storeys, training["max_episode_steps"], completion)
     recorded = records[-1]
     margin = recorded["greedy"]["structure_sensed_pct"] - recorded["learned"]["structure_sensed_pct"]
     assert replay["structure_sensed_pct"] >= greedy["structure_sensed_pct"] - max(margin, 0.0) - 2.0, (replay, greedy)
@@ -275,7 +278,7 @@ def test_the_bundled_reference_policy_gives_its_stored_logits():
     policy = make_policy("ppo:reference")
     assert len(data["logits"]) >= 10
     for k in range(len(data["logits"])):
-        obs = {key: data[key][k] for key in ("voxels", "candidates", "pose")}
+        obs = {key: data[key][k] for key in ("voxels", "candidates", "pose", "room") if key in data}
         logits = policy.logits(obs)
         np.testing.assert_allclose(logits, data["logits"][k], rtol=1e-4, atol=1e-4)
         masked = np.where(data["mask"][k], data["logits"][k], -np.inf)

@@ -7,7 +7,8 @@ Usage::
     python tests/data/make_ppo_observations.py
 
 Greedy episodes on the first two validation storeys (``generated:20000000`` and ``20000001``, seed
-0); every second observation is kept, with its action mask.
+0), in the env the policy was trained in (``completion="policy"`` for a policy with a "room done"
+action); every second observation is kept, with its action mask.
 """
 
 from __future__ import annotations
@@ -26,13 +27,14 @@ OUT = Path(__file__).with_name("ppo_reference_observations.npz")
 def main() -> None:
     policy = make_policy("ppo:reference")
     greedy = GreedyPolicy()
-    keep: dict[str, list[np.ndarray]] = {"voxels": [], "candidates": [], "pose": [], "mask": [], "logits": []}
+    keys = ("voxels", "candidates", "pose", "room")
+    keep: dict[str, list[np.ndarray]] = {k: [] for k in (*keys, "mask", "logits")}
     for storey in (20_000_000, 20_000_001):
-        env = NBSEnv("fast", scene=f"generated:{storey}")
+        env = NBSEnv("fast", scene=f"generated:{storey}", **getattr(policy, "env_overrides", {}))
         obs, info = env.reset(seed=0)
         for step in range(40):
             if step % 2 == 0:
-                for key in ("voxels", "candidates", "pose"):
+                for key in keys:
                     keep[key].append(obs[key])
                 keep["mask"].append(info["action_mask"])
                 keep["logits"].append(policy.logits(obs).astype(np.float32))
