@@ -239,8 +239,9 @@ class NBSEnv(gym.Env):
         return mask
 
     def gain_rule_done(self) -> bool:
-        """Whether the robot's gain rule would end the room now (:meth:`Storey.gain_rule_done`):
-        what the greedy declares by with ``completion="policy"``; also ``info["gain_rule_done"]``."""
+        """Whether the robot's gain rule would end the room now (:meth:`Storey.gain_rule_done`; False
+        before ``reset``): what the greedy declares by with ``completion="policy"``; also
+        ``info["gain_rule_done"]``."""
         return self.storey is not None and self.storey.gain_rule_done()
 
     def candidate_gains(self) -> np.ndarray:

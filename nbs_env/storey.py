@@ -283,12 +283,20 @@ class Storey:
         return self.robot.path_length
 
     def gain_rule_done(self) -> bool:
-        """Whether the robot's own gain rule (METHOD §7: no NVP predicts ``robot.completion_fraction``
-        of the room's structural voxels) would end the current room now; False once the episode is
-        over. With ``completion="gain"`` the session ends the room itself when this holds; with
-        ``"policy"`` it is what the greedy (and the behaviour-cloning teacher) declares by. Reads
-        the robot's plan only, never ground truth."""
-        return self.open and self.plan.gain_below(self.robot.config.completion_fraction)
+        """Whether the robot's own gain rule (METHOD §7) would end the current room now.
+
+        Returns
+        -------
+        bool
+            True when no NVP predicts ``robot.completion_fraction`` of the room's structural voxels;
+            False once the episode is over and when the robot predicts no gains
+            (``robot.predict_gains=False``: the rule has nothing to read). With
+            ``completion="gain"`` the session ends such a room itself; with ``"policy"`` it is what
+            the greedy (and the behaviour-cloning teacher) declares by. Reads the robot's plan
+            only, never ground truth.
+        """
+        robot = self.robot
+        return self.open and robot.config.predict_gains and self.plan.gain_below(robot.config.completion_fraction)
 
     def coverage_pct(self) -> float:
         """True structural surface sensed, % of the storey's (evaluation side)."""

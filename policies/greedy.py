@@ -41,8 +41,11 @@ class GreedyPolicy:
         mask = mask_of(obs, info)
         gains = np.asarray(info["candidate_gains"])
         k = len(gains)
-        if len(mask) > k and (info.get("gain_rule_done", False) or not mask[:k].any()):
-            return k  # the "room done" action of completion="policy"
+        if len(mask) > k:  # completion="policy": action k is "room done"
+            if "gain_rule_done" not in info:
+                raise KeyError("GreedyPolicy needs info['gain_rule_done'] to end rooms, which NBSEnv provides")
+            if info["gain_rule_done"] or not mask[:k].any():
+                return k
         path = candidate_table_of(obs)[:, CandidateColumn.PATH_LENGTH]
         return int(greedy_order(gains, path, mask[:k])[0])
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from nbs_env.config import Config, _integer, _require
 from nbs_env.errors import ConfigError, ModelFileError
-from nbs_env.observation import CandidateColumn, candidate_table_of
+from nbs_env.observation import ROOM_FEATURES, CandidateColumn, candidate_table_of
 from policies.base import mask_of
 
 __all__ = [
@@ -126,7 +126,10 @@ class NetworkConfig(Config):
             )
         for name in ("candidates", "features", "actions", "grid_dim", "hidden"):
             _integer(self, name, 1)
-        _integer(self, "room_features", 0)
+        _require(
+            self.room_features in (0, len(ROOM_FEATURES)),
+            f"room_features must be 0 or {len(ROOM_FEATURES)} (the room vector), got {self.room_features!r}",
+        )
         _require(
             self.actions in (self.candidates, self.candidates + 1),
             f"actions must be candidates ({self.candidates}) or candidates + 1, got {self.actions}",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pickle
 import warnings
+from dataclasses import replace
 
 import gymnasium as gym
 import numpy as np
@@ -148,10 +149,6 @@ def test_the_greedy_declaring_rooms_done_scans_as_the_gain_rule(scene):
         obs, info = env.reset(seed=0)
         policy, steps, declared = GreedyPolicy(), 0, 0
         while True:
-            storey = env.storey
-            assert info["gain_rule_done"] == (
-                storey.open and storey.plan.gain_below(storey.robot.config.completion_fraction)
-            )
             if completion == "gain":
                 assert not info["gain_rule_done"]  # the session ended such rooms itself
             action = policy.act(obs, info)
@@ -166,6 +163,19 @@ def test_the_greedy_declaring_rooms_done_scans_as_the_gain_rule(scene):
     assert pos == gain_pos and pct == gain_pct and path == gain_path
     reasons = [end["reason"] for end in env.storey.room_ends]
     assert declared == reasons.count("declared") >= 1 and steps == gain_steps + declared
+
+
+def test_the_gain_rule_says_nothing_when_the_robot_predicts_no_gains():
+    """Without predicted gains (the compared methods' envs) the rule has nothing to read: it never
+    tells the greedy to end a room, and an info without the flag is refused rather than ignored."""
+    config = make_config("fast", scene="l_room", completion="policy")
+    config = replace(config, robot=replace(config.robot, predict_gains=False))
+    env = NBSEnv(config)
+    obs, info = env.reset(seed=0)
+    assert not info["gain_rule_done"] and not env.gain_rule_done()
+    assert np.all(info["candidate_gains"] == 0)
+    with pytest.raises(KeyError, match="gain_rule_done"):
+        GreedyPolicy().act(obs, {k: v for k, v in info.items() if k != "gain_rule_done"})
 
 
 def test_pooling_keeps_the_highest_priority_label():

@@ -13,6 +13,7 @@ torch = pytest.importorskip("torch")
 
 from nbs_env.env import NBSEnv  # noqa: E402
 from nbs_env.errors import ModelFileError  # noqa: E402
+from nbs_env.observation import CandidateColumn  # noqa: E402
 from policies import make_policy  # noqa: E402
 from policies.learned import LearnedPolicy, NetworkConfig, build_network, save_checkpoint  # noqa: E402
 
@@ -122,11 +123,12 @@ def test_the_room_done_head_reads_the_room_and_what_is_left_to_gain():
     moved = scorer(room)[0]
     assert not torch.allclose(moved[64], base[64]) and not torch.allclose(moved[:64], base[:64])
     gains = latent.clone()
-    table = gains[0, config.grid_dim : config.grid_dim + 64 * 5].view(64, 5)
-    table[:, 3] *= 0.01  # little left to gain
+    k, f = config.candidates, config.features
+    table = gains[0, config.grid_dim : config.grid_dim + k * f].view(k, f)
+    table[:, CandidateColumn.PREDICTED_GAIN] *= 0.01  # little left to gain
     assert not torch.allclose(scorer(gains)[0][64], base[64])
     swapped = latent.clone()
-    table = swapped[0, config.grid_dim : config.grid_dim + 64 * 5].view(64, 5)
+    table = swapped[0, config.grid_dim : config.grid_dim + k * f].view(k, f)
     table[[3, 7]] = table[[7, 3]]
     after = scorer(swapped)[0]
     assert torch.allclose(after[64], base[64]) and torch.allclose(after[3], base[7])
@@ -190,6 +192,7 @@ def test_bad_checkpoints_raise_clear_errors(tmp_path):
         ("hidden", -1, "hidden must be an integer >= 1"),
         ("voxel_shape", [0, 0, 0], "voxel_shape must be three integers >= 1"),
         ("actions", 3, "actions must be candidates"),
+        ("room_features", 4, "room_features must be 0 or 5"),
         ("channels", [8, 16], "channels must be three integers"),
     ):
         bad = {**document, "network": {**document["network"], "hidden": 64, field: value}}

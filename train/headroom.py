@@ -4,20 +4,20 @@ Usage::
 
     python -m train.headroom --storeys 24 [--base 20000000] [--jobs 2] [--out headroom.json]
 
-Plays the greedy (:class:`policies.GreedyPolicy`) with ``completion="policy"`` on the generated
-storeys ``generated:BASE`` to ``BASE + storeys - 1`` (the fast preset, seed 0; by default the
-validation storeys of :mod:`train.ppo`, never the test storeys), where every step is either a scan
-the policy chose or a "room done" declaration, and splits the episode's scans and path:
+Plays the greedy (:class:`policies.GreedyPolicy`) on the generated storeys ``generated:BASE`` to
+``BASE + storeys - 1`` (the fast preset, seed 0; by default the validation storeys of
+:mod:`train.ppo`, never the test storeys) and splits the episode's scans and path, scan by scan
+(the episode log's :class:`~nbs_env.storey.ScanRecord`):
 
 - *chosen*: the scans inside a room and the metres driven to them, what any policy decides;
-- *hand-over*: the storey's first scan and, per room done, the drive to the nearest unvisited door,
-  the crossing and the next room's first scan: the robot's door rule, the same for every policy
-  that ends the rooms where the greedy does.
+- *hand-over*: the storey's first scan and every door-frame scan, with the drive to the door: the
+  robot's door rule, the same for every policy that ends the rooms where the greedy does.
 
-It then bounds what ending rooms earlier can save, in hindsight: drop each room's trailing chosen
-scans that each gained less than a threshold (true coverage, percentage points of the storey), and
-report the scans, path and coverage dropped. The bound reads ground truth; it is a measurement of
-the task, not a policy.
+It then estimates, in hindsight, what ending rooms earlier could save: drop each room's trailing
+chosen scans that each gained less than a threshold (true coverage, percentage points of the
+storey), and report the scans, path and coverage dropped. An estimate, not a bound: a room left
+earlier changes the drive to the next door and what the door search sees. It reads ground truth;
+it measures the task, it is not a policy.
 """
 
 from __future__ import annotations
@@ -35,64 +35,70 @@ from train.ppo import VALIDATION_BASE
 THRESHOLDS = (0.25, 0.5, 0.75, 1.0, 1.5)
 
 
-def greedy_steps(scene: str, seed: int = 0) -> list[dict]:
-    """The greedy's episode on ``scene`` (fast preset, ``completion="policy"``), step by step:
-    ``{"room", "declared", "scans", "metres", "gain_pt"}`` per step (scans and metres of the step,
-    true coverage gained in points)."""
+def greedy_scans(scene: str, seed: int = 0) -> list[dict]:
+    """The greedy's episode on ``scene`` (fast preset), scan by scan.
+
+    Returns
+    -------
+    list of dict
+        Per scan: ``room`` (the robot's room index), ``handover`` (the first scan or a door-frame
+        scan), ``metres`` (driven to it) and ``gain_pt`` (true coverage it added, points).
+    """
     from nbs_env.env import NBSEnv
     from policies import GreedyPolicy
 
-    env = NBSEnv("fast", scene=scene, completion="policy")
+    env = NBSEnv("fast", scene=scene)
     obs, info = env.reset(seed=seed)
     policy = GreedyPolicy()
-    steps = [{"room": -1, "declared": True, "scans": 1, "metres": 0.0, "gain_pt": info["structure_sensed_pct"]}]
-    while True:
-        before = (info["scans"], info["path_length_m"], info["structure_sensed_pct"], info["room"])
-        action = policy.act(obs, info)
-        obs, _, terminated, truncated, info = env.step(action)
-        steps.append(
+    while env.storey.open:
+        obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
+        if terminated or truncated:
+            break
+    out, path, pct = [], 0.0, 0.0
+    for k, record in enumerate(env.storey.scans):
+        out.append(
             {
-                "room": before[3],
-                "declared": action == env.stop_action,
-                "scans": info["scans"] - before[0],
-                "metres": info["path_length_m"] - before[1],
-                "gain_pt": info["structure_sensed_pct"] - before[2],
+                "room": record.room,
+                "handover": k == 0 or record.door,
+                "metres": record.path_length - path,
+                "gain_pt": record.structure_sensed_pct - pct,
             }
         )
-        if terminated or truncated:
-            return steps
+        path, pct = record.path_length, record.structure_sensed_pct
+    return out
 
 
 def summarise(episodes: list[list[dict]]) -> dict:
-    """The split and the hindsight bound over episodes of :func:`greedy_steps` (means per storey)."""
+    """The split and the hindsight estimate over episodes of :func:`greedy_scans` (means per storey)."""
     n = len(episodes)
-    scans = sum(s["scans"] for e in episodes for s in e)
+    scans = sum(len(e) for e in episodes)
     metres = sum(s["metres"] for e in episodes for s in e)
-    chosen = [s for e in episodes for s in e if not s["declared"]]
+    chosen = [s for e in episodes for s in e if not s["handover"]]
     out = {
         "storeys": n,
         "scans": scans / n,
         "path_m": metres / n,
         "coverage_pct": float(np.mean([sum(s["gain_pt"] for s in e) for e in episodes])),
-        "chosen_scans": sum(s["scans"] for s in chosen) / n,
+        "chosen_scans": len(chosen) / n,
         "chosen_path_m": sum(s["metres"] for s in chosen) / n,
-        "bound": [],
+        "estimate": [],
     }
     for threshold in THRESHOLDS:
         dropped = {"scans": 0, "metres": 0.0, "gain_pt": 0.0}
         for episode in episodes:
             rooms: dict[int, list[dict]] = {}
             for s in episode:
-                if not s["declared"]:
+                if not s["handover"]:
                     rooms.setdefault(s["room"], []).append(s)
-            for steps in rooms.values():
-                k = len(steps)
-                while k > 0 and steps[k - 1]["gain_pt"] < threshold:
+            for room_scans in rooms.values():
+                k = len(room_scans)
+                while k > 0 and room_scans[k - 1]["gain_pt"] < threshold:
                     k -= 1
-                for s in steps[k:]:
-                    for key in dropped:
-                        dropped[key] += s[key]
-        out["bound"].append(
+                for s in room_scans[k:]:
+                    dropped["scans"] += 1
+                    dropped["metres"] += s["metres"]
+                    dropped["gain_pt"] += s["gain_pt"]
+        out["estimate"].append(
             {
                 "threshold_pt": threshold,
                 "fewer_scans_pct": 100 * dropped["scans"] / scans,
@@ -104,7 +110,7 @@ def summarise(episodes: list[list[dict]]) -> dict:
 
 
 def _run(scene: str) -> list[dict]:
-    return greedy_steps(scene)
+    return greedy_scans(scene)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -125,9 +131,9 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"chosen in rooms: {s['chosen_scans']:.2f} scans ({100 * s['chosen_scans'] / s['scans']:.0f}%), "
         f"{s['chosen_path_m']:.1f} m ({100 * s['chosen_path_m'] / s['path_m']:.0f}%); the rest is the first scans "
-        "and the door hand-overs"
+        "and the door-frame scans with the drives to the doors"
     )
-    for b in s["bound"]:
+    for b in s["estimate"]:
         print(
             f"hindsight, each room's trailing scans that gained < {b['threshold_pt']} pt dropped: "
             f"{b['fewer_scans_pct']:.1f}% fewer scans, {b['shorter_path_pct']:.1f}% shorter path, "

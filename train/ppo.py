@@ -101,7 +101,7 @@ class TrainConfig(Config):
     max_episode_steps: int = 40
     bc_steps: int = 0
     metre_cost: float = 0.05
-    completion: str = "policy"
+    completion: str = "gain"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "rooms", tuple(self.rooms))
@@ -213,7 +213,9 @@ def evaluate(policy_fn, storeys: list[int], max_episode_steps: int, completion: 
     for seed in storeys:
         env = NBSEnv(make_config("fast", scene=f"generated:{seed}", max_scans=max_episode_steps, completion=completion))
         obs, info = env.reset(seed=seed)
-        while True:
+        # At most max_episode_steps decisions, as training's TimeLimit, and as many scans: with the
+        # gain rule a step takes at least one scan, with "room done" steps the decisions bind first.
+        for _ in range(max_episode_steps):
             obs, _, terminated, truncated, info = env.step(policy_fn(obs, info))
             if terminated or truncated:
                 break
@@ -471,8 +473,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--completion",
         choices=("policy", "gain"),
-        default="policy",
-        help="who ends a room: the agent's 'room done' action (policy) or the robot's gain rule (gain)",
+        default="gain",
+        help="who ends a room: the agent's 'room done' action (policy) or the robot's gain rule (gain, the default)",
     )
     p.add_argument("--max-episode-steps", type=int, default=40, help="decisions per episode at the most")
     p.add_argument("--out", type=Path, required=True)
