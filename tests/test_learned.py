@@ -74,6 +74,29 @@ def test_loaded_policy_acts_as_the_trained_model(trained):
         assert policy.act(obs, info) == int(expected[0])
 
 
+def test_a_run_can_start_from_a_checkpoint(trained, tmp_path):
+    """--init loads the checkpoint's encoder and scorer: with a learning rate too small to move them,
+    the new run's policy gives the checkpoint's logits (random weights would not); a checkpoint of
+    another network is refused before any worker starts."""
+    from train.ppo import TrainConfig, train
+
+    path, _ = trained
+    completion = json.loads(path.read_text())["training"]["completion"]
+    config = TrainConfig(
+        timesteps=32, envs=1, seed=3, rooms=(1, 1), n_steps=32, batch_size=32, learning_rate=1e-12,
+        completion=completion, init=str(path.parent),
+    )  # fmt: skip
+    again, _ = train(config, tmp_path / "again", progress=False)
+    before, after = make_policy(f"ppo:{path.parent}"), make_policy(f"ppo:{again.parent}")
+    for obs, _ in observations(completion=completion):
+        np.testing.assert_allclose(after.logits(obs), before.logits(obs), atol=1e-5)
+    other = "gain" if completion == "policy" else "policy"
+    mismatched = TrainConfig(timesteps=32, envs=1, completion=other, init=str(path.parent))
+    with pytest.raises(ModelFileError, match="is not this run's"):
+        train(mismatched, tmp_path / "x", progress=False)
+    assert not (tmp_path / "x").exists()
+
+
 def test_the_encoder_reads_the_labels_as_one_hot_channels():
     """The encoder's one-hot is torch's ``one_hot`` moved to channels, to the last bit:
     labels out of range clamp to the nearest, float labels round."""

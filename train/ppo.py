@@ -24,7 +24,7 @@ import numpy as np
 
 from nbs_env import threads
 from nbs_env.config import Config, _finite, _integer, _require
-from nbs_env.errors import ConfigError
+from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import ROOM_FEATURES
 from policies.learned import NetworkConfig, build_network, save_checkpoint
 from train.arguments import parse_range
@@ -82,6 +82,12 @@ class TrainConfig(Config):
         Vector steps of greedy play to behaviour-clone from before PPO (0: none).
     metre_cost : float
         Reward subtracted per metre driven.
+    cell_size : (float, float)
+        The range of the generator's cell edge, metres: rooms are unions of such cells, so larger
+        cells make larger rooms and open spaces.
+    init : str
+        A checkpoint (folder or ``policy.json``) to start the policy's network from, instead of
+        random weights; its network must be this run's. Empty: none.
     completion : {"policy", "gain"}
         Who ends a room: ``"policy"``, the agent through its "room done" action (K + 1 actions; the
         network also reads the observation's ``room`` vector); ``"gain"``, the robot's gain rule
@@ -102,9 +108,19 @@ class TrainConfig(Config):
     bc_steps: int = 0
     metre_cost: float = 0.05
     completion: str = "gain"
+    cell_size: tuple[float, float] = (2.0, 3.6)
+    init: str = ""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "rooms", tuple(self.rooms))
+        object.__setattr__(self, "cell_size", tuple(self.cell_size))
+        _require(
+            len(self.cell_size) == 2
+            and all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in self.cell_size)
+            and 1.8 <= self.cell_size[0] <= self.cell_size[1] <= 10.0,
+            f"cell_size must be (A, B) metres with 1.8 <= A <= B <= 10, got {self.cell_size!r}",
+        )
+        _require(isinstance(self.init, str), f"init must be a checkpoint path (str), got {self.init!r}")
         for name in ("timesteps", "envs", "n_steps", "batch_size", "eval_storeys", "max_episode_steps"):
             _integer(self, name, 1)
         for name in ("seed", "eval_every", "checkpoint_every", "bc_steps"):
@@ -130,7 +146,13 @@ class TrainConfig(Config):
         return NetworkConfig()
 
 
-def _env_factory(rooms: tuple[int, int], max_episode_steps: int, metre_cost: float = 0.05, completion: str = "gain"):
+def _env_factory(
+    rooms: tuple[int, int],
+    max_episode_steps: int,
+    metre_cost: float = 0.05,
+    completion: str = "gain",
+    cell_size: tuple[float, float] = (2.0, 3.6),
+):
     def make():
         import gymnasium as gym
         from stable_baselines3.common.monitor import Monitor
@@ -141,7 +163,7 @@ def _env_factory(rooms: tuple[int, int], max_episode_steps: int, metre_cost: flo
         config = make_config("fast")
         config = replace(
             config,
-            generator=GeneratorConfig(rooms=rooms),
+            generator=GeneratorConfig(rooms=rooms, cell_size=tuple(cell_size)),
             reward=replace(config.reward, metre_cost=metre_cost),
             completion=completion,
         )
@@ -235,7 +257,9 @@ def make_training_envs(config: TrainConfig):
     _require_rl()
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-    workers = [_env_factory(config.rooms, config.max_episode_steps, config.metre_cost, config.completion)] * config.envs
+    workers = [
+        _env_factory(config.rooms, config.max_episode_steps, config.metre_cost, config.completion, config.cell_size)
+    ] * config.envs
     if config.envs > 1:
         # Each worker's kernels share the cores with the others' (nbs_env.threads): a worker gets
         # its share, unless NBS_THREADS says otherwise. The workers read it when they start.
@@ -268,10 +292,12 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
 
     from policies import GreedyPolicy
 
+    network = config.network
+    # Checked before any worker starts: a bad checkpoint fails at once, not after the envs are up.
+    initial = _load_init(config.init, network) if config.init else None
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     venv = make_training_envs(config)
-    network = config.network
     device = "cuda" if torch.cuda.is_available() else "cpu"
     model = MaskablePPO(
         _policy_class(),
@@ -285,6 +311,9 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
         policy_kwargs={"network": network},
         verbose=0,
     )
+    if initial is not None:  # the encoder and scorer from the checkpoint; the value head starts afresh
+        model.policy.features_extractor.encoder.load_state_dict(initial[0].state_dict())
+        model.policy.action_net.load_state_dict(initial[1].state_dict())
     held_out = [VALIDATION_BASE + k for k in range(config.eval_storeys)]
     log = out / "learning_curve.jsonl"
     log.write_text("")
@@ -356,6 +385,23 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
     )
     plot_learning_curve(log, out / "learning_curve.png")
     return final, model
+
+
+def _load_init(path: str, network: NetworkConfig):
+    """The encoder and scorer of the checkpoint a run starts from.
+
+    Raises
+    ------
+    ModelFileError
+        The checkpoint cannot be read, or its network is not ``network``.
+    """
+    from nbs_env.errors import ModelFileError
+    from policies.learned import load_checkpoint, resolve_checkpoint
+
+    theirs, encoder, scorer, _, _ = load_checkpoint(resolve_checkpoint(path))
+    if theirs != network:
+        raise ModelFileError(f"{path}: its network {theirs.to_dict()} is not this run's {network.to_dict()}")
+    return encoder, scorer
 
 
 def behaviour_clone(model, steps: int, epochs: int = 30, batch_size: int = 64, progress: bool = False) -> dict:
@@ -477,6 +523,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="who ends a room: the agent's 'room done' action (policy) or the robot's gain rule (gain, the default)",
     )
     p.add_argument("--max-episode-steps", type=int, default=40, help="decisions per episode at the most")
+    p.add_argument("--cell-size", default="2.0-3.6", help="range of the generator's cell edge in metres, e.g. 2.0-6.0")
+    p.add_argument("--init", default="", help="checkpoint to start the network from (default: random weights)")
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--quiet", action="store_true")
     return p
@@ -488,6 +536,12 @@ def main(argv: list[str] | None = None) -> int:
         rooms = parse_range(args.rooms)
     except ValueError as exc:
         print(f"nbs train: error: --rooms: {exc}", file=sys.stderr)
+        return 2
+    try:
+        lo, _, hi = args.cell_size.partition("-")
+        cell_size = (float(lo), float(hi or lo))
+    except ValueError:
+        print(f"nbs train: error: --cell-size: expected A-B in metres, got {args.cell_size!r}", file=sys.stderr)
         return 2
     try:
         config = TrainConfig(
@@ -504,11 +558,17 @@ def main(argv: list[str] | None = None) -> int:
             metre_cost=args.metre_cost,
             completion=args.completion,
             max_episode_steps=args.max_episode_steps,
+            cell_size=cell_size,
+            init=args.init,
         )
     except ConfigError as exc:
         print(f"nbs train: error: {exc}", file=sys.stderr)
         return 2
-    path, _ = train(config, args.out, progress=not args.quiet)
+    try:
+        path, _ = train(config, args.out, progress=not args.quiet)
+    except ModelFileError as exc:
+        print(f"nbs train: error: --init: {exc}", file=sys.stderr)
+        return 2
     print(f"wrote {path}")
     return 0
 
