@@ -416,21 +416,24 @@ def behaviour_clone(model, steps: int, epochs: int = 30, batch_size: int = 64, p
     import torch
     from sb3_contrib.common.maskable.utils import get_action_masks
 
-    from nbs_env.observation import CandidateColumn, candidate_table_of
-    from nbs_env.planning.planner import greedy_order
+    from policies import GreedyPolicy
 
     venv = model.env
+    greedy = GreedyPolicy()
     obs = venv.reset()
     samples: list[tuple[dict, np.ndarray, np.ndarray]] = []
     for _ in range(steps):
         masks = get_action_masks(venv)
-        gains = np.stack(venv.env_method("candidate_gains"))
-        k = gains.shape[1]
-        done = venv.env_method("gain_rule_done") if masks.shape[1] > k else [False] * len(masks)
-        path = candidate_table_of(obs)[..., CandidateColumn.PATH_LENGTH]
+        # The greedy's own rule, one env at a time, from what its info would hold.
+        gains = venv.env_method("candidate_gains")
+        stop = masks.shape[1] > len(gains[0])
+        done = venv.env_method("gain_rule_done") if stop else [False] * len(masks)
         actions = np.array(
             [
-                k if done[i] or not masks[i][:k].any() else int(greedy_order(gains[i], path[i], masks[i][:k])[0])
+                greedy.act(
+                    {key: value[i] for key, value in obs.items()},
+                    {"candidate_gains": gains[i], "action_mask": masks[i], "gain_rule_done": done[i]},
+                )
                 for i in range(len(masks))
             ]
         )
