@@ -58,6 +58,8 @@ CASES = [
     ("train --learning-rate nan --out t", EXIT_USAGE, "learning_rate must be a finite number"),
     ("train --learning-rate -1 --out t", EXIT_USAGE, "learning_rate must be > 0"),
     ("train --metre-cost inf --out t", EXIT_USAGE, "metre_cost must be a finite number"),
+    ("train --scan-cost -0.5 --out t", EXIT_USAGE, "scan_cost must be >= 0"),
+    ("train --ent-coef nan --out t", EXIT_USAGE, "ent_coef must be a finite number"),
     ("train --completion never --out t", EXIT_USAGE, "--completion: invalid choice: 'never'"),
     ("train --max-episode-steps 0 --out t", EXIT_USAGE, "max_episode_steps must be an integer >= 1"),
     ("train --cell-size 1-2 --out t", EXIT_USAGE, "cell_size must be (A, B) metres with 1.8 <= A <= B <= 10"),

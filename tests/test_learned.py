@@ -311,3 +311,24 @@ def test_the_bundled_reference_policy_gives_its_stored_logits():
         top = np.sort(masked[np.isfinite(masked)])[::-1]
         if len(top) < 2 or top[0] - top[1] > 1e-3:
             assert policy.act(obs, {"action_mask": data["mask"][k]}) == int(np.argmax(masked))
+
+
+def test_training_envs_charge_the_run_s_prices():
+    """The reward the agent is trained on charges the run's scan and metre prices, not the env's
+    defaults: a step's reward is the coverage it gained minus them."""
+    from train.ppo import TrainConfig, make_training_envs
+
+    config = TrainConfig(envs=1, rooms=(1, 1), scan_cost=0.25, metre_cost=0.1, completion="policy")
+    venv = make_training_envs(config)
+    try:
+        env = venv.envs[0].unwrapped
+        assert (env.config.reward.scan_cost, env.config.reward.metre_cost) == (0.25, 0.1)
+        venv.reset()
+        action = int(np.flatnonzero(venv.reset_infos[0]["action_mask"][:-1])[0])
+        _, reward, _, _ = venv.step(np.array([action]))
+        outcome = env._last
+        assert outcome.scans >= 1 and outcome.metres > 0
+        expected = outcome.coverage_gain - 0.25 * outcome.scans - 0.1 * outcome.metres
+        assert reward[0] == pytest.approx(expected, abs=1e-5)
+    finally:
+        venv.close()

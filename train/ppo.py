@@ -82,6 +82,12 @@ class TrainConfig(Config):
         Vector steps of greedy play to behaviour-clone from before PPO (0: none).
     metre_cost : float
         Reward subtracted per metre driven.
+    scan_cost : float
+        Reward subtracted per scan (the env's 0.5 by default). The reward's first term is the true
+        structural surface sensed in percentage points, so lower prices of scans and metres make a
+        missed point dearer relative to them.
+    ent_coef : float
+        PPO's entropy bonus (stable-baselines3's ``ent_coef``; 0 is its default).
     cell_size : (float, float)
         The range of the generator's cell edge, metres: rooms are unions of such cells, so larger
         cells make larger rooms and open spaces.
@@ -107,6 +113,8 @@ class TrainConfig(Config):
     max_episode_steps: int = 40
     bc_steps: int = 0
     metre_cost: float = 0.05
+    scan_cost: float = 0.5
+    ent_coef: float = 0.0
     completion: str = "gain"
     cell_size: tuple[float, float] = (2.0, 3.6)
     init: str = ""
@@ -131,9 +139,16 @@ class TrainConfig(Config):
             and 1 <= self.rooms[0] <= self.rooms[1] <= 8,
             f"rooms must be (A, B) with 1 <= A <= B <= 8, got {self.rooms!r}",
         )
-        _finite(learning_rate=self.learning_rate, metre_cost=self.metre_cost)
+        _finite(
+            learning_rate=self.learning_rate,
+            metre_cost=self.metre_cost,
+            scan_cost=self.scan_cost,
+            ent_coef=self.ent_coef,
+        )
         _require(self.learning_rate > 0, f"learning_rate must be > 0, got {self.learning_rate}")
         _require(self.metre_cost >= 0, f"metre_cost must be >= 0, got {self.metre_cost}")
+        _require(self.scan_cost >= 0, f"scan_cost must be >= 0, got {self.scan_cost}")
+        _require(self.ent_coef >= 0, f"ent_coef must be >= 0, got {self.ent_coef}")
         _require(
             self.completion in ("policy", "gain"), f"completion must be 'policy' or 'gain', got {self.completion!r}"
         )
@@ -152,6 +167,7 @@ def _env_factory(
     metre_cost: float = 0.05,
     completion: str = "gain",
     cell_size: tuple[float, float] = (2.0, 3.6),
+    scan_cost: float = 0.5,
 ):
     def make():
         import gymnasium as gym
@@ -164,7 +180,7 @@ def _env_factory(
         config = replace(
             config,
             generator=GeneratorConfig(rooms=rooms, cell_size=tuple(cell_size)),
-            reward=replace(config.reward, metre_cost=metre_cost),
+            reward=replace(config.reward, metre_cost=metre_cost, scan_cost=scan_cost),
             completion=completion,
         )
         # Monitor puts each episode's return in info["episode"], for the learning-curve log.
@@ -258,7 +274,14 @@ def make_training_envs(config: TrainConfig):
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     workers = [
-        _env_factory(config.rooms, config.max_episode_steps, config.metre_cost, config.completion, config.cell_size)
+        _env_factory(
+            config.rooms,
+            config.max_episode_steps,
+            config.metre_cost,
+            config.completion,
+            config.cell_size,
+            config.scan_cost,
+        )
     ] * config.envs
     if config.envs > 1:
         # Each worker's kernels share the cores with the others' (nbs_env.threads): a worker gets
@@ -305,6 +328,7 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
         n_steps=config.n_steps,
         batch_size=config.batch_size,
         learning_rate=config.learning_rate,
+        ent_coef=config.ent_coef,
         seed=config.seed,
         device=device,
         tensorboard_log=str(out / "tb") if _has_tensorboard() else None,
@@ -519,6 +543,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--learning-rate", type=float, default=3e-4)
     p.add_argument("--n-steps", type=int, default=64, help="steps per worker between PPO updates")
     p.add_argument("--metre-cost", type=float, default=0.05, help="reward per metre driven, subtracted")
+    p.add_argument("--scan-cost", type=float, default=0.5, help="reward per scan, subtracted")
+    p.add_argument("--ent-coef", type=float, default=0.0, help="PPO's entropy bonus")
     p.add_argument(
         "--completion",
         choices=("policy", "gain"),
@@ -559,6 +585,8 @@ def main(argv: list[str] | None = None) -> int:
             learning_rate=args.learning_rate,
             n_steps=args.n_steps,
             metre_cost=args.metre_cost,
+            scan_cost=args.scan_cost,
+            ent_coef=args.ent_coef,
             completion=args.completion,
             max_episode_steps=args.max_episode_steps,
             cell_size=cell_size,
