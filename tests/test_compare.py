@@ -252,3 +252,17 @@ def test_methods_table_tells_the_rule_from_the_cap_and_from_no_nvp_left():
     row = next(line for line in text.splitlines() if line.startswith("| p |"))
     # 4 rooms: 2 by the rule (50%), 1 by the cap, 1 with no NVP left.
     assert row.split(" | ")[2:6] == ["4", "50.0", "1", "1"], row
+
+
+@pytest.mark.parametrize("name", ["ppo:../../outside", "ppo:/abs/run", "ppo:a/b", "..", "scenes/x.obj"])
+def test_a_run_folder_is_one_component_inside_out(tmp_path, name):
+    """A ppo:PATH or a file scene names its folder: it stays one path component under OUT/runs,
+    and names that differ never share one."""
+    from train.compare import _run_folder, folder_name
+
+    component = folder_name(name)
+    assert component and "/" not in component and component not in (".", "..")
+    folder = _run_folder(tmp_path, {"scene": name, "policy": name, "seed": 0})
+    assert folder.resolve().is_relative_to((tmp_path / "runs").resolve())
+    assert folder_name("ppo:a/b") != folder_name("ppo:a_b")
+    assert folder_name("greedy") == "greedy" and folder_name("ppo:reference") == "ppo_reference"

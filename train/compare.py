@@ -30,9 +30,11 @@ Runs are deterministic: the same seeds give the same table, times aside.
 from __future__ import annotations
 
 import csv
+import hashlib
 import json
 import math
 import multiprocessing
+import re
 import sys
 import time
 import traceback
@@ -711,9 +713,24 @@ def write_record(out: str | Path, kind: str, record: dict[str, Any]) -> None:
         (folder / "error.txt").write_text(record["error"] + "\n\n" + record.get("traceback", ""))
 
 
+def folder_name(name: str) -> str:
+    """A scene's or policy's folder under ``OUT/runs``: one path component, whatever the name holds.
+
+    ``ppo:PATH`` names a checkpoint by its path, which may hold ``/`` or ``..``: kept as they are,
+    a run's files would land in nested folders or outside ``OUT``. Characters other than letters,
+    digits, ``.``, ``_`` and ``-`` become ``_``, and a name so changed gets a short hash of itself,
+    so that two names never share a folder (``ppo:a/b`` and ``ppo:a_b``). Plain names keep their
+    folders (``greedy``, ``ppo_reference``, ``generated_7``).
+    """
+    plain = name.replace(":", "_")
+    safe = re.sub(r"[^A-Za-z0-9._-]", "_", plain)
+    if safe == plain and safe not in (".", ".."):
+        return safe
+    return f"{safe.strip('.')}-{hashlib.sha256(name.encode()).hexdigest()[:8]}"
+
+
 def _run_folder(out: Path, spec: dict[str, Any]) -> Path:
-    scene = spec["scene"].replace("/", "_").replace(":", "_")
-    return out / "runs" / scene / spec["policy"].replace(":", "_") / f"seed{spec['seed']}"
+    return out / "runs" / folder_name(spec["scene"]) / folder_name(spec["policy"]) / f"seed{spec['seed']}"
 
 
 def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from train.compare import _cell, _mean_std
+from train.compare import _cell, _mean_std, folder_name
 
 __all__ = ["PAPER", "main", "tables"]
 
@@ -70,7 +70,7 @@ PAPER_REDUCTIONS = {
 
 
 def _runs(folder: Path, policy: str) -> list[dict[str, Any]]:
-    base = folder / "runs" / "five_rooms" / policy.replace(":", "_")
+    base = folder / "runs" / "five_rooms" / folder_name(policy)
     return [json.loads(p.read_text()) for p in sorted(base.glob("seed*/metrics.json"))]
 
 
