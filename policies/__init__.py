@@ -28,8 +28,15 @@ def _no_option(name: str, option: str | None) -> None:
 
 
 def _greedy(seed: int | None, option: str | None = None):
-    _no_option("greedy", option)
-    return GreedyPolicy()
+    if not option:
+        return GreedyPolicy()
+    try:
+        return GreedyPolicy(near=float(option))
+    except ValueError:
+        raise UnknownPolicyError(
+            f"greedy takes one option, the share of the best gain a nearer candidate must reach, a number in "
+            f"(0, 1] (greedy:0.8), got greedy:{option}"
+        ) from None
 
 
 def _random(seed: int | None, option: str | None = None):
@@ -88,7 +95,7 @@ def _learned(seed: int | None, option: str | None = None):
 
 
 #: Policy names → factories taking a seed (and, after a colon, an option: ``information_gain:rear_side_voxel``,
-#: ``blaer_allen:controlled``, ``information_gain:rear_side_voxel+controlled``).
+#: ``blaer_allen:controlled``, ``information_gain:rear_side_voxel+controlled``, ``greedy:0.8``).
 POLICIES = {
     "greedy": _greedy,
     "stachniss_burgard": _baseline("stachniss_burgard"),

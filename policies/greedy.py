@@ -26,11 +26,26 @@ class GreedyPolicy:
 
     In an env with ``completion="policy"`` (a "room done" action after the K candidates) it
     declares the room done where the robot's gain rule would end it (``info["gain_rule_done"]``),
-    so that it scans as with ``completion="gain"``."""
+    so that it scans as with ``completion="gain"``.
 
-    name = "greedy"
+    Parameters
+    ----------
+    near : float
+        In (0, 1]. Below 1, a gain-travel trade-off (``greedy:NEAR`` by name): the candidate with
+        the shortest path among those predicting at least ``near`` × the best gain, ties to the
+        larger gain. 1 (the default) is the paper's rule. Not the paper's method: it measures how
+        much of the greedy's path a choice of positions can save (README, issue 19).
+    """
+
     #: Keeps only the SE points (the paper's processed-point measure).
     structure_aware = True
+
+    def __init__(self, near: float = 1.0) -> None:
+        near = float(near)
+        if not 0.0 < near <= 1.0:
+            raise ValueError(f"near must be in (0, 1], got {near}")
+        self.near = near
+        self.name = "greedy" if near == 1.0 else f"greedy:{near:g}"
 
     def reset(self) -> None:
         """The greedy keeps no state."""
@@ -47,7 +62,11 @@ class GreedyPolicy:
             if info["gain_rule_done"] or not mask[:k].any():
                 return k
         path = candidate_table_of(obs)[:, CandidateColumn.PATH_LENGTH]
-        return int(greedy_order(gains, path, mask[:k])[0])
+        if self.near == 1.0 or not mask[:k].any():
+            return int(greedy_order(gains, path, mask[:k])[0])
+        gains = gains.astype(float)
+        near = np.flatnonzero(mask[:k] & (gains >= self.near * gains[mask[:k]].max()))
+        return int(near[np.lexsort((-gains[near], path[near]))[0]])
 
 
 def scan_storey(storey: Storey, max_rooms: int | None = None) -> int:

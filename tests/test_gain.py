@@ -204,3 +204,30 @@ def test_the_models_compiled_read_of_the_labels_is_numpys(clutter_blocks):
     assert np.array_equal(model.coarse, padded.reshape(6, 4, 5, 4, 3, 4).any(axis=(1, 3, 5)))
     targets = np.argwhere(labels == VoxelLabel.OCCLUDED_STRUCTURE)
     assert np.array_equal(model.targets, np.array([0.3, -1.2, 0.0]) + (targets + 0.5) * 0.1)
+
+
+def _policy_inputs(gains, paths, mask):
+    from nbs_env.observation import CandidateColumn
+
+    table = np.zeros((len(gains), len(CandidateColumn)), dtype=np.float32)
+    table[:, CandidateColumn.PATH_LENGTH] = paths
+    table[:, CandidateColumn.VALID] = mask
+    return {"candidates": table.ravel()}, {"candidate_gains": np.asarray(gains), "action_mask": np.asarray(mask)}
+
+
+def test_greedy_near_takes_the_nearest_candidate_close_enough_to_the_best_gain():
+    from policies import GreedyPolicy, UnknownPolicyError, make_policy
+
+    gains = [100, 85, 79, 90, 200]
+    paths = [6.0, 3.0, 1.0, 3.0, 0.1]
+    mask = [True, True, True, True, False]  # the masked 200 is neither the best gain nor a choice
+    obs, info = _policy_inputs(gains, paths, mask)
+    assert make_policy("greedy").act(obs, info) == 0
+    # 85 and 90 reach 0.8 × 100 at the same path: the larger gain; 79 does not reach it.
+    assert make_policy("greedy:0.8").act(obs, info) == 3
+    assert make_policy("greedy:0.75").act(obs, info) == 2
+    assert GreedyPolicy(near=1.0).act(obs, info) == GreedyPolicy().act(obs, info)
+    assert make_policy("greedy:0.8").name == "greedy:0.8"
+    for bad in ("greedy:0", "greedy:1.5", "greedy:near", "greedy:nan"):
+        with pytest.raises(UnknownPolicyError, match=r"\(0, 1\]"):
+            make_policy(bad)
