@@ -27,7 +27,8 @@ CASES = [
     ("scan --scene office --storey 0", EXIT_USAGE, "--storey applies to .ifc files only"),
     ("scan --scene office --start nan,1", EXIT_USAGE, "expected finite X,Y"),
     ("scan --scene office --policy nope", EXIT_USAGE, "unknown policy"),
-    ("scan --scene office --policy greedy:x", EXIT_USAGE, "takes no option"),
+    ("scan --scene office --policy greedy:x", EXIT_USAGE, "greedy takes one option, the share of the best gain"),
+    ("scan --scene office --policy random:x", EXIT_USAGE, "takes no option"),
     ("scan --scene office --policy information_gain:psychic", EXIT_USAGE, "unknown formulation"),
     ("scan --scene nowhere", EXIT_SCENE_ERROR, "no bundled scene"),
     # nbs scenes
