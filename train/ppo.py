@@ -161,14 +161,10 @@ class TrainConfig(Config):
         return NetworkConfig()
 
 
-def _env_factory(
-    rooms: tuple[int, int],
-    max_episode_steps: int,
-    metre_cost: float = 0.05,
-    completion: str = "gain",
-    cell_size: tuple[float, float] = (2.0, 3.6),
-    scan_cost: float = 0.5,
-):
+def _env_factory(run: TrainConfig):
+    """A picklable maker of one training env: the fast preset on the run's generated storeys, with
+    its prices, completion and episode length."""
+
     def make():
         import gymnasium as gym
         from stable_baselines3.common.monitor import Monitor
@@ -179,12 +175,13 @@ def _env_factory(
         config = make_config("fast")
         config = replace(
             config,
-            generator=GeneratorConfig(rooms=rooms, cell_size=tuple(cell_size)),
-            reward=replace(config.reward, metre_cost=metre_cost, scan_cost=scan_cost),
-            completion=completion,
+            generator=GeneratorConfig(rooms=run.rooms, cell_size=run.cell_size),
+            reward=replace(config.reward, metre_cost=run.metre_cost, scan_cost=run.scan_cost),
+            completion=run.completion,
         )
         # Monitor puts each episode's return in info["episode"], for the learning-curve log.
-        return Monitor(gym.make("nbs_env:nbs_env/NBS-Fast-v0", config=config, max_episode_steps=max_episode_steps))
+        env = gym.make("nbs_env:nbs_env/NBS-Fast-v0", config=config, max_episode_steps=run.max_episode_steps)
+        return Monitor(env)
 
     return make
 
@@ -273,16 +270,7 @@ def make_training_envs(config: TrainConfig):
     _require_rl()
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-    workers = [
-        _env_factory(
-            config.rooms,
-            config.max_episode_steps,
-            config.metre_cost,
-            config.completion,
-            config.cell_size,
-            config.scan_cost,
-        )
-    ] * config.envs
+    workers = [_env_factory(config)] * config.envs
     if config.envs > 1:
         # Each worker's kernels share the cores with the others' (nbs_env.threads): a worker gets
         # its share, unless NBS_THREADS says otherwise. The workers read it when they start.
@@ -419,7 +407,6 @@ def _load_init(path: str, network: NetworkConfig):
     ModelFileError
         The checkpoint cannot be read, or its network is not ``network``.
     """
-    from nbs_env.errors import ModelFileError
     from policies.learned import load_checkpoint, resolve_checkpoint
 
     theirs, encoder, scorer, _, _ = load_checkpoint(resolve_checkpoint(path))
