@@ -30,8 +30,18 @@ from nbs_env.errors import UnreachableDoorError
 from nbs_env.labels import VoxelLabel
 from nbs_env.perception.doors import detect_doors
 from nbs_env.perception.roi import RoIError
+from nbs_env.planning.door_search import search_position, unviewed_wall
 from nbs_env.planning.navigation import Geodesic, Passage, TraversabilityMap, geodesic
-from nbs_env.planning.planner import Plan, blocked_directions, plan, traversable_floor, unobservable_after
+from nbs_env.planning.planner import (
+    Plan,
+    blocked_directions,
+    plan,
+    sensor_positions,
+    traversable_floor,
+    unobservable_after,
+    without_unobservable,
+)
+from nbs_env.planning.visibility import VisibilityModel
 from nbs_env.sensing.odometry import Odometry
 from nbs_env.sensing.pose import planar, pose_error, yaw_of
 from nbs_env.sensing.registration import AccumulatedCloud, RegistrationResult, level_from_floor, register
@@ -289,6 +299,36 @@ class Robot:
             self.room_models.append(model)
         self.rooms_done.append(self.room_index)
         return list(self.doors)
+
+    def door_search(self) -> int | None:
+        """The NVP from which a scan would view, frontally, the most of the room's wall no stop
+        viewed so (:mod:`nbs_env.planning.door_search`); None when every wall stretch as wide as
+        a door was viewed, or no NVP views one. Reads the robot's belief only.
+        """
+        belief = self.belief
+        if belief.roi is None or belief.grid is None or not self.stops:
+            return None
+        planned = self.plan()
+        if planned.count == 0:
+            return None
+        model = planned.model
+        if not isinstance(model, VisibilityModel):
+            # Lines of sight through V(t) as the paper's gain model draws them, whatever model
+            # predicts the gains (or none, when a policy turned the gains off).
+            grid = belief.grid
+            labels = without_unobservable(grid, belief.unobservable)
+            model = VisibilityModel(labels, grid.origin, grid.voxel_size, self.config.gain)
+        scanner = self.config.scanner
+        config = self.config.door_search
+
+        def sees(sensors: np.ndarray, targets: np.ndarray) -> np.ndarray:
+            return model.sees(sensors, targets, scanner)
+
+        scanned = [poly for room, poly in self.room_polygons.items() if room != self.room_index]
+        walls = unviewed_wall(belief.roi, self.stops, sees, scanned, config, min_face=self.config.doors.min_width)
+        n = planned.count
+        sensors = sensor_positions(planned.candidates.points[:n], belief.roi.floor_z, scanner)
+        return search_position(walls, sensors, planned.candidates.path_length[:n], sees, config)
 
     def room_model(self) -> RoomModel | None:
         """The current room's recovered model (None before its first scan)."""

@@ -18,6 +18,7 @@ CASES = [
     ("scan --scene office --seed 1.5", EXIT_USAGE, "expected an integer"),
     ("scan --scene office --max-scans 0", EXIT_USAGE, "expected an integer >= 1"),
     ("scan --scene office --max-scans x", EXIT_USAGE, "expected an integer"),
+    ("scan --scene office --door-search -1", EXIT_USAGE, "expected an integer >= 0"),
     ("scan --scene office --resolution 0", EXIT_USAGE, "angular_step must be > 0"),
     ("scan --scene office --resolution nan", EXIT_USAGE, "angular_step must be a finite number"),
     ("scan --scene office --resolution inf", EXIT_USAGE, "angular_step must be a finite number"),
@@ -51,6 +52,7 @@ CASES = [
     ("compare --scenes office --policies greedy --seeds x --out c", EXIT_USAGE, "comma-separated integers"),
     ("compare --scenes office --policies greedy --jobs 0 --out c", EXIT_USAGE, "expected an integer >= 1"),
     ("compare --scenes office --policies greedy --max-scans 0 --out c", EXIT_USAGE, "expected an integer >= 1"),
+    ("compare --scenes office --policies greedy --door-search x --out c", EXIT_USAGE, "expected an integer"),
     ("compare --scenes generated:5-2 --policies greedy --out c", EXIT_USAGE, "generated:A-B"),
     ("compare --scenes office --policies nope --out c", EXIT_USAGE, "unknown policy"),
     # nbs train (its checks live in TrainConfig)
@@ -61,6 +63,7 @@ CASES = [
     ("train --metre-cost inf --out t", EXIT_USAGE, "metre_cost must be a finite number"),
     ("train --scan-cost -0.5 --out t", EXIT_USAGE, "scan_cost must be >= 0"),
     ("train --ent-coef nan --out t", EXIT_USAGE, "ent_coef must be a finite number"),
+    ("train --door-search -1 --out t", EXIT_USAGE, "door_search must be an integer >= 0"),
     ("train --completion never --out t", EXIT_USAGE, "--completion: invalid choice: 'never'"),
     ("train --max-episode-steps 0 --out t", EXIT_USAGE, "max_episode_steps must be an integer >= 1"),
     ("train --cell-size 1-2 --out t", EXIT_USAGE, "cell_size must be (A, B) metres with 1.8 <= A <= B <= 10"),

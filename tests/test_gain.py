@@ -73,7 +73,7 @@ def test_lines_of_sight_are_those_of_the_slab_test_against_every_blocking_voxel(
     extent = np.asarray(shape) * size
     sensors = origin + rng.uniform(-0.3, 1.3, (4, 3)) * extent
     targets = origin + rng.uniform(-0.2, 1.2, (60, 3)) * extent
-    got = model._seen(sensors, targets, scanner)
+    got = model.sees(sensors, targets, scanner)
     blocking = labels == VoxelLabel.CLUTTER
     lo, hi = np.sin(np.radians(scanner.elevation_min)), np.sin(np.radians(scanner.elevation_max))
     for c, sensor in enumerate(sensors):
@@ -96,7 +96,7 @@ def test_lines_along_an_axis_and_through_a_corner():
     scanner = ScannerConfig(min_range=0.0, max_range=100.0, elevation_min=-90.0, elevation_max=90.0)
     sensors = np.array([[0.5, 2.5, 2.5], [0.5, 8.5, 2.5], [3.0, 3.0, 2.5]])
     targets = np.array([[11.5, 2.5, 2.5], [11.5, 8.5, 2.5], [0.5, 2.5, 0.5], [9.0, 9.0, 2.5], [3.5, 11.5, 2.5]])
-    seen = model._seen(sensors, targets, scanner)
+    seen = model.sees(sensors, targets, scanner)
     assert not seen[0, 0]  # along x through the wall at x = 6
     assert seen[1, 1]  # along x, clear
     assert seen[0, 2]  # down a free column

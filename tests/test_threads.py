@@ -30,9 +30,9 @@ def test_lines_of_sight_on_threads_are_the_single_thread_ones(monkeypatch, n):
     sensors = np.column_stack([rng.uniform(0.5, 3.5, 37), rng.uniform(0.5, 2.5, 37), np.full(37, 0.6)])
     scanner = ScannerConfig(min_range=0.3)
     monkeypatch.setenv("NBS_THREADS", "1")
-    want = model._seen(sensors, model.targets, scanner)
+    want = model.sees(sensors, model.targets, scanner)
     monkeypatch.setenv("NBS_THREADS", n)
-    got = model._seen(sensors, model.targets, scanner)
+    got = model.sees(sensors, model.targets, scanner)
     assert want.any() and not want.all()
     assert np.array_equal(got, want)
 

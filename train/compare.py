@@ -40,7 +40,7 @@ import time
 import traceback
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass, replace
+from dataclasses import MISSING, asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -73,10 +73,15 @@ class RunSpec:
     seed: int
     preset: str = "default"
     max_scans: int = 80
+    door_search: int = 0
 
     @property
     def key(self) -> str:
         return f"{self.scene}|{self.policy}|{self.seed}"
+
+
+#: RunSpec's defaults, for run records written before a field was added.
+SPEC_DEFAULTS = {f.name: f.default for f in fields(RunSpec) if f.default is not MISSING}
 
 
 def expand_scenes(text: str, skipped: list[str] | None = None) -> list[str]:
@@ -124,6 +129,7 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
 
         policy = make_policy(spec.policy, spec.seed)
         config = config_for(make_config(spec.preset, scene=spec.scene, max_scans=spec.max_scans), policy)
+        config = replace(config, robot=replace(config.robot, door_search_scans=spec.door_search))
         env = NBSEnv(config)
         times = run_episode(env, policy, spec.seed)
         metrics = metrics_dict(env.storey, spec.scene, policy, spec.seed, times)
@@ -737,8 +743,9 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
     """The successful runs and oracles an earlier ``nbs compare --out OUT`` left, for ``--resume``.
 
     A run is reused when its ``run.json`` holds the same spec (scene, policy name, seed, preset,
-    scan budget); an oracle when ``oracle.json`` has it for the same preset. Failed runs are run
-    again. A checkpoint replaced under the same ``ppo:PATH`` is not noticed: use a new ``--out``.
+    scan budget, door search; a field a record predates counts as its default); an oracle when
+    ``oracle.json`` has it for the same preset. Failed runs are run again. A checkpoint replaced
+    under the same ``ppo:PATH`` is not noticed: use a new ``--out``.
     """
     out = Path(out)
     runs: dict[str, Any] = {}
@@ -746,7 +753,7 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
         folder = _run_folder(out, asdict(spec))
         try:
             record = json.loads((folder / "run.json").read_text())
-            if record.get("ok") and record.get("spec") == asdict(spec):
+            if record.get("ok") and {**SPEC_DEFAULTS, **record.get("spec", {})} == asdict(spec):
                 runs[spec.key] = {**record, "metrics": json.loads((folder / "metrics.json").read_text())}
         except (OSError, ValueError):
             continue  # not there or unreadable: run it again
@@ -762,8 +769,11 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
     return {"runs": runs, "oracles": oracles}
 
 
-def grid(scenes: str, policies: str, seeds: str, preset: str = "default", max_scans: int = 80) -> list[RunSpec]:
-    """The RunSpecs of comma-separated scenes, policies and seeds (checked: bad names raise)."""
+def grid(
+    scenes: str, policies: str, seeds: str, preset: str = "default", max_scans: int = 80, door_search: int = 0
+) -> list[RunSpec]:
+    """The RunSpecs of comma-separated scenes, policies and seeds (checked: bad names raise), with
+    ``door_search`` scans per room (:attr:`nbs_env.settings.RobotConfig.door_search_scans`)."""
     from policies import UnknownPolicyError, make_policy
 
     skipped: list[str] = []
@@ -788,8 +798,10 @@ def grid(scenes: str, policies: str, seeds: str, preset: str = "default", max_sc
         raise CompareError("no seeds given")
     if min(seed_list) < 0:
         raise CompareError(f"seeds are integers >= 0, got {seeds!r}")
+    if not isinstance(door_search, int) or isinstance(door_search, bool) or door_search < 0:
+        raise CompareError(f"door_search is a number of scans per room >= 0, got {door_search!r}")
     return [
-        replace(RunSpec(scene, policy, seed), preset=preset, max_scans=max_scans)
+        replace(RunSpec(scene, policy, seed), preset=preset, max_scans=max_scans, door_search=door_search)
         for scene in scene_list
         for policy in policy_list
         for seed in seed_list

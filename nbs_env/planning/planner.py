@@ -68,6 +68,7 @@ __all__ = [
     "structural_voxels",
     "traversable_floor",
     "unseeable_free",
+    "without_unobservable",
 ]
 
 
@@ -394,14 +395,14 @@ def plan(
     gains = np.zeros(config.navigation.max_candidates, dtype=np.int64)
     model = None
     if config.predict_gains and cands.count:
-        labels = _without(grid, belief.unobservable)
+        labels = without_unobservable(grid, belief.unobservable)
         model = make_gain_model(labels, grid.origin, grid.voxel_size, config.gain)
         sensors = sensor_positions(cands.points, roi.floor_z, config.scanner)
         gains[: cands.count] = np.asarray(model.gains(sensors, config.scanner), dtype=np.int64)
     return Plan(cands, gains, structural_voxels(grid.labels), time.perf_counter() - t, model, view)
 
 
-def _without(grid: VoxelGrid, unobservable: np.ndarray) -> np.ndarray:
+def without_unobservable(grid: VoxelGrid, unobservable: np.ndarray) -> np.ndarray:
     """V(t)'s labels with the Occluded-structure voxels at the ``unobservable`` (n, 3) world points
     taken as Unknown (no target of a gain, no obstacle to a line of sight)."""
     points = np.asarray(unobservable, dtype=float).reshape(-1, 3)

@@ -298,8 +298,9 @@ class VisibilityModel:
         self.blocking = blocking
         self.coarse = coarse
 
-    def _seen(self, sensors: np.ndarray, targets: np.ndarray, scanner: ScannerConfig) -> np.ndarray:
-        """(c, n) bool: which of the (n, 3) targets each of the (c, 3) sensors sees."""
+    def sees(self, sensors: np.ndarray, targets: np.ndarray, scanner: ScannerConfig) -> np.ndarray:
+        """(c, n) bool: which of the (n, 3) targets (world metres) each of the (c, 3) sensors sees:
+        within the scanner's range and elevation band, with no blocking voxel of V(t) on the line."""
         sensors = np.ascontiguousarray(sensors, dtype=float).reshape(-1, 3)
         targets = np.ascontiguousarray(targets, dtype=float).reshape(-1, 3)
         limits = (
@@ -327,11 +328,11 @@ class VisibilityModel:
     def visible(self, sensor: np.ndarray, scanner: ScannerConfig) -> np.ndarray:
         """(n,) bool: which OCCLUDED_STRUCTURE voxels (:attr:`targets`) a scanner at ``sensor`` (3,)
         would see, one line of sight each (no grouping): for inspecting the model."""
-        return self._seen(np.asarray(sensor, dtype=float).reshape(1, 3), self.targets, scanner)[0]
+        return self.sees(np.asarray(sensor, dtype=float).reshape(1, 3), self.targets, scanner)[0]
 
     def gains(self, sensors: np.ndarray, scanner: ScannerConfig) -> np.ndarray:
         """(m,) int: predicted conversions for each of the (m, 3) scanner positions."""
         sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
         if not len(self.targets) or not len(sensors):
             return np.zeros(len(sensors), dtype=np.int64)
-        return self._seen(sensors, self.group_centres, scanner).astype(np.int64) @ self.group_counts
+        return self.sees(sensors, self.group_centres, scanner).astype(np.int64) @ self.group_counts

@@ -1,0 +1,219 @@
+"""Door search: where to scan so that the room's walls no scan faced get a frontal view.
+
+The robot finds a door only on a wall some scan faced: the lintel in range and the opening crossed
+by rays (:func:`~nbs_env.perception.doors.detect_doors`). The NBS gain does not ask for that: a wall
+seen edge-on, or never seen at all, holds no Occluded-structure, so a room can end by the gain rule
+(or by a learned "room done") with a door never in front of a scan, and the rooms behind it are
+never entered. This module measures, from the robot's belief only, which stretches of the RoI's
+walls no stop of the room viewed frontally, and picks the NVP that would view most of them::
+
+    unviewed_wall(roi, stops, sees, scanned_rooms, config) -> WallSamples (targets flagged)
+    search_position(walls, sensors, path_length, sees, config) -> NVP index or None
+
+``sees(sensors, targets)`` is a line-of-sight test through V(t)
+(:meth:`~nbs_env.planning.visibility.VisibilityModel.sees`). Not part of the paper's method
+(METHOD §7 ends a room by its gain alone): :attr:`nbs_env.settings.RobotConfig.door_search_scans`
+switches it on, 0 (off) by default.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+from shapely.geometry import Polygon
+
+from nbs_env.config import Config, _finite_fields, _require
+from nbs_env.perception.roi import RoI
+
+__all__ = ["DoorSearchConfig", "WallSamples", "search_position", "unviewed_wall"]
+
+#: ``sees(sensors (c, 3), targets (n, 3)) -> (c, n) bool``.
+LineOfSight = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class DoorSearchConfig(Config):
+    """How walls are sampled and when a sample counts as viewed (JSON-safe, frozen).
+
+    Attributes
+    ----------
+    step : float
+        Metres between sample columns along a wall face.
+    heights : tuple of float
+        Heights of a column's samples above the RoI's floor, metres (a door's opening spans them).
+    inset : float
+        Samples lie this far (metres) in front of the face, so that the wall's own voxels do not
+        block the line of sight to them.
+    incidence_deg : float
+        A stop views a sample that it sees at most this far off the face's normal: a wall seen
+        edge-on shows no gap.
+    max_range : float
+        ... and at most this far (metres): beyond it a door's opening is crossed by too few rays.
+    beyond : float
+        A column needs no view when the point this far (metres) behind the face lies in a room
+        already scanned (the robot's ``BEYOND_DOOR``).
+    min_run : float
+        Unviewed stretches shorter than this (metres) are no target (narrower than a door), and a
+        position must view at least this much of the targets to be worth a scan.
+    """
+
+    step: float = 0.25
+    heights: tuple[float, ...] = (1.0, 1.8)
+    inset: float = 0.15
+    incidence_deg: float = 72.0
+    max_range: float = 10.0
+    beyond: float = 0.6
+    min_run: float = 0.75
+
+    def __post_init__(self) -> None:
+        _finite_fields(self, "step", "inset", "incidence_deg", "max_range", "beyond", "min_run")
+        for name in ("step", "max_range", "beyond", "min_run"):
+            _require(getattr(self, name) > 0, f"door search: {name} must be > 0 metres, got {getattr(self, name)}")
+        _require(self.inset >= 0, f"door search: inset must be >= 0 metres, got {self.inset}")
+        _require(
+            0 < self.incidence_deg < 90, f"door search: incidence_deg must be in (0, 90), got {self.incidence_deg}"
+        )
+        heights = tuple(self.heights)
+        _require(
+            len(heights) > 0 and all(isinstance(h, int | float) and np.isfinite(h) and h > 0 for h in heights),
+            f"door search: heights must be positive numbers of metres, got {self.heights!r}",
+        )
+        object.__setattr__(self, "heights", tuple(float(h) for h in heights))
+
+
+@dataclass(frozen=True)
+class WallSamples:
+    """The RoI's walls as sample columns.
+
+    Attributes
+    ----------
+    points : (m * h, 3) float
+        Each column's samples (h = ``len(config.heights)``), column-major; NaN for columns that
+        need no view.
+    normals : (m, 2) float
+        The inward normal of each column's face.
+    face : (m,) int
+        Index of each column's face in ``roi.wall_faces``.
+    target : (m,) bool
+        Columns in unviewed stretches of at least ``config.min_run``.
+    """
+
+    points: np.ndarray
+    normals: np.ndarray
+    face: np.ndarray
+    target: np.ndarray
+
+    @property
+    def columns(self) -> int:
+        return len(self.face)
+
+
+def _viewed(walls: WallSamples, sensors: np.ndarray, sees: LineOfSight, config: DoorSearchConfig) -> np.ndarray:
+    """(c, m) bool: which columns each of the (c, 3) sensors views."""
+    sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
+    h = len(config.heights)
+    out = np.zeros((len(sensors), walls.columns * h), dtype=bool)
+    valid = np.isfinite(walls.points[:, 0])
+    if valid.any() and len(sensors):
+        points = walls.points[valid]
+        normals = np.repeat(walls.normals, h, axis=0)[valid]
+        ray = sensors[:, None, :] - points[None, :, :]
+        dist = np.linalg.norm(ray, axis=2)
+        cos = np.einsum("cnk,nk->cn", ray[:, :, :2], normals) / np.maximum(dist, 1e-9)
+        frontal = (cos >= np.cos(np.radians(config.incidence_deg))) & (dist <= config.max_range)
+        out[:, valid] = sees(sensors, points) & frontal
+    return out.reshape(len(sensors), walls.columns, h).any(axis=2)
+
+
+def unviewed_wall(
+    roi: RoI,
+    stops: Sequence[np.ndarray] | np.ndarray,
+    sees: LineOfSight,
+    scanned_rooms: Sequence[Polygon] = (),
+    config: DoorSearchConfig | None = None,
+    min_face: float = 0.0,
+) -> WallSamples:
+    """Sample the RoI's wall faces and flag the stretches no stop viewed frontally.
+
+    Parameters
+    ----------
+    roi : RoI
+        The room's region of interest (its polygon is counter-clockwise: normals point inward).
+    stops : (s, 3) float
+        The room's scanner positions.
+    sees : callable
+        ``sees(sensors (c, 3), targets (n, 3)) -> (c, n) bool``, lines of sight through V(t).
+    scanned_rooms : sequence of Polygon
+        Outlines of rooms already scanned: a column whose far side lies in one needs no view.
+    config : DoorSearchConfig
+    min_face : float
+        Faces shorter than this (metres) are not sampled (shorter than the narrowest door).
+    """
+    config = config or DoorSearchConfig()
+    points, normals, faces = [], [], []
+    for k, face in enumerate(roi.wall_faces):
+        if face.length < max(min_face, 1e-9):
+            continue
+        u = np.arange(config.step / 2, face.length, config.step)
+        xy = np.asarray(face.p0, dtype=float) + u[:, None] * face.direction
+        if scanned_rooms:
+            behind = xy - config.beyond * face.normal
+            known = np.zeros(len(xy), dtype=bool)
+            for polygon in scanned_rooms:
+                known |= shapely.contains_xy(polygon, behind[:, 0], behind[:, 1])
+            xy = np.where(known[:, None], np.nan, xy)
+        points.append(xy + config.inset * face.normal)
+        normals.append(np.broadcast_to(face.normal, xy.shape))
+        faces.append(np.full(len(xy), k))
+    if not points:
+        empty = np.zeros(0, dtype=bool)
+        return WallSamples(np.zeros((0, 3)), np.zeros((0, 2)), np.zeros(0, dtype=int), empty)
+    xy, normal, face = np.concatenate(points), np.concatenate(normals), np.concatenate(faces)
+    heights = np.asarray(config.heights, dtype=float)
+    samples = np.column_stack([np.repeat(xy, len(heights), axis=0), np.tile(roi.floor_z + heights, len(xy))])
+    walls = WallSamples(samples, normal, face, np.zeros(len(xy), dtype=bool))
+    stops = np.asarray(stops, dtype=float).reshape(-1, 3)
+    open_columns = np.isfinite(xy[:, 0]) & ~_viewed(walls, stops, sees, config).any(axis=0)
+    run = int(np.ceil(config.min_run / config.step - 1e-9))
+    target = np.zeros(len(xy), dtype=bool)
+    for k in np.unique(face):
+        idx = np.flatnonzero(face == k)
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], open_columns[idx].astype(np.int8), [0]])))
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
+            if b - a >= run:
+                target[idx[a:b]] = True
+    return WallSamples(samples, normal, face, target)
+
+
+def search_position(
+    walls: WallSamples,
+    sensors: np.ndarray,
+    path_length: np.ndarray,
+    sees: LineOfSight,
+    config: DoorSearchConfig | None = None,
+) -> int | None:
+    """The candidate that views most target columns (ties: the shorter path), or None when there
+    is no target or no candidate views ``config.min_run`` metres of them.
+
+    Parameters
+    ----------
+    walls : WallSamples
+        From :func:`unviewed_wall`.
+    sensors : (k, 3) float
+        The scanner above each candidate.
+    path_length : (k,) float
+        Each candidate's path from the robot, metres.
+    sees : callable
+        As in :func:`unviewed_wall`.
+    """
+    config = config or DoorSearchConfig()
+    sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
+    if not walls.target.any() or not len(sensors):
+        return None
+    score = _viewed(walls, sensors, sees, config)[:, walls.target].sum(axis=1)
+    if score.max() * config.step < config.min_run - 1e-9:
+        return None
+    return int(np.lexsort((np.asarray(path_length, dtype=float)[: len(sensors)], -score))[0])

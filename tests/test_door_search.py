@@ -1,0 +1,127 @@
+"""The door search (nbs_env.planning.door_search) and its place in the storey loop."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from shapely.geometry import Polygon
+
+from nbs_env.env import NBSEnv
+from nbs_env.errors import ConfigError
+from nbs_env.perception.roi import RoI
+from nbs_env.planning.door_search import DoorSearchConfig, search_position, unviewed_wall
+from nbs_env.settings import RobotConfig, make_config
+
+# A corridor 20 m by 2 m, floor at 0: from its middle the far ends of the long walls are seen at
+# grazing incidence (a point 9 m along, 1 m across: 84° off the normal).
+CORRIDOR = np.array([[0.0, 0.0], [20.0, 0.0], [20.0, 2.0], [0.0, 2.0]])
+
+
+def corridor() -> RoI:
+    return RoI(CORRIDOR, 0.0, 3.0, np.zeros((1, 1), dtype=bool), np.zeros(2))
+
+
+def open_space(sensors: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """Every line of sight is clear."""
+    return np.ones((len(sensors), len(targets)), dtype=bool)
+
+
+def incidence_deg(stop: np.ndarray, walls) -> np.ndarray:
+    """(m,) the smallest angle off the face normal at which ``stop`` sees each column."""
+    h = len(DoorSearchConfig().heights)
+    ray = stop[None, :] - walls.points
+    cos = np.einsum("nk,nk->n", ray[:, :2], np.repeat(walls.normals, h, axis=0)) / np.linalg.norm(ray, axis=1)
+    return np.degrees(np.arccos(np.clip(cos, -1, 1))).reshape(-1, h).min(axis=1)
+
+
+def test_columns_seen_at_grazing_incidence_are_targets_and_the_rest_are_not():
+    stop = np.array([10.0, 1.0, 1.5])
+    walls = unviewed_wall(corridor(), [stop], open_space)
+    config = DoorSearchConfig()
+    angle = incidence_deg(stop, walls)
+    dist = np.linalg.norm(stop[None, :] - walls.points, axis=1).reshape(walls.columns, -1).min(axis=1)
+    viewed = (angle <= config.incidence_deg) & (dist <= config.max_range)
+    # Stretches of >= 0.75 m not viewed are targets; every viewed column is not.
+    assert walls.target.any() and not (walls.target & viewed).any()
+    long_walls = np.isin(walls.face, (0, 2))
+    assert (walls.target[long_walls] == ~viewed[long_walls]).all()
+    # The samples lie inside the room, 0.15 m in front of their face, at 1.0 and 1.8 m.
+    assert set(np.round(walls.points[:, 2], 6)) == {1.0, 1.8}
+    assert (walls.points[:, 1] > 0.1).all() and (walls.points[:, 1] < 1.9).all()
+
+
+def test_stops_along_the_corridor_view_what_the_first_left():
+    first = np.array([2.0, 1.0, 1.5])
+    walls = unviewed_wall(corridor(), [first], open_space)
+    assert walls.target[walls.points[::2, 0] > 6].all()  # all but the west end
+    # 0.85 m from a long wall, a stop views 2.6 m of it either way within 72°: every 4 m is enough.
+    stops = [np.array([x, 1.0, 1.5]) for x in (2.0, 6.0, 10.0, 14.0, 18.0)]
+    assert not unviewed_wall(corridor(), stops, open_space).target.any()
+    # One stop fewer leaves a stretch.
+    assert unviewed_wall(corridor(), stops[:2] + stops[3:], open_space).target.any()
+
+
+def test_the_search_picks_the_candidate_that_views_most_targets_ties_to_the_shorter_path():
+    walls = unviewed_wall(corridor(), [np.array([3.0, 1.0, 1.5])], open_space)
+    # From 17 m a stop views 5.2 m of each long wall's target stretch, from 19.2 m 3.4 m (the wall
+    # ends); slots 1 and 3 stand at the same place: the shorter path (3) wins.
+    sensors = np.array([[2.0, 1.0, 1.5], [17.0, 1.0, 1.5], [19.2, 1.0, 1.5], [17.0, 1.0, 1.5]])
+    path = np.array([1.0, 14.0, 10.0, 12.0])
+    assert search_position(walls, sensors, path, open_space) == 3
+    # A candidate that views nothing new is no search position.
+    assert search_position(walls, sensors[:1], path[:1], open_space) is None
+
+
+def test_an_occluded_stretch_is_a_target_and_a_room_behind_it_is_not():
+    def wall_at_12(sensors, targets):
+        # A partition at x = 12 blocks every line that crosses it.
+        return (sensors[:, None, 0] < 12) == (targets[None, :, 0] < 12)
+
+    stops = [np.array([6.0, 1.0, 1.5]), np.array([8.0, 1.0, 1.5])]
+    walls = unviewed_wall(corridor(), stops, wall_at_12)
+    assert walls.target[walls.points[::2, 0] > 14].all()
+    # The far end's wall (x = 20) has a scanned room behind it: those columns need no view.
+    scanned = [Polygon([(20.2, -1), (25, -1), (25, 3), (20.2, 3)])]
+    walls = unviewed_wall(corridor(), stops, wall_at_12, scanned)
+    east = walls.face == 1
+    assert np.isnan(walls.points[np.repeat(east, 2), 0]).all() and not walls.target[east].any()
+    assert walls.target[~east & (np.nan_to_num(walls.points[::2, 0]) > 14)].all()
+
+
+def test_no_stop_no_target_and_short_faces_are_skipped():
+    walls = unviewed_wall(corridor(), [np.array([10.0, 1.0, 1.5])], open_space, min_face=2.5)
+    assert set(walls.face.tolist()) == {0, 2}  # the 2 m end walls are shorter than 2.5 m
+    assert search_position(walls, np.zeros((0, 3)), np.zeros(0), open_space) is None
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [("step", 0.0), ("incidence_deg", 90.0), ("max_range", -1.0), ("heights", ()), ("heights", (1.0, float("nan")))],
+)
+def test_bad_door_search_config_raises(field, value):
+    with pytest.raises(ConfigError, match=field):
+        DoorSearchConfig(**{field: value})
+
+
+def test_door_search_scans_is_checked_and_off_by_default():
+    assert RobotConfig().door_search_scans == 0
+    with pytest.raises(ConfigError, match="door_search_scans"):
+        RobotConfig(door_search_scans=-1)
+
+
+def test_room_done_takes_one_search_scan_which_can_reopen_the_room():
+    # After its first scan the L-shaped room's far arm was never faced: "room done" takes the
+    # search scan, the gain rule finds the room goes on, and the agent keeps it; a second
+    # declaration ends it (one search a room).
+    config = make_config("fast", scene="l_room", completion="policy", expose_belief=True)
+    env = NBSEnv(replace(config, robot=replace(config.robot, door_search_scans=1)))
+    _, info = env.reset(seed=0)
+    _, _, terminated, _, info = env.step(env.stop_action)
+    storey = env.storey
+    assert not terminated and info["scans"] == 2 and storey.door_searches == [{"scan": 1, "room": 0}]
+    assert storey.room_ends == [] and info["action_mask"][env.stop_action]
+    _, _, terminated, _, info = env.step(env.stop_action)
+    assert terminated and info["scans"] == 2
+    assert storey.room_ends == [{"room": 0, "scans": 2, "reason": "declared"}]
