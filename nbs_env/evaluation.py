@@ -82,7 +82,7 @@ scene's ground truth (true positions, true rooms), which the robot never sees.
                             crossed, abandoned (with reason)
     room_ends               list, one per room the robot completed: {room (the robot's number),
                             scans, reason: "gain" | "declared" | "cap" | "no NVP"}
-    door_searches           list, one per door-search scan (RobotConfig.door_search_scans > 0):
+    wall_searches           list, one per wall-search scan (RobotConfig.wall_search_scans > 0):
                             {scan (its index in steps), room (the robot's number)}
     config                  the env's EnvConfig as a dict (tuples as lists)
 
@@ -690,7 +690,7 @@ def metrics_dict(
         "steps": step_rows,
         "door_events": storey.door_events,
         "room_ends": storey.room_ends,
-        "door_searches": storey.door_searches,
+        "wall_searches": storey.wall_searches,
         "config": storey.config.to_dict(),
     }
     return json_safe(metrics)

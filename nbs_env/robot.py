@@ -30,7 +30,6 @@ from nbs_env.errors import UnreachableDoorError
 from nbs_env.labels import VoxelLabel
 from nbs_env.perception.doors import detect_doors
 from nbs_env.perception.roi import RoIError
-from nbs_env.planning.door_search import search_position, unviewed_wall
 from nbs_env.planning.navigation import Geodesic, Passage, TraversabilityMap, geodesic
 from nbs_env.planning.planner import (
     Plan,
@@ -42,6 +41,7 @@ from nbs_env.planning.planner import (
     without_unobservable,
 )
 from nbs_env.planning.visibility import VisibilityModel
+from nbs_env.planning.wall_search import search_position, unviewed_wall
 from nbs_env.sensing.odometry import Odometry
 from nbs_env.sensing.pose import planar, pose_error, yaw_of
 from nbs_env.sensing.registration import AccumulatedCloud, RegistrationResult, level_from_floor, register
@@ -300,9 +300,9 @@ class Robot:
         self.rooms_done.append(self.room_index)
         return list(self.doors)
 
-    def door_search(self) -> int | None:
+    def wall_search(self) -> int | None:
         """The NVP from which a scan would view, frontally, the most of the room's wall no stop
-        viewed so (:mod:`nbs_env.planning.door_search`); None when every wall stretch as wide as
+        viewed so (:mod:`nbs_env.planning.wall_search`); None when every wall stretch as wide as
         a door was viewed, or no NVP views one. Reads the robot's belief only.
         """
         belief = self.belief
@@ -319,7 +319,7 @@ class Robot:
             labels = without_unobservable(grid, belief.unobservable)
             model = VisibilityModel(labels, grid.origin, grid.voxel_size, self.config.gain)
         scanner = self.config.scanner
-        config = self.config.door_search
+        config = self.config.wall_search
 
         def sees(sensors: np.ndarray, targets: np.ndarray) -> np.ndarray:
             return model.sees(sensors, targets, scanner)

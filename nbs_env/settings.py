@@ -19,10 +19,10 @@ from nbs_env.evaluation import QualityConfig
 from nbs_env.observation import ObservationConfig
 from nbs_env.perception.doors import DoorConfig
 from nbs_env.perception.roi import RoIConfig
-from nbs_env.planning.door_search import DoorSearchConfig
 from nbs_env.planning.navigation import NavigationConfig
 from nbs_env.planning.planner import GAIN_MODELS, PlanningConfig
 from nbs_env.planning.visibility import GainConfig
+from nbs_env.planning.wall_search import WallSearchConfig
 from scenes.generator import GeneratorConfig
 
 __all__ = ["PRESETS", "EnvConfig", "RewardConfig", "RobotConfig", "make_config"]
@@ -63,13 +63,13 @@ class RobotConfig(Config):
         Compute the greedy's predicted gain of every NVP. Policies with their own utility turn it
         off, so that their processing time does not carry the greedy's; room completion by gain
         (METHOD §7) then cannot run.
-    door_search_scans : int
+    wall_search_scans : int
         Door-search scans per room, at most, before its hand-over
-        (:mod:`nbs_env.planning.door_search`): a scan from the NVP that views most of the room's
+        (:mod:`nbs_env.planning.wall_search`): a scan from the NVP that views most of the room's
         wall no stop viewed frontally, taken when the room would end (by the gain rule or by a
         policy's "room done"); the gain rule may then reopen the room. 0 (default) is the paper's
         method: a room ends by its gain alone, and a door on a wall no scan faced is not found.
-    door_search : DoorSearchConfig
+    wall_search : WallSearchConfig
         How the search samples the walls and when a wall counts as viewed.
     """
 
@@ -85,8 +85,8 @@ class RobotConfig(Config):
     max_scans_per_room: int = 12
     perfect_localisation: bool = False
     predict_gains: bool = True
-    door_search_scans: int = 0
-    door_search: DoorSearchConfig = field(default_factory=DoorSearchConfig)
+    wall_search_scans: int = 0
+    wall_search: WallSearchConfig = field(default_factory=WallSearchConfig)
 
     def __post_init__(self) -> None:
         _finite(voxel_size=self.voxel_size, completion_fraction=self.completion_fraction)
@@ -96,7 +96,7 @@ class RobotConfig(Config):
             f"completion_fraction is a share in [0, 1), got {self.completion_fraction}",
         )
         _integer(self, "max_scans_per_room", 1)
-        _integer(self, "door_search_scans", 0)
+        _integer(self, "wall_search_scans", 0)
         _require(
             self.gain.model in GAIN_MODELS,
             f"unknown gain model {self.gain.model!r}; registered: {', '.join(sorted(GAIN_MODELS))}",

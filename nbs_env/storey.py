@@ -229,8 +229,8 @@ class Storey:
     room_ends : list of dict
         One per room completed, in order: the robot's ``room`` number, its ``scans`` and the
         ``reason`` it ended (``"gain"``, ``"declared"``, ``"cap"`` or ``"no NVP"``).
-    door_searches : list of dict
-        One per door-search scan (``config.robot.door_search_scans`` > 0), in order: the index of
+    wall_searches : list of dict
+        One per wall-search scan (``config.robot.wall_search_scans`` > 0), in order: the index of
         its ``scan`` and the robot's ``room`` number.
     paths : list of (p, 2) float
         The planned paths driven.
@@ -257,7 +257,7 @@ class Storey:
         self.step_scans: list[tuple[np.ndarray, np.ndarray]] = []
         self.scan_log: list[ScanPoints] = []
         self._searches: dict[int, int] = {}
-        self.door_searches: list[dict[str, Any]] = []
+        self.wall_searches: list[dict[str, Any]] = []
         self._record(self.robot.scan(), door=False)
         self.advance()
 
@@ -390,7 +390,7 @@ class Storey:
         robot = self.robot
         while len(self.scans) < self.config.max_scans and (reason := self._room_complete(done)) is not None:
             done = False  # the declaration was for the room the robot was in
-            if reason in ("gain", "declared") and self._door_search():
+            if reason in ("gain", "declared") and self._wall_search():
                 # The search scan may open the room again (the gain rule says so); otherwise the
                 # agent's declaration stands, so that completion="policy" scans as "gain" does.
                 done = reason == "declared" and robot.plan().gain_below(robot.config.completion_fraction)
@@ -427,24 +427,24 @@ class Storey:
             return "gain" if planned.gain_below(robot.config.completion_fraction) else None
         return "declared" if done else None
 
-    def _door_search(self) -> bool:
+    def _wall_search(self) -> bool:
         """Before the hand-over: scan from the NVP that views most of the room's wall no stop viewed
-        frontally (:meth:`Robot.door_search`), at most ``door_search_scans`` times a room and
+        frontally (:meth:`Robot.wall_search`), at most ``wall_search_scans`` times a room and
         never past the room's cap; whether it scanned."""
         robot = self.robot
         room = robot.room_index
-        if self._searches.get(room, 0) >= robot.config.door_search_scans:
+        if self._searches.get(room, 0) >= robot.config.wall_search_scans:
             return False
         if robot.scans_in_room >= robot.config.max_scans_per_room:
             return False
-        index = robot.door_search()
+        index = robot.wall_search()
         if index is None:
             return False
         self._searches[room] = self._searches.get(room, 0) + 1
         report = robot.move_to(index, count_conversions=self.count_conversions)
         self.paths.append(report.path)
         self._record(report, door=False)
-        self.door_searches.append({"scan": len(self.scans) - 1, "room": room})
+        self.wall_searches.append({"scan": len(self.scans) - 1, "room": room})
         return True
 
     def _enter_next_room(self) -> bool:

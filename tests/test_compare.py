@@ -188,16 +188,16 @@ def test_resume_reuses_finished_runs_and_reruns_the_rest(tiny, monkeypatch):
     again, again_oracles = compare.run_grid(specs, jobs=1, progress=False, finished=finished)
     assert [(c.policy, c.seed) for c in calls] == [("random", 1)]
     assert strip_times(summarise(again, again_oracles)) == strip_times(rows)
-    # Another preset, scan budget or door search is another spec: nothing is reused.
+    # Another preset, scan budget or wall search is another spec: nothing is reused.
     other = grid(**{**TINY, "max_scans": 2})
     assert compare.load_finished(resumed, other)["runs"] == {}
-    assert compare.load_finished(resumed, grid(**{**TINY, "door_search": 1}))["runs"] == {}
-    # A record written before RunSpec had door_search reads as the default (0): still reused.
+    assert compare.load_finished(resumed, grid(**{**TINY, "wall_search": 1}))["runs"] == {}
+    # A record written before RunSpec had wall_search reads as the default (0): still reused.
     import json
 
     record_file = resumed / "runs" / "l_room" / "random" / "seed0" / "run.json"
     record = json.loads(record_file.read_text())
-    del record["spec"]["door_search"]
+    del record["spec"]["wall_search"]
     record_file.write_text(json.dumps(record))
     assert len(compare.load_finished(resumed, specs)["runs"]) == 5
 

@@ -319,12 +319,12 @@ def test_training_envs_charge_the_run_s_prices():
     as the run says."""
     from train.ppo import TrainConfig, make_training_envs
 
-    config = TrainConfig(envs=1, rooms=(1, 1), scan_cost=0.25, metre_cost=0.1, completion="policy", door_search=1)
+    config = TrainConfig(envs=1, rooms=(1, 1), scan_cost=0.25, metre_cost=0.1, completion="policy", wall_search=1)
     venv = make_training_envs(config)
     try:
         env = venv.envs[0].unwrapped
         assert (env.config.reward.scan_cost, env.config.reward.metre_cost) == (0.25, 0.1)
-        assert env.config.robot.door_search_scans == 1  # and the run's robot
+        assert env.config.robot.wall_search_scans == 1  # and the run's robot
         venv.reset()
         action = int(np.flatnonzero(venv.reset_infos[0]["action_mask"][:-1])[0])
         _, reward, _, _ = venv.step(np.array([action]))

@@ -63,9 +63,9 @@ _seed = _integer_from(0, "a seed is an integer")
 _positive_int = _integer_from(1)
 _count = _integer_from(0)
 
-DOOR_SEARCH_HELP = (
-    "door-search scans per room: before a room ends, scan from where most of its wall no scan faced "
-    "is viewed (default 0: the paper's method, a room ends by its gain)"
+WALL_SEARCH_HELP = (
+    "wall-search scans per room: before a room ends, scan from where most of its wall that no scan "
+    "faced is seen, so that doors there can be found (default 0: the paper's method)"
 )
 
 
@@ -194,7 +194,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="X,Y",
         help="start position in metres (--start=-1,2 for a negative X)",
     )
-    scan.add_argument("--door-search", type=_count, default=0, metavar="N", help=DOOR_SEARCH_HELP)
+    scan.add_argument("--wall-search", type=_count, default=0, metavar="N", help=WALL_SEARCH_HELP)
     scan.add_argument("--no-steps", action="store_true", help="do not save a picture per step")
     scan.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -222,7 +222,7 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--address", default=None, help="Ray cluster address (default: start a local instance)")
     compare.add_argument("--preset", choices=("default", "fast"), default="default", help="env preset (default)")
     compare.add_argument("--max-scans", type=_positive_int, default=80, help="scan budget per run (default 80)")
-    compare.add_argument("--door-search", type=_count, default=0, metavar="N", help=DOOR_SEARCH_HELP)
+    compare.add_argument("--wall-search", type=_count, default=0, metavar="N", help=WALL_SEARCH_HELP)
     compare.add_argument("--quiet", action="store_true", help="no progress bar")
     compare.add_argument(
         "--resume", action="store_true", help="reuse the successful runs and oracles already in --out (same specs)"
@@ -242,7 +242,7 @@ def run_compare(args: argparse.Namespace) -> int:
     from train.compare import CompareError, check_out_dir, grid, load_finished, run_grid, write_outputs, write_record
 
     try:
-        specs = grid(args.scenes, args.policies, args.seeds, args.preset, args.max_scans, args.door_search)
+        specs = grid(args.scenes, args.policies, args.seeds, args.preset, args.max_scans, args.wall_search)
         out = check_out_dir(args.out)  # before anything runs
         finished = load_finished(out, specs) if args.resume else None
         if finished and not args.quiet:
@@ -430,7 +430,7 @@ def _scan_config(args: argparse.Namespace):
         if not (math.isfinite(args.voxel) and 0.01 <= args.voxel <= 1.0):
             raise ConfigError(f"--voxel must be a voxel size in metres within 0.01..1, got {args.voxel}")
         robot = replace(robot, voxel_size=args.voxel)
-    return replace(cfg, robot=replace(robot, door_search_scans=args.door_search))
+    return replace(cfg, robot=replace(robot, wall_search_scans=args.wall_search))
 
 
 def _table(rows: list[list[str]], right: set[int]) -> str:

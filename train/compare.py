@@ -73,7 +73,7 @@ class RunSpec:
     seed: int
     preset: str = "default"
     max_scans: int = 80
-    door_search: int = 0
+    wall_search: int = 0
 
     @property
     def key(self) -> str:
@@ -129,7 +129,7 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
 
         policy = make_policy(spec.policy, spec.seed)
         config = config_for(make_config(spec.preset, scene=spec.scene, max_scans=spec.max_scans), policy)
-        config = replace(config, robot=replace(config.robot, door_search_scans=spec.door_search))
+        config = replace(config, robot=replace(config.robot, wall_search_scans=spec.wall_search))
         env = NBSEnv(config)
         times = run_episode(env, policy, spec.seed)
         metrics = metrics_dict(env.storey, spec.scene, policy, spec.seed, times)
@@ -743,7 +743,7 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
     """The successful runs and oracles an earlier ``nbs compare --out OUT`` left, for ``--resume``.
 
     A run is reused when its ``run.json`` holds the same spec (scene, policy name, seed, preset,
-    scan budget, door search; a field a record predates counts as its default); an oracle when
+    scan budget, wall search; a field a record predates counts as its default); an oracle when
     ``oracle.json`` has it for the same preset. Failed runs are run again. A checkpoint replaced
     under the same ``ppo:PATH`` is not noticed: use a new ``--out``.
     """
@@ -770,10 +770,10 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
 
 
 def grid(
-    scenes: str, policies: str, seeds: str, preset: str = "default", max_scans: int = 80, door_search: int = 0
+    scenes: str, policies: str, seeds: str, preset: str = "default", max_scans: int = 80, wall_search: int = 0
 ) -> list[RunSpec]:
     """The RunSpecs of comma-separated scenes, policies and seeds (checked: bad names raise), with
-    ``door_search`` scans per room (:attr:`nbs_env.settings.RobotConfig.door_search_scans`)."""
+    ``wall_search`` scans per room (:attr:`nbs_env.settings.RobotConfig.wall_search_scans`)."""
     from policies import UnknownPolicyError, make_policy
 
     skipped: list[str] = []
@@ -798,10 +798,10 @@ def grid(
         raise CompareError("no seeds given")
     if min(seed_list) < 0:
         raise CompareError(f"seeds are integers >= 0, got {seeds!r}")
-    if not isinstance(door_search, int) or isinstance(door_search, bool) or door_search < 0:
-        raise CompareError(f"door_search is a number of scans per room >= 0, got {door_search!r}")
+    if not isinstance(wall_search, int) or isinstance(wall_search, bool) or wall_search < 0:
+        raise CompareError(f"wall_search is a number of scans per room >= 0, got {wall_search!r}")
     return [
-        replace(RunSpec(scene, policy, seed), preset=preset, max_scans=max_scans, door_search=door_search)
+        replace(RunSpec(scene, policy, seed), preset=preset, max_scans=max_scans, wall_search=wall_search)
         for scene in scene_list
         for policy in policy_list
         for seed in seed_list

@@ -88,8 +88,8 @@ class TrainConfig(Config):
         missed point dearer relative to them.
     ent_coef : float
         PPO's entropy bonus (stable-baselines3's ``ent_coef``; 0 is its default).
-    door_search : int
-        The robot's door-search scans per room (:attr:`nbs_env.settings.RobotConfig.door_search_scans`)
+    wall_search : int
+        The robot's wall-search scans per room (:attr:`nbs_env.settings.RobotConfig.wall_search_scans`)
         in the training and validation envs; 0 (default) is the paper's robot.
     cell_size : (float, float)
         The range of the generator's cell edge, metres: rooms are unions of such cells, so larger
@@ -118,7 +118,7 @@ class TrainConfig(Config):
     metre_cost: float = 0.05
     scan_cost: float = 0.5
     ent_coef: float = 0.0
-    door_search: int = 0
+    wall_search: int = 0
     completion: str = "gain"
     cell_size: tuple[float, float] = (2.0, 3.6)
     init: str = ""
@@ -135,7 +135,7 @@ class TrainConfig(Config):
         _require(isinstance(self.init, str), f"init must be a checkpoint path (str), got {self.init!r}")
         for name in ("timesteps", "envs", "n_steps", "batch_size", "eval_storeys", "max_episode_steps"):
             _integer(self, name, 1)
-        for name in ("seed", "eval_every", "checkpoint_every", "bc_steps", "door_search"):
+        for name in ("seed", "eval_every", "checkpoint_every", "bc_steps", "wall_search"):
             _integer(self, name, 0)
         _require(
             len(self.rooms) == 2
@@ -182,7 +182,7 @@ def _env_factory(run: TrainConfig):
             generator=GeneratorConfig(rooms=run.rooms, cell_size=run.cell_size),
             reward=replace(config.reward, metre_cost=run.metre_cost, scan_cost=run.scan_cost),
             completion=run.completion,
-            robot=replace(config.robot, door_search_scans=run.door_search),
+            robot=replace(config.robot, wall_search_scans=run.wall_search),
         )
         # Monitor puts each episode's return in info["episode"], for the learning-curve log.
         env = gym.make("nbs_env:nbs_env/NBS-Fast-v0", config=config, max_episode_steps=run.max_episode_steps)
@@ -244,17 +244,17 @@ def _layout(model) -> str:
 
 
 def evaluate(
-    policy_fn, storeys: list[int], max_episode_steps: int, completion: str = "gain", door_search: int = 0
+    policy_fn, storeys: list[int], max_episode_steps: int, completion: str = "gain", wall_search: int = 0
 ) -> dict[str, float]:
     """Mean scans, SE % and path of a policy over held-out generated storeys (the fast preset, with
-    ``completion`` and ``door_search`` scans per room)."""
+    ``completion`` and ``wall_search`` scans per room)."""
     from nbs_env.env import NBSEnv
     from nbs_env.settings import make_config
 
     scans, pct, path = [], [], []
     for seed in storeys:
         config = make_config("fast", scene=f"generated:{seed}", max_scans=max_episode_steps, completion=completion)
-        env = NBSEnv(replace(config, robot=replace(config.robot, door_search_scans=door_search)))
+        env = NBSEnv(replace(config, robot=replace(config.robot, wall_search_scans=wall_search)))
         obs, info = env.reset(seed=seed)
         # At most max_episode_steps decisions, as training's TimeLimit, and as many scans: with the
         # gain rule a step takes at least one scan, with "room done" steps the decisions bind first.
@@ -340,7 +340,7 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
     greedy = GreedyPolicy()
     baseline = None
     if config.eval_every:
-        baseline = evaluate(greedy.act, held_out, config.max_episode_steps, config.completion, config.door_search)
+        baseline = evaluate(greedy.act, held_out, config.max_episode_steps, config.completion, config.wall_search)
 
     class Progress(BaseCallback):
         def _on_training_start(self) -> None:
@@ -375,7 +375,7 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
                 )
                 return int(action[0])
 
-            learned = evaluate(act, held_out, config.max_episode_steps, config.completion, config.door_search)
+            learned = evaluate(act, held_out, config.max_episode_steps, config.completion, config.wall_search)
             record = {"timesteps": n, "learned": learned, "greedy": baseline}
             record["train_return"] = float(np.mean(self.episodes[-20:])) if self.episodes else None
             with log.open("a") as f:
@@ -541,7 +541,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scan-cost", type=float, default=0.5, help="reward per scan, subtracted")
     p.add_argument("--ent-coef", type=float, default=0.0, help="PPO's entropy bonus")
     p.add_argument(
-        "--door-search", type=int, default=0, help="the robot's door-search scans per room (default 0: the paper's)"
+        "--wall-search", type=int, default=0, help="the robot's wall-search scans per room (default 0: the paper's)"
     )
     p.add_argument(
         "--completion",
@@ -585,7 +585,7 @@ def main(argv: list[str] | None = None) -> int:
             metre_cost=args.metre_cost,
             scan_cost=args.scan_cost,
             ent_coef=args.ent_coef,
-            door_search=args.door_search,
+            wall_search=args.wall_search,
             completion=args.completion,
             max_episode_steps=args.max_episode_steps,
             cell_size=cell_size,

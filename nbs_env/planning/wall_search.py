@@ -1,4 +1,4 @@
-"""Door search: where to scan so that the room's walls no scan faced get a frontal view.
+"""Wall search: where to scan so that the room's walls no scan faced get a frontal view.
 
 The robot finds a door only on a wall some scan faced: the lintel in range and the opening crossed
 by rays (:func:`~nbs_env.perception.doors.detect_doors`). The NBS gain does not ask for that: a wall
@@ -12,7 +12,7 @@ walls no stop of the room viewed frontally, and picks the NVP that would view mo
 
 ``sees(sensors, targets)`` is a line-of-sight test through V(t)
 (:meth:`~nbs_env.planning.visibility.VisibilityModel.sees`). Not part of the paper's method
-(METHOD §7 ends a room by its gain alone): :attr:`nbs_env.settings.RobotConfig.door_search_scans`
+(METHOD §7 ends a room by its gain alone): :attr:`nbs_env.settings.RobotConfig.wall_search_scans`
 switches it on, 0 (off) by default.
 """
 
@@ -28,14 +28,14 @@ from shapely.geometry import Polygon
 from nbs_env.config import Config, _finite_fields, _require
 from nbs_env.perception.roi import RoI
 
-__all__ = ["DoorSearchConfig", "WallSamples", "search_position", "unviewed_wall"]
+__all__ = ["WallSamples", "WallSearchConfig", "search_position", "unviewed_wall"]
 
 #: ``sees(sensors (c, 3), targets (n, 3)) -> (c, n) bool``.
 LineOfSight = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 @dataclass(frozen=True)
-class DoorSearchConfig(Config):
+class WallSearchConfig(Config):
     """How walls are sampled and when a sample counts as viewed (JSON-safe, frozen).
 
     Attributes
@@ -71,15 +71,15 @@ class DoorSearchConfig(Config):
     def __post_init__(self) -> None:
         _finite_fields(self, "step", "inset", "incidence_deg", "max_range", "beyond", "min_run")
         for name in ("step", "max_range", "beyond", "min_run"):
-            _require(getattr(self, name) > 0, f"door search: {name} must be > 0 metres, got {getattr(self, name)}")
-        _require(self.inset >= 0, f"door search: inset must be >= 0 metres, got {self.inset}")
+            _require(getattr(self, name) > 0, f"wall search: {name} must be > 0 metres, got {getattr(self, name)}")
+        _require(self.inset >= 0, f"wall search: inset must be >= 0 metres, got {self.inset}")
         _require(
-            0 < self.incidence_deg < 90, f"door search: incidence_deg must be in (0, 90), got {self.incidence_deg}"
+            0 < self.incidence_deg < 90, f"wall search: incidence_deg must be in (0, 90), got {self.incidence_deg}"
         )
         heights = tuple(self.heights)
         _require(
             len(heights) > 0 and all(isinstance(h, int | float) and np.isfinite(h) and h > 0 for h in heights),
-            f"door search: heights must be positive numbers of metres, got {self.heights!r}",
+            f"wall search: heights must be positive numbers of metres, got {self.heights!r}",
         )
         object.__setattr__(self, "heights", tuple(float(h) for h in heights))
 
@@ -111,7 +111,7 @@ class WallSamples:
         return len(self.face)
 
 
-def _viewed(walls: WallSamples, sensors: np.ndarray, sees: LineOfSight, config: DoorSearchConfig) -> np.ndarray:
+def _viewed(walls: WallSamples, sensors: np.ndarray, sees: LineOfSight, config: WallSearchConfig) -> np.ndarray:
     """(c, m) bool: which columns each of the (c, 3) sensors views."""
     sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
     h = len(config.heights)
@@ -133,7 +133,7 @@ def unviewed_wall(
     stops: Sequence[np.ndarray] | np.ndarray,
     sees: LineOfSight,
     scanned_rooms: Sequence[Polygon] = (),
-    config: DoorSearchConfig | None = None,
+    config: WallSearchConfig | None = None,
     min_face: float = 0.0,
 ) -> WallSamples:
     """Sample the RoI's wall faces and flag the stretches no stop viewed frontally.
@@ -148,11 +148,11 @@ def unviewed_wall(
         ``sees(sensors (c, 3), targets (n, 3)) -> (c, n) bool``, lines of sight through V(t).
     scanned_rooms : sequence of Polygon
         Outlines of rooms already scanned: a column whose far side lies in one needs no view.
-    config : DoorSearchConfig
+    config : WallSearchConfig
     min_face : float
         Faces shorter than this (metres) are not sampled (shorter than the narrowest door).
     """
-    config = config or DoorSearchConfig()
+    config = config or WallSearchConfig()
     points, normals, faces = [], [], []
     for k, face in enumerate(roi.wall_faces):
         if face.length < max(min_face, 1e-9):
@@ -193,7 +193,7 @@ def search_position(
     sensors: np.ndarray,
     path_length: np.ndarray,
     sees: LineOfSight,
-    config: DoorSearchConfig | None = None,
+    config: WallSearchConfig | None = None,
 ) -> int | None:
     """The candidate that views most target columns (ties: the shorter path), or None when there
     is no target or no candidate views ``config.min_run`` metres of them.
@@ -209,7 +209,7 @@ def search_position(
     sees : callable
         As in :func:`unviewed_wall`.
     """
-    config = config or DoorSearchConfig()
+    config = config or WallSearchConfig()
     sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
     if not walls.target.any() or not len(sensors):
         return None

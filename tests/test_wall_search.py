@@ -1,4 +1,4 @@
-"""The door search (nbs_env.planning.door_search) and its place in the storey loop."""
+"""The wall search (nbs_env.planning.wall_search) and its place in the storey loop."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from shapely.geometry import Polygon
 from nbs_env.env import NBSEnv
 from nbs_env.errors import ConfigError
 from nbs_env.perception.roi import RoI
-from nbs_env.planning.door_search import DoorSearchConfig, search_position, unviewed_wall
+from nbs_env.planning.wall_search import WallSearchConfig, search_position, unviewed_wall
 from nbs_env.settings import RobotConfig, make_config
 
 # A corridor 20 m by 2 m, floor at 0: from its middle the far ends of the long walls are seen at
@@ -30,7 +30,7 @@ def open_space(sensors: np.ndarray, targets: np.ndarray) -> np.ndarray:
 
 def incidence_deg(stop: np.ndarray, walls) -> np.ndarray:
     """(m,) the smallest angle off the face normal at which ``stop`` sees each column."""
-    h = len(DoorSearchConfig().heights)
+    h = len(WallSearchConfig().heights)
     ray = stop[None, :] - walls.points
     cos = np.einsum("nk,nk->n", ray[:, :2], np.repeat(walls.normals, h, axis=0)) / np.linalg.norm(ray, axis=1)
     return np.degrees(np.arccos(np.clip(cos, -1, 1))).reshape(-1, h).min(axis=1)
@@ -39,7 +39,7 @@ def incidence_deg(stop: np.ndarray, walls) -> np.ndarray:
 def test_columns_seen_at_grazing_incidence_are_targets_and_the_rest_are_not():
     stop = np.array([10.0, 1.0, 1.5])
     walls = unviewed_wall(corridor(), [stop], open_space)
-    config = DoorSearchConfig()
+    config = WallSearchConfig()
     angle = incidence_deg(stop, walls)
     dist = np.linalg.norm(stop[None, :] - walls.points, axis=1).reshape(walls.columns, -1).min(axis=1)
     viewed = (angle <= config.incidence_deg) & (dist <= config.max_range)
@@ -100,15 +100,15 @@ def test_no_stop_no_target_and_short_faces_are_skipped():
     "field, value",
     [("step", 0.0), ("incidence_deg", 90.0), ("max_range", -1.0), ("heights", ()), ("heights", (1.0, float("nan")))],
 )
-def test_bad_door_search_config_raises(field, value):
+def test_bad_wall_search_config_raises(field, value):
     with pytest.raises(ConfigError, match=field):
-        DoorSearchConfig(**{field: value})
+        WallSearchConfig(**{field: value})
 
 
-def test_door_search_scans_is_checked_and_off_by_default():
-    assert RobotConfig().door_search_scans == 0
-    with pytest.raises(ConfigError, match="door_search_scans"):
-        RobotConfig(door_search_scans=-1)
+def test_wall_search_scans_is_checked_and_off_by_default():
+    assert RobotConfig().wall_search_scans == 0
+    with pytest.raises(ConfigError, match="wall_search_scans"):
+        RobotConfig(wall_search_scans=-1)
 
 
 def test_room_done_takes_one_search_scan_which_can_reopen_the_room():
@@ -116,11 +116,11 @@ def test_room_done_takes_one_search_scan_which_can_reopen_the_room():
     # search scan, the gain rule finds the room goes on, and the agent keeps it; a second
     # declaration ends it (one search a room).
     config = make_config("fast", scene="l_room", completion="policy", expose_belief=True)
-    env = NBSEnv(replace(config, robot=replace(config.robot, door_search_scans=1)))
+    env = NBSEnv(replace(config, robot=replace(config.robot, wall_search_scans=1)))
     _, info = env.reset(seed=0)
     _, _, terminated, _, info = env.step(env.stop_action)
     storey = env.storey
-    assert not terminated and info["scans"] == 2 and storey.door_searches == [{"scan": 1, "room": 0}]
+    assert not terminated and info["scans"] == 2 and storey.wall_searches == [{"scan": 1, "room": 0}]
     assert storey.room_ends == [] and info["action_mask"][env.stop_action]
     _, _, terminated, _, info = env.step(env.stop_action)
     assert terminated and info["scans"] == 2
