@@ -325,10 +325,10 @@ class Robot:
             return model.sees(sensors, targets, scanner)
 
         scanned = [poly for room, poly in self.room_polygons.items() if room != self.room_index]
-        walls = unviewed_wall(belief.roi, self.stops, sees, scanned, config, min_face=self.config.doors.min_width)
+        walls = unviewed_wall(belief.roi, self.stops, sees, scanned, config, self.config.doors.min_width, scanner)
         n = planned.count
         sensors = sensor_positions(planned.candidates.points[:n], belief.roi.floor_z, scanner)
-        return search_position(walls, sensors, planned.candidates.path_length[:n], sees, config)
+        return search_position(walls, sensors, planned.candidates.path_length[:n], sees, config, scanner)
 
     def room_model(self) -> RoomModel | None:
         """The current room's recovered model (None before its first scan)."""

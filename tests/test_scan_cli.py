@@ -91,6 +91,7 @@ TOP_LEVEL = {
     "steps": list,
     "door_events": list,
     "room_ends": list,
+    "wall_searches": list,
     "config": dict,
 }
 ROOM_KEYS = {
@@ -517,6 +518,7 @@ def test_door_frame_scans_belong_to_the_room_entered():
         complete=True,
         door_events=[],
         room_ends=[],
+        wall_searches=[],
     )
     m = metrics_dict(storey, "fake", "stachniss_burgard", 0, structure_aware=False)
     json.dumps(m)  # plain JSON types only

@@ -125,3 +125,56 @@ def test_room_done_takes_one_search_scan_which_can_reopen_the_room():
     _, _, terminated, _, info = env.step(env.stop_action)
     assert terminated and info["scans"] == 2
     assert storey.room_ends == [{"room": 0, "scans": 2, "reason": "declared"}]
+
+
+def test_rays_through_an_opening_fall_with_range_and_incidence_and_vanish_behind_the_wall():
+    from nbs_env.config import ScannerConfig
+    from nbs_env.planning.wall_search import opening_rays
+
+    scanner = ScannerConfig(angular_step=1.0)
+    point, normal = np.array([[0.0, 0.0, 1.0]]), np.array([[0.0, 1.0]])
+
+    def rays(distance, angle_deg, thickness=0.2, step=1.0):
+        a = np.radians(angle_deg)
+        sensor = np.array([[distance * np.sin(a), distance * np.cos(a), 1.5]])
+        config = replace(scanner, angular_step=step)
+        return float(opening_rays(sensor, point, normal, 0.0, config, 0.8, 2.0, thickness)[0, 0])
+
+    assert rays(3, 0) > rays(6, 0) > rays(9, 0) > 0
+    assert rays(4, 0) > rays(4, 45) > rays(4, 70) > 0
+    # The far jamb of a 0.2 m wall hides a 0.8 m opening seen at 76° or more; none from behind.
+    assert rays(4, 80) == 0 and rays(4, 80, thickness=0.0) > 0 and rays(-4, 0) == 0
+    # Half the angular step, four times the rays.
+    assert rays(5, 30, step=0.5) == pytest.approx(4 * rays(5, 30))
+
+
+def test_min_rays_leaves_far_frontal_walls_unviewed():
+    from nbs_env.config import ScannerConfig
+
+    scanner = ScannerConfig(angular_step=1.0)
+    roi = RoI(
+        np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 10.5], [0.0, 10.5]]), 0.0, 3.0, np.zeros((1, 1), bool), np.zeros(2)
+    )
+    stop = [np.array([3.0, 2.0, 1.5])]
+    plain = unviewed_wall(roi, stop, open_space, scanner=scanner)
+    strict = unviewed_wall(roi, stop, open_space, config=WallSearchConfig(min_rays=100), scanner=scanner)
+    north = np.flatnonzero(plain.face == 2)  # the wall at y = 10.5, 8.5 m in front of the stop
+    assert not plain.target[north].any() and strict.target[north].all()
+    assert not strict.target[plain.face == 0].any()  # the wall 2 m behind the stop stays viewed
+
+
+def test_a_stop_under_the_lintel_does_not_view_the_wall_above_it():
+    # Door detection needs the lintel measured: 0.3 m in front of the wall the top of a 2 m opening
+    # lies within the scanner's 1.5 m minimum range, so the columns in front of the stop stay
+    # unviewed; a stop 3 m back views them.
+    from nbs_env.config import ScannerConfig
+
+    scanner = ScannerConfig(angular_step=1.0)
+    roi = RoI(np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 6.0], [0.0, 6.0]]), 0.0, 3.0, np.zeros((1, 1), bool), np.zeros(2))
+    close = unviewed_wall(roi, [np.array([3.0, 0.45, 1.5])], open_space, scanner=scanner)
+    south = close.face == 0
+    in_front = south & (np.abs(close.points[::2, 0] - 3.0) < 0.4)
+    assert close.target[in_front].all()
+    assert not unviewed_wall(roi, [np.array([3.0, 0.45, 1.5])], open_space).target[in_front].any()
+    back = unviewed_wall(roi, [np.array([3.0, 3.0, 1.5])], open_space, scanner=scanner)
+    assert not back.target[in_front].any()

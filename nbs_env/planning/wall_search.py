@@ -25,7 +25,7 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
-from nbs_env.config import Config, _finite_fields, _require
+from nbs_env.config import Config, ScannerConfig, _finite_fields, _integer, _require
 from nbs_env.perception.roi import RoI
 
 __all__ = ["WallSamples", "WallSearchConfig", "search_position", "unviewed_wall"]
@@ -52,6 +52,17 @@ class WallSearchConfig(Config):
         edge-on shows no gap.
     max_range : float
         ... and at most this far (metres): beyond it a door's opening is crossed by too few rays.
+    min_rays : int
+        ... and its scan would send at least this many rays through an opening of
+        ``opening_width`` x ``opening_height`` there (the scanner's angular step, its elevation
+        band): door detection asks for rays seen through the gap
+        (:attr:`~nbs_env.perception.doors.DoorConfig.min_behind_points`). 0: no such condition.
+    opening_width, opening_height : float
+        The opening ``min_rays`` is counted through, metres (a narrow door); its top, the lintel,
+        must lie beyond the scanner's minimum range.
+    wall_thickness : float
+        Metres: seen obliquely, the opening's far jamb hides ``wall_thickness`` x sin(incidence)
+        of its width.
     beyond : float
         A column needs no view when the point this far (metres) behind the face lies in a room
         already scanned (the robot's ``BEYOND_DOOR``).
@@ -65,14 +76,33 @@ class WallSearchConfig(Config):
     inset: float = 0.15
     incidence_deg: float = 72.0
     max_range: float = 10.0
+    min_rays: int = 0
+    opening_width: float = 0.8
+    opening_height: float = 2.0
+    wall_thickness: float = 0.2
     beyond: float = 0.6
     min_run: float = 0.75
 
     def __post_init__(self) -> None:
-        _finite_fields(self, "step", "inset", "incidence_deg", "max_range", "beyond", "min_run")
-        for name in ("step", "max_range", "beyond", "min_run"):
+        _finite_fields(
+            self,
+            "step",
+            "inset",
+            "incidence_deg",
+            "max_range",
+            "beyond",
+            "min_run",
+            "opening_width",
+            "opening_height",
+            "wall_thickness",
+        )
+        _integer(self, "min_rays", 0)
+        for name in ("step", "max_range", "beyond", "min_run", "opening_width", "opening_height"):
             _require(getattr(self, name) > 0, f"wall search: {name} must be > 0 metres, got {getattr(self, name)}")
         _require(self.inset >= 0, f"wall search: inset must be >= 0 metres, got {self.inset}")
+        _require(
+            self.wall_thickness >= 0, f"wall search: wall_thickness must be >= 0 metres, got {self.wall_thickness}"
+        )
         _require(
             0 < self.incidence_deg < 90, f"wall search: incidence_deg must be in (0, 90), got {self.incidence_deg}"
         )
@@ -99,19 +129,55 @@ class WallSamples:
         Index of each column's face in ``roi.wall_faces``.
     target : (m,) bool
         Columns in unviewed stretches of at least ``config.min_run``.
+    floor_z : float
+        The RoI's floor height.
     """
 
     points: np.ndarray
     normals: np.ndarray
     face: np.ndarray
     target: np.ndarray
+    floor_z: float = 0.0
 
     @property
     def columns(self) -> int:
         return len(self.face)
 
 
-def _viewed(walls: WallSamples, sensors: np.ndarray, sees: LineOfSight, config: WallSearchConfig) -> np.ndarray:
+def opening_rays(
+    sensors: np.ndarray,
+    points: np.ndarray,
+    normals: np.ndarray,
+    floor_z: float,
+    scanner: ScannerConfig,
+    width: float,
+    height: float,
+    thickness: float = 0.0,
+) -> np.ndarray:
+    """(c, n) float: about how many of a scanner's rays from each of the (c, 3) sensors pass
+    through a ``width`` x ``height`` opening in the wall at each of the (n, 3) points (its floor at
+    ``floor_z``, its face's inward normal (n, 2), in a wall ``thickness`` thick): the opening's
+    angular width (foreshortened by the incidence, less what its far jamb hides) times its angular
+    height (within the elevation band), over the angular step squared. 0 from behind the wall."""
+    ray = sensors[:, None, :2] - points[None, :, :2]
+    d = np.maximum(np.linalg.norm(ray, axis=2), 1e-6)
+    cos = np.clip(np.einsum("cnk,nk->cn", ray, normals) / d, 0.0, 1.0)
+    z = sensors[:, None, 2] - floor_z
+    lo = np.maximum(np.arctan2(-z, d), np.radians(scanner.elevation_min))
+    hi = np.minimum(np.arctan2(height - z, d), np.radians(scanner.elevation_max))
+    step = np.radians(scanner.angular_step)
+    sin = np.sqrt(1.0 - cos**2)
+    clear = np.maximum(width * cos - thickness * sin, 0.0)
+    return (clear / d / step) * (np.maximum(hi - lo, 0.0) / step)
+
+
+def _viewed(
+    walls: WallSamples,
+    sensors: np.ndarray,
+    sees: LineOfSight,
+    config: WallSearchConfig,
+    scanner: ScannerConfig | None = None,
+) -> np.ndarray:
     """(c, m) bool: which columns each of the (c, 3) sensors views."""
     sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
     h = len(config.heights)
@@ -124,6 +190,23 @@ def _viewed(walls: WallSamples, sensors: np.ndarray, sees: LineOfSight, config: 
         dist = np.linalg.norm(ray, axis=2)
         cos = np.einsum("cnk,nk->cn", ray[:, :, :2], normals) / np.maximum(dist, 1e-9)
         frontal = (cos >= np.cos(np.radians(config.incidence_deg))) & (dist <= config.max_range)
+        if scanner is not None:
+            # A door is found by its lintel: standing under it, the scanner's minimum range hides it.
+            lintel = points.copy()
+            lintel[:, 2] = walls.floor_z + config.opening_height
+            frontal &= np.linalg.norm(sensors[:, None, :] - lintel[None, :, :], axis=2) >= scanner.min_range
+        if config.min_rays and scanner is not None:
+            rays = opening_rays(
+                sensors,
+                points,
+                normals,
+                walls.floor_z,
+                scanner,
+                config.opening_width,
+                config.opening_height,
+                config.wall_thickness,
+            )
+            frontal &= rays >= config.min_rays
         out[:, valid] = sees(sensors, points) & frontal
     return out.reshape(len(sensors), walls.columns, h).any(axis=2)
 
@@ -135,6 +218,7 @@ def unviewed_wall(
     scanned_rooms: Sequence[Polygon] = (),
     config: WallSearchConfig | None = None,
     min_face: float = 0.0,
+    scanner: ScannerConfig | None = None,
 ) -> WallSamples:
     """Sample the RoI's wall faces and flag the stretches no stop viewed frontally.
 
@@ -151,6 +235,10 @@ def unviewed_wall(
     config : WallSearchConfig
     min_face : float
         Faces shorter than this (metres) are not sampled (shorter than the narrowest door).
+    scanner : ScannerConfig, optional
+        The scanner. With it, a stop views a column only if the top of an ``opening_height``
+        opening there lies beyond the scanner's minimum range (a lintel under the scanner is never
+        measured, and door detection needs it), and ``config.min_rays`` applies.
     """
     config = config or WallSearchConfig()
     points, normals, faces = [], [], []
@@ -174,9 +262,9 @@ def unviewed_wall(
     xy, normal, face = np.concatenate(points), np.concatenate(normals), np.concatenate(faces)
     heights = np.asarray(config.heights, dtype=float)
     samples = np.column_stack([np.repeat(xy, len(heights), axis=0), np.tile(roi.floor_z + heights, len(xy))])
-    walls = WallSamples(samples, normal, face, np.zeros(len(xy), dtype=bool))
+    walls = WallSamples(samples, normal, face, np.zeros(len(xy), dtype=bool), float(roi.floor_z))
     stops = np.asarray(stops, dtype=float).reshape(-1, 3)
-    open_columns = np.isfinite(xy[:, 0]) & ~_viewed(walls, stops, sees, config).any(axis=0)
+    open_columns = np.isfinite(xy[:, 0]) & ~_viewed(walls, stops, sees, config, scanner).any(axis=0)
     run = int(np.ceil(config.min_run / config.step - 1e-9))
     target = np.zeros(len(xy), dtype=bool)
     for k in np.unique(face):
@@ -185,7 +273,7 @@ def unviewed_wall(
         for a, b in zip(edges[::2], edges[1::2], strict=True):
             if b - a >= run:
                 target[idx[a:b]] = True
-    return WallSamples(samples, normal, face, target)
+    return WallSamples(samples, normal, face, target, float(roi.floor_z))
 
 
 def search_position(
@@ -194,6 +282,7 @@ def search_position(
     path_length: np.ndarray,
     sees: LineOfSight,
     config: WallSearchConfig | None = None,
+    scanner: ScannerConfig | None = None,
 ) -> int | None:
     """The candidate that views most target columns (ties: the shorter path), or None when there
     is no target or no candidate views ``config.min_run`` metres of them.
@@ -208,12 +297,14 @@ def search_position(
         Each candidate's path from the robot, metres.
     sees : callable
         As in :func:`unviewed_wall`.
+    config, scanner
+        As in :func:`unviewed_wall`.
     """
     config = config or WallSearchConfig()
     sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
     if not walls.target.any() or not len(sensors):
         return None
-    score = _viewed(walls, sensors, sees, config)[:, walls.target].sum(axis=1)
+    score = _viewed(walls, sensors, sees, config, scanner)[:, walls.target].sum(axis=1)
     if score.max() * config.step < config.min_run - 1e-9:
         return None
     return int(np.lexsort((np.asarray(path_length, dtype=float)[: len(sensors)], -score))[0])
