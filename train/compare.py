@@ -755,8 +755,8 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
             record = json.loads((folder / "run.json").read_text())
             if record.get("ok") and {**SPEC_DEFAULTS, **record.get("spec", {})} == asdict(spec):
                 runs[spec.key] = {**record, "metrics": json.loads((folder / "metrics.json").read_text())}
-        except (OSError, ValueError):
-            continue  # not there or unreadable: run it again
+        except (OSError, ValueError, TypeError, AttributeError):
+            continue  # not there, unreadable or malformed: run it again
     oracles: dict[str, Any] = {}
     presets = {s.preset for s in specs}
     try:
