@@ -256,7 +256,6 @@ class Storey:
         self.new_room = True
         self.step_scans: list[tuple[np.ndarray, np.ndarray]] = []
         self.scan_log: list[ScanPoints] = []
-        self._searches: dict[int, int] = {}
         self.wall_searches: list[dict[str, Any]] = []
         self._record(self.robot.scan(), door=False)
         self.advance()
@@ -433,14 +432,13 @@ class Storey:
         never past the room's cap; whether it scanned."""
         robot = self.robot
         room = robot.room_index
-        if self._searches.get(room, 0) >= robot.config.wall_search_scans:
+        if sum(search["room"] == room for search in self.wall_searches) >= robot.config.wall_search_scans:
             return False
         if robot.scans_in_room >= robot.config.max_scans_per_room:
             return False
         index = robot.wall_search()
         if index is None:
             return False
-        self._searches[room] = self._searches.get(room, 0) + 1
         report = robot.move_to(index, count_conversions=self.count_conversions)
         self.paths.append(report.path)
         self._record(report, door=False)

@@ -177,12 +177,16 @@ def _viewed(
     sees: LineOfSight,
     config: WallSearchConfig,
     scanner: ScannerConfig | None = None,
+    columns: np.ndarray | None = None,
 ) -> np.ndarray:
-    """(c, m) bool: which columns each of the (c, 3) sensors views."""
+    """(c, m) bool: which columns each of the (c, 3) sensors views; only the ``columns`` (m,) bool
+    are tested when given (the rest read False)."""
     sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
     h = len(config.heights)
     out = np.zeros((len(sensors), walls.columns * h), dtype=bool)
     valid = np.isfinite(walls.points[:, 0])
+    if columns is not None:
+        valid &= np.repeat(columns, h)
     if valid.any() and len(sensors):
         points = walls.points[valid]
         normals = np.repeat(walls.normals, h, axis=0)[valid]
@@ -304,7 +308,7 @@ def search_position(
     sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
     if not walls.target.any() or not len(sensors):
         return None
-    score = _viewed(walls, sensors, sees, config, scanner)[:, walls.target].sum(axis=1)
+    score = _viewed(walls, sensors, sees, config, scanner, walls.target)[:, walls.target].sum(axis=1)
     if score.max() * config.step < config.min_run - 1e-9:
         return None
     return int(np.lexsort((np.asarray(path_length, dtype=float)[: len(sensors)], -score))[0])
