@@ -41,7 +41,7 @@ from nbs_env.planning.planner import (
     without_unobservable,
 )
 from nbs_env.planning.visibility import VisibilityModel
-from nbs_env.planning.wall_search import search_position, unviewed_wall
+from nbs_env.planning.wall_search import approach_position, search_position, unviewed_wall
 from nbs_env.sensing.odometry import Odometry
 from nbs_env.sensing.pose import planar, pose_error, yaw_of
 from nbs_env.sensing.registration import AccumulatedCloud, RegistrationResult, level_from_floor, register
@@ -300,10 +300,12 @@ class Robot:
         self.rooms_done.append(self.room_index)
         return list(self.doors)
 
-    def wall_search(self) -> int | None:
-        """The NVP from which a scan would view, frontally, the most of the room's wall no stop
-        viewed so (:mod:`nbs_env.planning.wall_search`); None when every wall stretch as wide as
-        a door was viewed, or no NVP views one. Reads the robot's belief only.
+    def wall_search(self) -> tuple[int, str] | None:
+        """Where to scan for the room's wall no stop viewed frontally
+        (:mod:`nbs_env.planning.wall_search`): the NVP and why, ``"view"`` (it views the most of
+        that wall) or ``"approach"`` (no NVP views it; this one is the nearest to it). None when
+        every wall stretch as wide as a door was viewed, or no NVP views one or comes near enough.
+        Reads the robot's belief only.
         """
         belief = self.belief
         if belief.roi is None or belief.grid is None or not self.stops:
@@ -328,7 +330,12 @@ class Robot:
         walls = unviewed_wall(belief.roi, self.stops, sees, scanned, config, self.config.doors.min_width, scanner)
         n = planned.count
         sensors = sensor_positions(planned.candidates.points[:n], belief.roi.floor_z, scanner)
-        return search_position(walls, sensors, planned.candidates.path_length[:n], sees, config, scanner)
+        path_length = planned.candidates.path_length[:n]
+        index = search_position(walls, sensors, path_length, sees, config, scanner)
+        if index is not None:
+            return index, "view"
+        index = approach_position(walls, sensors, path_length, np.asarray(self.stops, dtype=float), config)
+        return None if index is None else (index, "approach")
 
     def room_model(self) -> RoomModel | None:
         """The current room's recovered model (None before its first scan)."""

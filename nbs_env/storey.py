@@ -436,13 +436,14 @@ class Storey:
             return False
         if robot.scans_in_room >= robot.config.max_scans_per_room:
             return False
-        index = robot.wall_search()
-        if index is None:
+        choice = robot.wall_search()
+        if choice is None:
             return False
+        index, kind = choice
         report = robot.move_to(index, count_conversions=self.count_conversions)
         self.paths.append(report.path)
         self._record(report, door=False)
-        self.wall_searches.append({"scan": len(self.scans) - 1, "room": room})
+        self.wall_searches.append({"scan": len(self.scans) - 1, "room": room, "kind": kind})
         return True
 
     def _enter_next_room(self) -> bool:

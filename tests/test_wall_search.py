@@ -11,7 +11,7 @@ from shapely.geometry import Polygon
 from nbs_env.env import NBSEnv
 from nbs_env.errors import ConfigError
 from nbs_env.perception.roi import RoI
-from nbs_env.planning.wall_search import WallSearchConfig, search_position, unviewed_wall
+from nbs_env.planning.wall_search import WallSearchConfig, approach_position, search_position, unviewed_wall
 from nbs_env.settings import RobotConfig, make_config
 
 # A corridor 20 m by 2 m, floor at 0: from its middle the far ends of the long walls are seen at
@@ -90,6 +90,28 @@ def test_an_occluded_stretch_is_a_target_and_a_room_behind_it_is_not():
     assert walls.target[~east & (np.nan_to_num(walls.points[::2, 0]) > 14)].all()
 
 
+def test_when_no_candidate_views_the_targets_the_search_approaches_them():
+    def west_of_12(sensors, targets):
+        # Nothing east of x = 12 is in view (floor there never measured, say) from anywhere.
+        return np.broadcast_to(targets[None, :, 0] < 12, (len(sensors), len(targets)))
+
+    stops = np.array([[2.0, 1.0, 1.5], [6.0, 1.0, 1.5], [10.0, 1.0, 1.5]])
+    walls = unviewed_wall(corridor(), stops, west_of_12)
+    assert walls.target[walls.points[::2, 0] > 12].all() and not walls.target[walls.points[::2, 0] < 12].any()
+    sensors = np.array([[3.0, 1.0, 1.5], [11.8, 1.0, 1.5], [9.0, 1.0, 1.5], [11.8, 1.0, 1.5]])
+    path = np.array([5.0, 4.0, 2.0, 3.0])
+    assert search_position(walls, sensors, path, west_of_12) is None
+    # The nearest (x = 11.8, 0.91 m from the first target column against the last stop's 2.29 m)
+    # wins, the shorter path of the two there.
+    assert approach_position(walls, sensors, path, stops) == 3
+    # Not nearer than the stops by the margin, or the margin off, or nothing to approach: none.
+    assert approach_position(walls, sensors, path, stops, WallSearchConfig(approach=1.5)) is None
+    assert approach_position(walls, sensors[[0]], path[[0]], stops) is None
+    assert approach_position(walls, sensors, path, stops, WallSearchConfig(approach=0.0)) is None
+    viewed = unviewed_wall(corridor(), [np.array([x, 1.0, 1.5]) for x in (2.0, 6.0, 10.0, 14.0, 18.0)], open_space)
+    assert approach_position(viewed, sensors, path, stops) is None
+
+
 def test_no_stop_no_target_and_short_faces_are_skipped():
     walls = unviewed_wall(corridor(), [np.array([10.0, 1.0, 1.5])], open_space, min_face=2.5)
     assert set(walls.face.tolist()) == {0, 2}  # the 2 m end walls are shorter than 2.5 m
@@ -98,7 +120,14 @@ def test_no_stop_no_target_and_short_faces_are_skipped():
 
 @pytest.mark.parametrize(
     "field, value",
-    [("step", 0.0), ("incidence_deg", 90.0), ("max_range", -1.0), ("heights", ()), ("heights", (1.0, float("nan")))],
+    [
+        ("step", 0.0),
+        ("incidence_deg", 90.0),
+        ("max_range", -1.0),
+        ("heights", ()),
+        ("heights", (1.0, float("nan"))),
+        ("approach", -0.5),
+    ],
 )
 def test_bad_wall_search_config_raises(field, value):
     with pytest.raises(ConfigError, match=field):
@@ -120,7 +149,7 @@ def test_room_done_takes_one_search_scan_which_can_reopen_the_room():
     _, info = env.reset(seed=0)
     _, _, terminated, _, info = env.step(env.stop_action)
     storey = env.storey
-    assert not terminated and info["scans"] == 2 and storey.wall_searches == [{"scan": 1, "room": 0}]
+    assert not terminated and info["scans"] == 2 and storey.wall_searches == [{"scan": 1, "room": 0, "kind": "view"}]
     assert storey.room_ends == [] and info["action_mask"][env.stop_action]
     _, _, terminated, _, info = env.step(env.stop_action)
     assert terminated and info["scans"] == 2
