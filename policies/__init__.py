@@ -30,13 +30,25 @@ def _no_option(name: str, option: str | None) -> None:
 def _greedy(seed: int | None, option: str | None = None):
     if not option:
         return GreedyPolicy()
+    usage = (
+        "greedy takes NEAR, the share of the best gain a nearer candidate must reach, a number in (0, 1] "
+        "(greedy:0.8), and stop=FRACTION, the completion fraction its rooms end at, in [0, 1) "
+        f"(greedy:stop=0.08), joined by + (greedy:0.8+stop=0.08); got greedy:{option}"
+    )
+    kwargs: dict[str, float] = {}
+    for part in option.split("+"):
+        key, equals, value = part.rpartition("=")
+        key = key if equals else "near"
+        if key not in ("near", "stop") or key in kwargs:
+            raise UnknownPolicyError(usage)
+        try:
+            kwargs[key] = float(value)
+        except ValueError:
+            raise UnknownPolicyError(usage) from None
     try:
-        return GreedyPolicy(near=float(option))
+        return GreedyPolicy(**kwargs)
     except ValueError:
-        raise UnknownPolicyError(
-            f"greedy takes one option, the share of the best gain a nearer candidate must reach, a number in "
-            f"(0, 1] (greedy:0.8), got greedy:{option}"
-        ) from None
+        raise UnknownPolicyError(usage) from None
 
 
 def _random(seed: int | None, option: str | None = None):

@@ -35,17 +35,33 @@ class GreedyPolicy:
         the shortest path among those predicting at least ``near`` × the best gain, ties to the
         larger gain. 1 (the default) is the paper's rule. Not the paper's method: it measures how
         much of the greedy's path a choice of positions can save (README, issue 19).
+    stop : float, optional
+        In [0, 1). The completion fraction the greedy's rooms end at (``greedy:stop=0.08`` by name):
+        the robot's gain rule (:attr:`nbs_env.settings.RobotConfig.completion_fraction`, 0.03 by
+        default) with this fraction instead, through :attr:`robot_overrides`. Larger fractions end
+        rooms sooner: the greedy's own trade of coverage for scans, against which a policy that
+        ends rooms itself is measured (README, issue 19). None (the default): the robot's.
     """
 
     #: Keeps only the SE points (the paper's processed-point measure).
     structure_aware = True
 
-    def __init__(self, near: float = 1.0) -> None:
+    def __init__(self, near: float = 1.0, stop: float | None = None) -> None:
         near = float(near)
         if not 0.0 < near <= 1.0:
             raise ValueError(f"near must be in (0, 1], got {near}")
+        options = [] if near == 1.0 else [f"{near:g}"]
+        #: RobotConfig fields this policy sets (:func:`train.episode.config_for` applies them).
+        self.robot_overrides: dict[str, float] = {}
+        if stop is not None:
+            stop = float(stop)
+            if not 0.0 <= stop < 1.0:
+                raise ValueError(f"stop must be in [0, 1), got {stop}")
+            self.robot_overrides = {"completion_fraction": stop}
+            options.append(f"stop={stop:g}")
         self.near = near
-        self.name = "greedy" if near == 1.0 else f"greedy:{near:g}"
+        self.stop = stop
+        self.name = "greedy" if not options else "greedy:" + "+".join(options)
 
     def reset(self) -> None:
         """The greedy keeps no state."""
