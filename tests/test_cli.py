@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import subprocess
 import sys
@@ -84,3 +85,16 @@ def test_bad_plan_file_error_names_the_field(tmp_path, plan_dict):
     assert proc.returncode == EXIT_SCENE_ERROR
     assert f"{path}: doors[0].width: 'wide' is not of type 'number'" in proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+def test_compare_help_names_every_registered_policy():
+    from policies import POLICIES
+    from train.cli import build_parser
+
+    compare = next(
+        action.choices["compare"]
+        for action in build_parser()._actions
+        if isinstance(action, argparse._SubParsersAction)
+    )
+    help_text = next(a.help for a in compare._actions if "--policies" in a.option_strings)
+    assert all(name in help_text for name in POLICIES), help_text

@@ -214,7 +214,12 @@ def build_parser() -> argparse.ArgumentParser:
         required=True,
         help="comma-separated scenes; generated:A-B is a range of seeds, suite:unseen the evaluation corpus",
     )
-    compare.add_argument("--policies", required=True, help="comma-separated policies (see `nbs compare --help`)")
+    compare.add_argument(
+        "--policies",
+        required=True,
+        help="comma-separated policies: greedy (greedy:NEAR, greedy:stop=F), stachniss_burgard, blaer_allen, "
+        "potthast_sukhatme, information_gain:F, nearest_frontier, random, ppo:PATH (README, the policy table)",
+    )
     compare.add_argument("--seeds", default="0", help="comma-separated seeds (default 0)")
     compare.add_argument("--out", type=Path, required=True, help="output folder")
     compare.add_argument("--jobs", type=_positive_int, default=1, help="worker processes (default 1)")
