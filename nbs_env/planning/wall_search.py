@@ -340,9 +340,10 @@ def approach_position(
 
     For targets that no candidate views (:func:`search_position` is None): a wall beyond floor
     the scans have not measured (behind furniture, round a corner of the room) has no NVP in view
-    of it, and only a scan from nearer measures the floor on the way (measured on
-    ``corpus:edge_8rooms_1``: an L-shaped room's far arm, behind a tall cabinet, held the only
-    door to two rooms).
+    of it, and only a scan from nearer measures the floor on the way. Built for
+    ``corpus:edge_8rooms_1``, where an L-shaped room's far arm, behind a tall cabinet, holds the
+    only door to two rooms; measured there, the rooms come back when an approach scan elsewhere
+    changes the order of the rooms, not through the arm (README, "The wall search").
 
     Parameters
     ----------
