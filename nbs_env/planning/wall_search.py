@@ -155,6 +155,11 @@ class WallSamples:
     def columns(self) -> int:
         return len(self.face)
 
+    @property
+    def column_xy(self) -> np.ndarray:
+        """(m, 2) float: each column's place in the plane (NaN for columns that need no view)."""
+        return self.points[:: len(self.points) // self.columns if self.columns else 1, :2]
+
 
 def opening_rays(
     sensors: np.ndarray,
@@ -347,12 +352,8 @@ def approach_position(
 
     Parameters
     ----------
-    walls : WallSamples
-        From :func:`unviewed_wall`.
-    sensors : (k, 3) float
-        The scanner above each candidate.
-    path_length : (k,) float
-        Each candidate's path from the robot, metres.
+    walls, sensors, path_length
+        As in :func:`search_position`.
     stops : (s, 3) float
         The room's scanner positions.
     config : WallSearchConfig
@@ -362,7 +363,7 @@ def approach_position(
     stops = np.asarray(stops, dtype=float).reshape(-1, 3)
     if config.approach <= 0 or not walls.target.any() or not len(sensors):
         return None
-    targets = walls.points[:: len(config.heights)][walls.target][:, :2]
+    targets = walls.column_xy[walls.target]
 
     def nearest(points: np.ndarray) -> np.ndarray:
         return np.linalg.norm(points[:, None, :2] - targets[None], axis=2).min(axis=1)
