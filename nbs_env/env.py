@@ -238,11 +238,12 @@ class NBSEnv(gym.Env):
             mask[0] = True
         return mask
 
-    def gain_rule_done(self) -> bool:
+    def gain_rule_done(self, fraction: float | None = None) -> bool:
         """Whether the robot's gain rule would end the room now (:meth:`Storey.gain_rule_done`; False
         before ``reset``): what the greedy declares by with ``completion="policy"``; also
-        ``info["gain_rule_done"]``."""
-        return self.storey is not None and self.storey.gain_rule_done()
+        ``info["gain_rule_done"]``. ``fraction`` reads the rule at another completion fraction
+        (None: the robot's)."""
+        return self.storey is not None and self.storey.gain_rule_done(fraction)
 
     def candidate_gains(self) -> np.ndarray:
         """(K,) int64: predicted Occluded-structure→Structure conversions of each candidate, from the

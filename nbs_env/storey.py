@@ -286,8 +286,15 @@ class Storey:
         """Metres driven."""
         return self.robot.path_length
 
-    def gain_rule_done(self) -> bool:
+    def gain_rule_done(self, fraction: float | None = None) -> bool:
         """Whether the robot's own gain rule (METHOD §7) would end the current room now.
+
+        Parameters
+        ----------
+        fraction : float, optional
+            The completion fraction to read the rule at, in [0, 1); None (the default):
+            ``robot.completion_fraction``. A behaviour-cloning teacher that ends rooms at another
+            fraction (``greedy:stop=F``) asks with its own.
 
         Returns
         -------
@@ -300,7 +307,11 @@ class Storey:
             only, never ground truth.
         """
         robot = self.robot
-        return self.open and robot.config.predict_gains and self.plan.gain_below(robot.config.completion_fraction)
+        if fraction is None:
+            fraction = robot.config.completion_fraction
+        elif not 0.0 <= fraction < 1.0:
+            raise ValueError(f"fraction is a share in [0, 1), got {fraction}")
+        return self.open and robot.config.predict_gains and self.plan.gain_below(fraction)
 
     def coverage_pct(self) -> float:
         """True structural surface sensed, % of the storey's (evaluation side)."""

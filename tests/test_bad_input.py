@@ -75,6 +75,9 @@ CASES = [
     ("train --timesteps -5 --out t", EXIT_USAGE, "timesteps must be an integer >= 1"),
     ("train --seed -1 --out t", EXIT_USAGE, "seed must be an integer >= 0"),
     ("train --eval-storeys 0 --out t", EXIT_USAGE, "eval_storeys must be an integer >= 1"),
+    ("train --bc-teacher random --out t", EXIT_USAGE, "bc_teacher must name a greedy"),
+    ("train --bc-teacher greedy:stop=2 --out t", EXIT_USAGE, "bc_teacher: greedy takes"),
+    ("train --bc-teacher nope --out t", EXIT_USAGE, "bc_teacher: unknown policy 'nope'"),
 ]
 
 

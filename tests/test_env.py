@@ -435,3 +435,20 @@ def test_rooms_behind_closed_doors_are_reported_unscanned(tmp_path, capsys):
     assert scans["Schlafzimmer"] == scans["Bad"] == scans["Buero"] == 0
     assert scans["Wohnen"] > 0 and metrics["complete"] and metrics["scans"] < 40
     assert "Schlafzimmer" in capsys.readouterr().out
+
+
+def test_the_gain_rule_reads_at_another_fraction_on_request():
+    """gain_rule_done(F) asks the robot's rule at completion fraction F (a behaviour-cloning teacher
+    that ends rooms sooner): the largest predicted gain against F of the room's structural voxels,
+    so it says done at a fraction above that share and not at one below it; a fraction outside
+    [0, 1) is refused."""
+    env = NBSEnv("fast", scene="l_room", completion="policy")
+    env.reset(seed=0)
+    plan = env.storey.plan
+    best = int(plan.gains[: plan.count].max()) / plan.structural_voxels
+    assert 0.0 < best < 0.9
+    assert env.gain_rule_done(min(0.99, 2 * best)) and not env.gain_rule_done(best / 2)
+    assert env.gain_rule_done() == env.gain_rule_done(env.config.robot.completion_fraction)
+    for bad in (-0.1, 1.0):
+        with pytest.raises(ValueError, match="fraction"):
+            env.gain_rule_done(bad)

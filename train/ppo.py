@@ -80,6 +80,10 @@ class TrainConfig(Config):
         Decisions per episode at the most.
     bc_steps : int
         Vector steps of greedy play to behaviour-clone from before PPO (0: none).
+    bc_teacher : str
+        The greedy the behaviour cloning copies, by policy name: ``"greedy"`` (the paper's, the
+        default) or a variant such as ``"greedy:stop=0.05"`` or ``"greedy:0.8+stop=0.05"``
+        (:class:`policies.GreedyPolicy`); its ``stop`` is where it declares rooms done.
     metre_cost : float
         Reward subtracted per metre driven.
     scan_cost : float
@@ -115,6 +119,7 @@ class TrainConfig(Config):
     checkpoint_every: int = 0
     max_episode_steps: int = 40
     bc_steps: int = 0
+    bc_teacher: str = "greedy"
     metre_cost: float = 0.05
     scan_cost: float = 0.5
     ent_coef: float = 0.0
@@ -133,6 +138,8 @@ class TrainConfig(Config):
             f"cell_size must be (A, B) metres with 1.8 <= A <= B <= 10, got {self.cell_size!r}",
         )
         _require(isinstance(self.init, str), f"init must be a checkpoint path (str), got {self.init!r}")
+        _require(isinstance(self.bc_teacher, str), f"bc_teacher must be a policy name, got {self.bc_teacher!r}")
+        _teacher(self.bc_teacher)  # an unknown or non-greedy teacher fails here, before any worker starts
         for name in ("timesteps", "envs", "n_steps", "batch_size", "eval_storeys", "max_episode_steps"):
             _integer(self, name, 1)
         for name in ("seed", "eval_every", "checkpoint_every", "bc_steps", "wall_search"):
@@ -385,9 +392,13 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
             self.bar.close()
 
     started = time.time()
-    warm = behaviour_clone(model, config.bc_steps, progress=progress) if config.bc_steps else None
+    warm = None
+    if config.bc_steps:
+        warm = behaviour_clone(model, config.bc_steps, progress=progress, teacher=_teacher(config.bc_teacher))
     if warm is not None:
         (out / "behaviour_cloning.json").write_text(json.dumps(warm, indent=1))
+        if config.checkpoint_every:  # the behaviour-cloned start, a policy of its own to compare
+            save_checkpoint(out / "checkpoint_0", network, _state_dict(model), _layout(model))
     model.learn(total_timesteps=config.timesteps, callback=Progress())
     venv.close()
     final = save_checkpoint(
@@ -423,14 +434,33 @@ def _load_init(path: str, network: NetworkConfig):
     return encoder, scorer
 
 
-def behaviour_clone(model, steps: int, epochs: int = 30, batch_size: int = 64, progress: bool = False) -> dict:
-    """Warm-start the policy on the greedy's decisions: play the greedy in the training envs for
+def _teacher(name: str):
+    """The :class:`policies.GreedyPolicy` named ``name``, or ConfigError."""
+    from policies import GreedyPolicy, UnknownPolicyError, make_policy
+
+    try:
+        teacher = make_policy(name)
+    except UnknownPolicyError as exc:
+        raise ConfigError(f"bc_teacher: {exc}") from None
+    if not isinstance(teacher, GreedyPolicy):
+        raise ConfigError(f"bc_teacher must name a greedy, got {name!r}")
+    return teacher
+
+
+def behaviour_clone(
+    model, steps: int, epochs: int = 30, batch_size: int = 64, progress: bool = False, teacher=None
+) -> dict:
+    """Warm-start the policy on a greedy's decisions: play the greedy in the training envs for
     ``steps`` vector steps, then fit the masked logits to its choices by cross-entropy. With a
     "room done" action (completion="policy") the greedy declares the room done where the robot's
-    gain rule would end it (``NBSEnv.gain_rule_done``, the robot's own plan).
+    gain rule would end it at the teacher's completion fraction (``NBSEnv.gain_rule_done``, the
+    robot's own plan; the robot's fraction when the teacher sets none).
 
-    Returns ``{"samples", "loss_first", "loss_last", "agreement"}``: agreement is the share of the
-    samples where the policy's masked argmax equals the greedy's choice after fitting.
+    ``teacher``: a :class:`policies.GreedyPolicy` (None: the paper's greedy).
+
+    Returns ``{"samples", "loss_first", "loss_last", "agreement", "teacher", "rooms_declared"}``:
+    agreement is the share of the samples where the policy's masked argmax equals the greedy's
+    choice after fitting; rooms_declared how many of the teacher's choices were "room done".
     """
     import torch
     from sb3_contrib.common.maskable.utils import get_action_masks
@@ -438,7 +468,7 @@ def behaviour_clone(model, steps: int, epochs: int = 30, batch_size: int = 64, p
     from policies import GreedyPolicy
 
     venv = model.env
-    greedy = GreedyPolicy()
+    greedy = GreedyPolicy() if teacher is None else teacher
     obs = venv.reset()
     samples: list[tuple[dict, np.ndarray, np.ndarray]] = []
     for _ in range(steps):
@@ -446,7 +476,7 @@ def behaviour_clone(model, steps: int, epochs: int = 30, batch_size: int = 64, p
         # The greedy's own rule, one env at a time, from what its info would hold.
         gains = venv.env_method("candidate_gains")
         stop = masks.shape[1] > len(gains[0])
-        done = venv.env_method("gain_rule_done") if stop else [False] * len(masks)
+        done = venv.env_method("gain_rule_done", greedy.stop) if stop else [False] * len(masks)
         actions = np.array(
             [
                 greedy.act(
@@ -484,7 +514,14 @@ def behaviour_clone(model, steps: int, epochs: int = 30, batch_size: int = 64, p
         tensors, _ = policy.obs_to_tensor(all_obs)
         chosen = policy.get_distribution(tensors, action_masks=all_masks).get_actions(deterministic=True)
     agreement = float((chosen.cpu().numpy() == all_actions).mean())
-    return {"samples": n, "loss_first": losses[0], "loss_last": losses[-1], "agreement": agreement}
+    return {
+        "samples": n,
+        "loss_first": losses[0],
+        "loss_last": losses[-1],
+        "agreement": agreement,
+        "teacher": greedy.name,
+        "rooms_declared": int((all_actions == all_masks.shape[1] - 1).sum()) if stop else 0,
+    }
 
 
 def plot_learning_curve(log: str | Path, out: str | Path) -> Path | None:
@@ -534,6 +571,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--eval-every", type=int, default=0, help="timesteps between evaluations (0: none)")
     p.add_argument("--checkpoint-every", type=int, default=0, help="timesteps between checkpoints (0: none)")
     p.add_argument("--bc-steps", type=int, default=0, help="vector steps of greedy play to warm-start from (0: none)")
+    p.add_argument(
+        "--bc-teacher",
+        default="greedy",
+        help="the greedy behaviour cloning copies, e.g. greedy:stop=0.05 or greedy:0.8+stop=0.05 (default greedy)",
+    )
     p.add_argument("--eval-storeys", type=int, default=4, help="validation storeys per evaluation")
     p.add_argument("--learning-rate", type=float, default=3e-4)
     p.add_argument("--n-steps", type=int, default=64, help="steps per worker between PPO updates")
@@ -579,6 +621,7 @@ def main(argv: list[str] | None = None) -> int:
             eval_every=args.eval_every,
             checkpoint_every=args.checkpoint_every,
             bc_steps=args.bc_steps,
+            bc_teacher=args.bc_teacher,
             eval_storeys=args.eval_storeys,
             learning_rate=args.learning_rate,
             n_steps=args.n_steps,
