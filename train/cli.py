@@ -214,6 +214,8 @@ def build_parser() -> argparse.ArgumentParser:
         required=True,
         help="comma-separated scenes; generated:A-B is a range of seeds, suite:unseen the evaluation corpus",
     )
+    # Named here rather than read from policies.POLICIES: importing policies adds about a second to
+    # every command, --help included; test_cli checks this list against the registry.
     compare.add_argument(
         "--policies",
         required=True,
