@@ -30,7 +30,7 @@ from nbs_env.errors import UnreachableDoorError
 from nbs_env.labels import VoxelLabel
 from nbs_env.perception.doors import detect_doors
 from nbs_env.perception.roi import RoIError
-from nbs_env.planning.navigation import Geodesic, Passage, TraversabilityMap, geodesic
+from nbs_env.planning.navigation import Geodesic, Passage, TraversabilityMap, candidates, geodesic
 from nbs_env.planning.planner import (
     Plan,
     blocked_directions,
@@ -49,7 +49,7 @@ from nbs_env.sensing.scanner import Scan, Scanner
 from nbs_env.settings import RobotConfig
 from scenes import Scene
 
-__all__ = ["APPROACH_DEPTH", "BEYOND_DOOR", "SAME_DOOR", "KnownDoor", "Robot", "StepReport"]
+__all__ = ["APPROACH_DEPTH", "BEYOND_DOOR", "SAME_DOOR", "KnownDoor", "Robot", "SearchStop", "StepReport"]
 
 #: How far in front of the frame (metres) an approach is searched for when the preferred point is
 #: not free: any free cell on the robot's side from which it can drive straight through the opening.
@@ -74,6 +74,33 @@ class KnownDoor:
     exterior: bool = False
     covered: float = float("nan")
     reason: str | None = None
+
+
+@dataclass(frozen=True)
+class SearchStop:
+    """Where a wall-search scan is taken (:meth:`Robot.wall_search`).
+
+    Attributes
+    ----------
+    kind : str
+        ``"view"`` (the NVP that views most of the unviewed wall), ``"approach"`` (no NVP views it;
+        the NVP nearest to it) or ``"narrow"`` (no NVP views it or comes near; a place reached
+        keeping only the robot's radius clear views it).
+    nvp : int or None
+        The plan's NVP index (``"view"``, ``"approach"``); None for ``"narrow"``.
+    point : (2,) float
+        Where the robot stands for the scan.
+    path : (p, 2) float
+        The route there.
+    length : float
+        Its length, metres.
+    """
+
+    kind: str
+    nvp: int | None
+    point: np.ndarray
+    path: np.ndarray = field(repr=False)
+    length: float
 
 
 @dataclass(frozen=True)
@@ -300,12 +327,14 @@ class Robot:
         self.rooms_done.append(self.room_index)
         return list(self.doors)
 
-    def wall_search(self) -> tuple[int, str] | None:
+    def wall_search(self) -> SearchStop | None:
         """Where to scan for the room's wall no stop viewed frontally
-        (:mod:`nbs_env.planning.wall_search`): the NVP and why, ``"view"`` (it views the most of
-        that wall) or ``"approach"`` (no NVP views it; this one is the nearest to it). None when
-        every wall stretch as wide as a door was viewed, or no NVP views one or comes near enough.
-        Reads the robot's belief only.
+        (:mod:`nbs_env.planning.wall_search`), in this order: the NVP that views the most of that
+        wall (``"view"``); the NVP nearest to it (``"approach"``); a place that views it among
+        those reached keeping only the robot's radius clear (``"narrow"``, when
+        ``config.wall_search.narrow``). None when every wall stretch as wide as a door was viewed,
+        or none of the three finds a place. Reads the robot's belief only; :meth:`search_scan`
+        drives there and scans.
         """
         belief = self.belief
         if belief.roi is None or belief.grid is None or not self.stops:
@@ -331,11 +360,41 @@ class Robot:
         n = planned.count
         sensors = sensor_positions(planned.candidates.points[:n], belief.roi.floor_z, scanner)
         path_length = planned.candidates.path_length[:n]
+        cands = planned.candidates
         index = search_position(walls, sensors, path_length, sees, config, scanner)
         if index is not None:
-            return index, "view"
+            return SearchStop("view", index, cands.points[index], cands.path(index), float(path_length[index]))
         index = approach_position(walls, sensors, path_length, np.asarray(self.stops, dtype=float), config)
-        return None if index is None else (index, "approach")
+        if index is not None:
+            return SearchStop("approach", index, cands.points[index], cands.path(index), float(path_length[index]))
+        if not config.narrow or not walls.target.any():
+            return None
+        # The door routes' map keeps the robot's radius clear and no safety distance: the NVPs'
+        # margin can close a gap between furniture that the robot fits through.
+        tmap, route = self._door_routes()
+        narrow = candidates(tmap, self.pose[:2, 3], replace(self.config.navigation, safety_distance=0.0), route)
+        if narrow.count == 0:
+            return None
+        sensors = sensor_positions(narrow.points, belief.roi.floor_z, scanner)
+        lengths = narrow.path_length[: narrow.count]
+        index = search_position(walls, sensors, lengths, sees, config, scanner)
+        if index is None:
+            return None
+        return SearchStop("narrow", None, narrow.points[index], narrow.path(index), float(lengths[index]))
+
+    def search_scan(self, stop: SearchStop, count_conversions: bool = False) -> StepReport:
+        """Drive to a wall-search stop of :meth:`wall_search` and scan there."""
+        if stop.nvp is not None:
+            return self.move_to(stop.nvp, count_conversions=count_conversions)
+        watched = self.belief.occluded_structure_centres() if count_conversions else None
+        path = np.asarray(stop.path, dtype=float)
+        heading = path[-1] - path[-2] if len(path) >= 2 else np.array([1.0, 0.0])
+        self._drive(np.asarray(stop.point, dtype=float), float(np.arctan2(heading[1], heading[0])), stop.length)
+        report = self.scan(stop.length, 0)
+        converted = 0
+        if watched is not None and len(watched):
+            converted = int(np.count_nonzero(self.belief.labels_at(watched) == VoxelLabel.STRUCTURE))
+        return replace(report, path=path, conversions=converted)
 
     def room_model(self) -> RoomModel | None:
         """The current room's recovered model (None before its first scan)."""

@@ -231,7 +231,8 @@ class Storey:
         ``reason`` it ended (``"gain"``, ``"declared"``, ``"cap"`` or ``"no NVP"``).
     wall_searches : list of dict
         One per wall-search scan (``config.robot.wall_search_scans`` > 0), in order: the index of
-        its ``scan`` and the robot's ``room`` number.
+        its ``scan``, the robot's ``room`` number and the ``kind`` of stop
+        (:class:`~nbs_env.robot.SearchStop`).
     paths : list of (p, 2) float
         The planned paths driven.
     scan_log : list of ScanPoints
@@ -447,14 +448,13 @@ class Storey:
             return False
         if robot.scans_in_room >= robot.config.max_scans_per_room:
             return False
-        choice = robot.wall_search()
-        if choice is None:
+        stop = robot.wall_search()
+        if stop is None:
             return False
-        index, kind = choice
-        report = robot.move_to(index, count_conversions=self.count_conversions)
+        report = robot.search_scan(stop, count_conversions=self.count_conversions)
         self.paths.append(report.path)
         self._record(report, door=False)
-        self.wall_searches.append({"scan": len(self.scans) - 1, "room": room, "kind": kind})
+        self.wall_searches.append({"scan": len(self.scans) - 1, "room": room, "kind": stop.kind})
         return True
 
     def _enter_next_room(self) -> bool:

@@ -14,6 +14,8 @@ walls no stop of the room viewed frontally, and picks the NVP that would view mo
 When no NVP views the targets (they lie beyond floor the robot has not measured, so no NVP stands
 where they could be seen), :func:`approach_position` picks the NVP nearest to them instead: its
 scan measures the floor in between from closer, which may open a way to stand where they show.
+When no NVP comes near either, the robot looks for a place that views them among those it reaches
+keeping only its radius clear (``narrow``; the NVPs keep a safety distance more).
 
 ``sees(sensors, targets)`` is a line-of-sight test through V(t)
 (:meth:`~nbs_env.planning.visibility.VisibilityModel.sees`). Not part of the paper's method
@@ -78,6 +80,11 @@ class WallSearchConfig(Config):
         When no NVP views the targets, the NVP nearest to them is scanned from if it is at least
         this much (metres) nearer to them than every stop of the room (:func:`approach_position`).
         0: no such scan.
+    narrow : bool
+        When no NVP views the targets or approaches them, scan from a place that keeps only the
+        robot's radius clear of obstacles (the clearance a door crossing keeps, without the NVPs'
+        safety distance) if one views them: a gap between furniture narrower than the NVPs'
+        clearance may be the only way to the wall (:meth:`nbs_env.robot.Robot.wall_search`).
     """
 
     step: float = 0.25
@@ -92,8 +99,10 @@ class WallSearchConfig(Config):
     beyond: float = 0.6
     min_run: float = 0.75
     approach: float = 1.0
+    narrow: bool = True
 
     def __post_init__(self) -> None:
+        _require(isinstance(self.narrow, bool), f"wall search: narrow must be a bool, got {self.narrow!r}")
         _finite_fields(
             self,
             "step",
