@@ -127,6 +127,7 @@ def test_no_stop_no_target_and_short_faces_are_skipped():
         ("heights", ()),
         ("heights", (1.0, float("nan"))),
         ("approach", -0.5),
+        ("narrow", 1),
     ],
 )
 def test_bad_wall_search_config_raises(field, value):
@@ -154,6 +155,52 @@ def test_room_done_takes_one_search_scan_which_can_reopen_the_room():
     _, _, terminated, _, info = env.step(env.stop_action)
     assert terminated and info["scans"] == 2
     assert storey.room_ends == [{"room": 0, "scans": 2, "reason": "declared"}]
+
+
+def l_room_with_safety(safety: float, narrow: bool) -> NBSEnv:
+    config = make_config("fast", scene="l_room", completion="policy")
+    robot = config.robot
+    robot = replace(
+        robot,
+        wall_search_scans=3,
+        navigation=replace(robot.navigation, safety_distance=safety),
+        wall_search=replace(robot.wall_search, narrow=narrow),
+    )
+    return NBSEnv(replace(config, robot=robot))
+
+
+def test_a_gap_the_safety_distance_closes_leads_the_search_to_the_wall_keeping_the_radius_clear():
+    # With a 1 m safety distance the NVPs keep 1.25 m from every obstacle, which closes the way
+    # into the L-shaped room's far arm. Once the one NVP that views unviewed wall has been used,
+    # the search stands where only the robot's radius is kept clear ("narrow"): not an NVP, and
+    # its scan adds coverage that the search without it leaves.
+    covered = {}
+    for narrow in (True, False):
+        env = l_room_with_safety(1.0, narrow)
+        env.reset(seed=0)
+        robot = env.storey.robot
+        env.step(env.stop_action)  # the first search: an NVP views the wall
+        nvps = robot.plan().candidates.points.copy()
+        stop = robot.wall_search()
+        if not narrow:
+            assert stop is None
+        else:
+            assert stop is not None and stop.kind == "narrow" and stop.nvp is None
+            assert np.allclose(stop.path[-1], stop.point) and np.allclose(stop.path[0], robot.pose[:2, 3])
+            assert stop.length >= np.linalg.norm(stop.point - robot.pose[:2, 3]) - 1e-6
+            assert not len(nvps) or np.linalg.norm(nvps - stop.point, axis=1).min() > 0.1
+            tmap, _ = robot._door_routes()
+            clearance = float(tmap.clearance_at(stop.point[None])[0])
+            nav = robot.config.navigation
+            assert nav.robot_radius - 1e-9 <= clearance < nav.robot_radius + nav.safety_distance
+        terminated = False
+        while not terminated:
+            _, _, terminated, truncated, _ = env.step(env.stop_action)
+            terminated = terminated or truncated
+        kinds = [search["kind"] for search in env.storey.wall_searches]
+        assert ("narrow" in kinds) == narrow
+        covered[narrow] = env.storey.coverage_pct()
+    assert covered[True] > covered[False] + 5.0
 
 
 def test_rays_through_an_opening_fall_with_range_and_incidence_and_vanish_behind_the_wall():
