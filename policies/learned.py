@@ -335,6 +335,14 @@ class LearnedPolicy:
         if self.config.actions > self.config.candidates:
             self.env_overrides = {"completion": "policy"}
 
+    @property
+    def trained_wall_search(self) -> int | None:
+        """The robot's wall-search scans per room the network was trained with (``nbs train
+        --wall-search``; :attr:`nbs_env.settings.RobotConfig.wall_search_scans`), None when its
+        checkpoint does not record it (checkpoints written during a run, older runs)."""
+        value = self.document.get("training", {}).get("wall_search")
+        return value if isinstance(value, int) and not isinstance(value, bool) else None
+
     def reset(self) -> None:
         """A learned policy keeps no episode state."""
 

@@ -543,6 +543,11 @@ def run_scan(args: argparse.Namespace) -> int:
         return _scan_error(detail, EXIT_USAGE)
     except ModelFileError as exc:
         return _scan_error(exc, EXIT_SCENE_ERROR)
+    from train.episode import wall_search_note
+
+    note = wall_search_note(policy, args.wall_search)
+    if note:
+        print(f"nbs scan: note: {note}", file=sys.stderr)
     if args.record is not None:
         try:
             from nbs_env.replay import require_rerun

@@ -784,12 +784,15 @@ def grid(
     if not policy_list:
         raise CompareError("no policies given")
     from nbs_env.errors import ModelFileError
+    from train.episode import wall_search_note
 
     for p in policy_list:
         try:
-            make_policy(p, 0)
+            note = wall_search_note(make_policy(p, 0), wall_search)
         except (UnknownPolicyError, ModelFileError) as exc:
             raise CompareError(str(exc)) from None
+        if note:
+            print(f"nbs compare: note: {note}", file=sys.stderr)
     try:
         seed_list = [int(s) for s in str(seeds).split(",") if s.strip()]
     except ValueError:
