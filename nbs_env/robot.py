@@ -84,8 +84,9 @@ class SearchStop:
     ----------
     kind : str
         ``"view"`` (the NVP that views most of the unviewed wall), ``"approach"`` (no NVP views it;
-        the NVP nearest to it) or ``"narrow"`` (no NVP views it or comes near; a place reached
-        keeping only the robot's radius clear views it).
+        the NVP nearest to it), ``"narrow"`` (no NVP views it or comes near; a place reached
+        keeping only the robot's radius clear views it) or ``"door"`` (:meth:`Robot.door_search`:
+        nearer to a door no route reaches).
     nvp : int or None
         The plan's NVP index (``"view"``, ``"approach"``); None for ``"narrow"``.
     point : (2,) float
@@ -381,6 +382,47 @@ class Robot:
         if index is None:
             return None
         return SearchStop("narrow", None, narrow.points[index], narrow.path(index), float(lengths[index]))
+
+    def door_search(self, door: KnownDoor) -> SearchStop | None:
+        """Where to scan so that ``door`` of the current room, which no route reaches, may be
+        reached: the place (among those reached keeping the robot's radius clear) nearest to the
+        door across floor not yet measured, when it is at least ``config.wall_search.approach``
+        metres nearer so than every stop of the room (``"door"``). None when there is no such place.
+
+        A door is found from afar: the floor in front of it may be unmeasured (furniture's shadow
+        on the way), so no route reaches it, though the robot's map shows nothing in between. Floor
+        not measured, holding no obstacle and leaving the robot's radius clear, counts as passable
+        for the distance only; the robot still drives on measured floor. Reads the robot's belief.
+        """
+        belief = self.belief
+        if belief.grid is None or belief.roi is None or not self.stops:
+            return None
+        tmap, route = self._door_routes()
+        side = 1.0 if np.dot(self.pose[:2, 3] - door.centre[:2], door.outward) > 0 else -1.0
+        goal = door.centre[:2] + side * 0.5 * np.asarray(door.outward[:2], dtype=float)
+        if not tmap.contains(goal[None])[0]:
+            return None
+        hopeful = tmap.free | (~tmap.obstacle & (tmap.clearance >= tmap.robot_radius))
+        towards = geodesic(replace(tmap, free=hopeful), goal).distances
+        near = candidates(tmap, self.pose[:2, 3], replace(self.config.navigation, safety_distance=0.0), route)
+        if near.count == 0:
+            return None
+
+        def distance(xy: np.ndarray) -> np.ndarray:
+            xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+            inside = tmap.contains(xy)
+            out = np.full(len(xy), np.inf)
+            if inside.any():
+                cells = tmap.cell_of(xy[inside], "door search")
+                out[inside] = towards[cells[:, 0], cells[:, 1]]
+            return out
+
+        d = distance(near.points)
+        reach = distance(np.asarray(self.stops, dtype=float)[:, :2]).min()
+        if not np.isfinite(d).any() or d.min() > reach - self.config.wall_search.approach + 1e-9:
+            return None
+        index = int(np.lexsort((near.path_length[: near.count], d))[0])
+        return SearchStop("door", None, near.points[index], near.path(index), float(near.path_length[index]))
 
     def search_scan(self, stop: SearchStop, count_conversions: bool = False) -> StepReport:
         """Drive to a wall-search stop of :meth:`wall_search` and scan there."""

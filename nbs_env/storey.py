@@ -232,7 +232,8 @@ class Storey:
     wall_searches : list of dict
         One per wall-search scan (``config.robot.wall_search_scans`` > 0), in order: the index of
         its ``scan``, the robot's ``room`` number and the ``kind`` of stop
-        (:class:`~nbs_env.robot.SearchStop`).
+        (:class:`~nbs_env.robot.SearchStop`; ``"door"``: a scan toward a door of the room no route
+        reaches, taken once no other door is left).
     paths : list of (p, 2) float
         The planned paths driven.
     scan_log : list of ScanPoints
@@ -457,12 +458,45 @@ class Storey:
         self.wall_searches.append({"scan": len(self.scans) - 1, "room": room, "kind": stop.kind})
         return True
 
+    def _door_search(self) -> bool:
+        """With no door left that a route reaches: scan to come nearer to a door of the current room
+        that none reaches (:meth:`Robot.door_search`), at most ``wall_search_scans`` times a room
+        and never past the room's cap or the budget; whether it scanned."""
+        robot = self.robot
+        if not robot.config.wall_search.doors:
+            return False
+        room = robot.room_index
+        searches = sum(s["room"] == room and s["kind"] == "door" for s in self.wall_searches)
+        if searches >= robot.config.wall_search_scans or robot.scans_in_room >= robot.config.max_scans_per_room:
+            return False
+        if len(self.scans) >= self.config.max_scans:
+            return False
+        here = robot.pose[:2, 3]
+        doors = [
+            d
+            for d in robot.doors
+            if d.found_in_room == room
+            and not (d.visited or d.failed or (d.exterior and not robot.config.doors.cross_exterior))
+        ]
+        for door in sorted(doors, key=lambda d: float(np.linalg.norm(d.centre[:2] - here))):
+            stop = robot.door_search(door)
+            if stop is None:
+                continue
+            report = robot.search_scan(stop, count_conversions=self.count_conversions)
+            self.paths.append(report.path)
+            self._record(report, door=False)
+            self.wall_searches.append({"scan": len(self.scans) - 1, "room": room, "kind": stop.kind})
+            return True
+        return False
+
     def _enter_next_room(self) -> bool:
         """Cross the nearest reachable unvisited door and scan the next room; False when the storey
         is complete or the budget is spent."""
         robot = self.robot
         while True:
             k = robot.next_door()
+            if k is None and self._door_search():
+                continue
             if k is None:
                 for door in robot.abandon_unreachable():
                     self._abandoned(door)

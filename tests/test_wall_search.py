@@ -128,6 +128,7 @@ def test_no_stop_no_target_and_short_faces_are_skipped():
         ("heights", (1.0, float("nan"))),
         ("approach", -0.5),
         ("narrow", 1),
+        ("doors", "yes"),
     ],
 )
 def test_bad_wall_search_config_raises(field, value):
@@ -254,3 +255,29 @@ def test_a_stop_under_the_lintel_does_not_view_the_wall_above_it():
     assert not unviewed_wall(roi, [np.array([3.0, 0.45, 1.5])], open_space).target[in_front].any()
     back = unviewed_wall(roi, [np.array([3.0, 3.0, 1.5])], open_space, scanner=scanner)
     assert not back.target[in_front].any()
+
+
+def test_a_door_no_route_reaches_gets_a_scan_toward_it_before_it_is_given_up():
+    # generated:10000006, every room declared done at once (one search scan a room): the door of
+    # the L-shaped room's far arm is found from its other end, behind two tables whose shadow
+    # left the floor before it unmeasured. Without the door search it is given up ("cut off") and
+    # the room behind it is never scanned; with it, a scan from nearer measures the way.
+    results = {}
+    for doors in (True, False):
+        config = make_config("fast", scene="generated:10000006", completion="policy")
+        robot = replace(config.robot, wall_search_scans=1, wall_search=WallSearchConfig(doors=doors))
+        env = NBSEnv(replace(config, robot=robot))
+        env.reset(seed=0)
+        terminated = False
+        while not terminated:
+            _, _, terminated, truncated, _ = env.step(env.stop_action)
+            terminated = terminated or truncated
+        storey = env.storey
+        kinds = [search["kind"] for search in storey.wall_searches]
+        abandoned = [event for event in storey.door_events if event["event"] == "abandoned"]
+        results[doors] = (kinds, abandoned, storey.coverage_pct(), storey.rooms_done)
+    kinds, abandoned, pct, rooms = results[True]
+    assert "door" in kinds and not abandoned
+    kinds_off, abandoned_off, pct_off, rooms_off = results[False]
+    assert "door" not in kinds_off and any("cut off" in event["reason"] for event in abandoned_off)
+    assert rooms > rooms_off and pct > pct_off + 5.0

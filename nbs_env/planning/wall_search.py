@@ -85,6 +85,11 @@ class WallSearchConfig(Config):
         robot's radius clear of obstacles (the clearance a door crossing keeps, without the NVPs'
         safety distance) if one views them: a gap between furniture narrower than the NVPs'
         clearance may be the only way to the wall (:meth:`nbs_env.robot.Robot.wall_search`).
+    doors : bool
+        Once no door is left that a route reaches, scan to come nearer to a door of the room that
+        none reaches, across floor not yet measured (:meth:`nbs_env.robot.Robot.door_search`), at
+        least ``approach`` metres nearer than every stop; the door is given up only when no such
+        scan is left.
     """
 
     step: float = 0.25
@@ -100,9 +105,12 @@ class WallSearchConfig(Config):
     min_run: float = 0.75
     approach: float = 1.0
     narrow: bool = True
+    doors: bool = True
 
     def __post_init__(self) -> None:
-        _require(isinstance(self.narrow, bool), f"wall search: narrow must be a bool, got {self.narrow!r}")
+        for name in ("narrow", "doors"):
+            value = getattr(self, name)
+            _require(isinstance(value, bool), f"wall search: {name} must be a bool, got {value!r}")
         _finite_fields(
             self,
             "step",
