@@ -30,7 +30,7 @@ from nbs_env.errors import UnreachableDoorError
 from nbs_env.labels import VoxelLabel
 from nbs_env.perception.doors import detect_doors
 from nbs_env.perception.roi import RoIError
-from nbs_env.planning.navigation import Geodesic, Passage, TraversabilityMap, candidates, geodesic
+from nbs_env.planning.navigation import Candidates, Geodesic, Passage, TraversabilityMap, candidates, geodesic
 from nbs_env.planning.planner import (
     Plan,
     blocked_directions,
@@ -255,16 +255,24 @@ class Robot:
             planned, index, roi.floor_z, self.config.scanner, self.config.voxel_size, grid.speculative if grid else None
         )
         path = cands.path(index)
-        heading = path[-1] - path[-2] if len(path) >= 2 else np.array([1.0, 0.0])
-        self._drive(cands.points[index], float(np.arctan2(heading[1], heading[0])), float(cands.path_length[index]))
-        report = self.scan(float(cands.path_length[index]), int(planned.gains[index]))
+        length = float(cands.path_length[index])
+        report = self._drive_and_scan(cands.points[index], path, length, int(planned.gains[index]))
         if len(expected):
             missed = expected[self.belief.labels_at(expected) == VoxelLabel.OCCLUDED_STRUCTURE]
             self.belief.unobservable = np.concatenate([self.belief.unobservable, missed])
-        converted = 0
-        if watched is not None and len(watched):
-            converted = int(np.count_nonzero(self.belief.labels_at(watched) == VoxelLabel.STRUCTURE))
-        return replace(report, path=path, conversions=converted)
+        return replace(report, path=path, conversions=self._converted(watched))
+
+    def _drive_and_scan(self, point: np.ndarray, path: np.ndarray, length: float, predicted_gain: int) -> StepReport:
+        """Drive the planned ``path`` (``length`` metres) to ``point``, facing along its last leg, and scan."""
+        heading = path[-1] - path[-2] if len(path) >= 2 else np.array([1.0, 0.0])
+        self._drive(point, float(np.arctan2(heading[1], heading[0])), length)
+        return self.scan(length, predicted_gain)
+
+    def _converted(self, watched: np.ndarray | None) -> int:
+        """How many of the ``watched`` Occluded-structure voxel centres are Structure now (0 for None)."""
+        if watched is None or not len(watched):
+            return 0
+        return int(np.count_nonzero(self.belief.labels_at(watched) == VoxelLabel.STRUCTURE))
 
     def _drive(self, target_xy: np.ndarray, yaw: float, distance: float) -> None:
         """Execute a planned motion: the true robot moves by the planned displacement from where it
@@ -370,10 +378,7 @@ class Robot:
             return SearchStop("approach", index, cands.points[index], cands.path(index), float(path_length[index]))
         if not config.narrow or not walls.target.any():
             return None
-        # The door routes' map keeps the robot's radius clear and no safety distance: the NVPs'
-        # margin can close a gap between furniture that the robot fits through.
-        tmap, route = self._door_routes()
-        narrow = candidates(tmap, self.pose[:2, 3], replace(self.config.navigation, safety_distance=0.0), route)
+        narrow = self._narrow_candidates()
         if narrow.count == 0:
             return None
         sensors = sensor_positions(narrow.points, belief.roi.floor_z, scanner)
@@ -397,14 +402,14 @@ class Robot:
         belief = self.belief
         if belief.grid is None or belief.roi is None or not self.stops:
             return None
-        tmap, route = self._door_routes()
+        tmap, _ = self._door_routes()
         side = 1.0 if np.dot(self.pose[:2, 3] - door.centre[:2], door.outward) > 0 else -1.0
         goal = door.centre[:2] + side * 0.5 * np.asarray(door.outward[:2], dtype=float)
         if not tmap.contains(goal[None])[0]:
             return None
         hopeful = tmap.free | (~tmap.obstacle & (tmap.clearance >= tmap.robot_radius))
         towards = geodesic(replace(tmap, free=hopeful), goal).distances
-        near = candidates(tmap, self.pose[:2, 3], replace(self.config.navigation, safety_distance=0.0), route)
+        near = self._narrow_candidates()
         if near.count == 0:
             return None
 
@@ -424,23 +429,29 @@ class Robot:
         index = int(np.lexsort((near.path_length[: near.count], d))[0])
         return SearchStop("door", None, near.points[index], near.path(index), float(near.path_length[index]))
 
+    def _narrow_candidates(self) -> Candidates:
+        """Places the robot reaches keeping only its radius clear: the door routes' map, with no
+        safety distance (the NVPs' margin can close a gap between furniture the robot fits through)."""
+        tmap, route = self._door_routes()
+        return candidates(tmap, self.pose[:2, 3], replace(self.config.navigation, safety_distance=0.0), route)
+
     def search_scan(self, stop: SearchStop, count_conversions: bool = False) -> StepReport:
-        """Drive to a wall-search stop of :meth:`wall_search` and scan there."""
+        """Drive to a stop of :meth:`wall_search` or :meth:`door_search` and scan there."""
         if stop.nvp is not None:
             return self.move_to(stop.nvp, count_conversions=count_conversions)
         watched = self.belief.occluded_structure_centres() if count_conversions else None
         path = np.asarray(stop.path, dtype=float)
-        heading = path[-1] - path[-2] if len(path) >= 2 else np.array([1.0, 0.0])
-        self._drive(np.asarray(stop.point, dtype=float), float(np.arctan2(heading[1], heading[0])), stop.length)
-        report = self.scan(stop.length, 0)
-        converted = 0
-        if watched is not None and len(watched):
-            converted = int(np.count_nonzero(self.belief.labels_at(watched) == VoxelLabel.STRUCTURE))
-        return replace(report, path=path, conversions=converted)
+        report = self._drive_and_scan(np.asarray(stop.point, dtype=float), path, stop.length, 0)
+        return replace(report, path=path, conversions=self._converted(watched))
 
     def room_model(self) -> RoomModel | None:
         """The current room's recovered model (None before its first scan)."""
         return self.belief.model(self.room_index)
+
+    def door_open(self, door: KnownDoor) -> bool:
+        """Whether ``door`` still waits to be crossed: not visited, not given up, and not an
+        exterior door the robot leaves (``config.doors.cross_exterior``)."""
+        return not (door.visited or door.failed or (door.exterior and not self.config.doors.cross_exterior))
 
     def next_door(self) -> int | None:
         """The nearest unvisited door the robot can reach, by its estimated travel, or None.
@@ -449,7 +460,7 @@ class Robot:
         reached keeps the reason in :attr:`KnownDoor.reason` (see :meth:`abandon_unreachable`)."""
         best, best_length = None, np.inf
         for k, door in enumerate(self.doors):
-            if door.visited or door.failed or (door.exterior and not self.config.doors.cross_exterior):
+            if not self.door_open(door):
                 continue
             length, reason = self._route_length(door)
             door.reason = reason
@@ -461,7 +472,7 @@ class Robot:
         """Mark every door still open that no route reaches as failed; returns them (with reasons)."""
         left = []
         for door in self.doors:
-            if door.visited or door.failed or (door.exterior and not self.config.doors.cross_exterior):
+            if not self.door_open(door):
                 continue
             door.failed = True
             door.reason = door.reason or "no route"

@@ -35,7 +35,7 @@ from nbs_env.errors import ConfigError, InvalidPoseError, UnreachableDoorError
 from nbs_env.evaluation import CoverageMeter
 from nbs_env.observation import BeliefView
 from nbs_env.planning.planner import Plan
-from nbs_env.robot import KnownDoor, Robot, StepReport
+from nbs_env.robot import KnownDoor, Robot, SearchStop, StepReport
 from nbs_env.settings import EnvConfig
 from scenes import FloorPlan, Scene, load_scene
 from scenes.generator import generate_storey
@@ -452,10 +452,7 @@ class Storey:
         stop = robot.wall_search()
         if stop is None:
             return False
-        report = robot.search_scan(stop, count_conversions=self.count_conversions)
-        self.paths.append(report.path)
-        self._record(report, door=False)
-        self.wall_searches.append({"scan": len(self.scans) - 1, "room": room, "kind": stop.kind})
+        self._search_scan(stop)
         return True
 
     def _door_search(self) -> bool:
@@ -472,22 +469,21 @@ class Storey:
         if len(self.scans) >= self.config.max_scans:
             return False
         here = robot.pose[:2, 3]
-        doors = [
-            d
-            for d in robot.doors
-            if d.found_in_room == room
-            and not (d.visited or d.failed or (d.exterior and not robot.config.doors.cross_exterior))
-        ]
+        doors = [d for d in robot.doors if d.found_in_room == room and robot.door_open(d)]
         for door in sorted(doors, key=lambda d: float(np.linalg.norm(d.centre[:2] - here))):
             stop = robot.door_search(door)
-            if stop is None:
-                continue
-            report = robot.search_scan(stop, count_conversions=self.count_conversions)
-            self.paths.append(report.path)
-            self._record(report, door=False)
-            self.wall_searches.append({"scan": len(self.scans) - 1, "room": room, "kind": stop.kind})
-            return True
+            if stop is not None:
+                self._search_scan(stop)
+                return True
         return False
+
+    def _search_scan(self, stop: SearchStop) -> None:
+        """Scan from a search stop and log it in :attr:`wall_searches`."""
+        room = self.robot.room_index
+        report = self.robot.search_scan(stop, count_conversions=self.count_conversions)
+        self.paths.append(report.path)
+        self._record(report, door=False)
+        self.wall_searches.append({"scan": len(self.scans) - 1, "room": room, "kind": stop.kind})
 
     def _enter_next_room(self) -> bool:
         """Cross the nearest reachable unvisited door and scan the next room; False when the storey
