@@ -13,7 +13,7 @@ Importing it registers the Gymnasium ids in :data:`ENV_IDS` (``gymnasium.make("n
 
 from __future__ import annotations
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 #: The registered environments: id → (preset, overrides, max_episode_steps).
 ENV_IDS: dict[str, tuple[str, dict, int]] = {

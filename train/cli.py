@@ -119,7 +119,10 @@ def _scanner_help() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from nbs_env import __version__
+
     parser = argparse.ArgumentParser(prog="nbs", description="nbs-env: next-best-scan planning of building interiors.")
+    parser.add_argument("--version", action="version", version=f"nbs-env {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     scenes = sub.add_parser("scenes", help="list, show, inspect and generate buildings")
@@ -220,7 +223,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--policies",
         required=True,
         help="comma-separated policies: greedy (greedy:NEAR, greedy:stop=F), stachniss_burgard, blaer_allen, "
-        "potthast_sukhatme, information_gain:F, nearest_frontier, random, ppo:PATH (README, the policy table)",
+        "potthast_sukhatme, information_gain:F, nearest_frontier, random, ppo:PATH (docs/comparing.md)",
     )
     compare.add_argument("--seeds", default="0", help="comma-separated seeds (default 0)")
     compare.add_argument("--out", type=Path, required=True, help="output folder")
