@@ -34,13 +34,13 @@ class GreedyPolicy:
         In (0, 1]. Below 1, a gain-travel trade-off (``greedy:NEAR`` by name): the candidate with
         the shortest path among those predicting at least ``near`` × the best gain, ties to the
         larger gain. 1 (the default) is the paper's rule. Not the paper's method: it measures how
-        much of the greedy's path a choice of positions can save (README, issue 19).
+        much of the greedy's path a choice of positions can save (docs/experiments/learning.md).
     stop : float, optional
         In [0, 1). The completion fraction the greedy's rooms end at (``greedy:stop=0.08`` by name):
         the robot's gain rule (:attr:`nbs_env.settings.RobotConfig.completion_fraction`, 0.03 by
         default) with this fraction instead, through :attr:`robot_overrides`. Larger fractions end
         rooms sooner: the greedy's own trade of coverage for scans, against which a policy that
-        ends rooms itself is measured (README, issue 19). None (the default): the robot's.
+        ends rooms itself is measured (docs/experiments/learning.md). None (the default): the robot's.
     """
 
     #: Keeps only the SE points (the paper's processed-point measure).

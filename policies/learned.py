@@ -13,8 +13,8 @@ one shared MLP to the candidate's logit (with the candidate's gain and path rela
 largest), so an action's score depends on its own candidate and the grid, not on its slot. Masked
 actions are never chosen.
 
-Checkpoints shipped with the package are named in :data:`BUNDLED` (``ppo:reference``); see the
-README's "Train your own agent" for the command that trained them.
+Checkpoints shipped with the package are named in :data:`BUNDLED` (``ppo:reference``); see
+docs/training.md for the command that trained them.
 
 torch is an optional dependency (``pip install "nbs-env[rl]"``), imported when a network is built.
 """

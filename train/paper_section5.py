@@ -1,5 +1,5 @@
 """The paper's §5 beside ours: ``python -m train.paper_section5 DIR`` reads an ``nbs compare`` output
-on ``five_rooms`` and prints the tables of the README's "The paper's §5 against ours".
+on ``five_rooms`` and prints the tables of docs/results.md's "The paper's §5 against ours".
 
 The paper (González-de Santos et al., "Autonomous Scanning of Structural Elements in Buildings",
 §5) reports, on five concave rooms, its method against Stachniss & Burgard [12], Blaer & Allen [3]
@@ -111,7 +111,7 @@ def _ms(values: Sequence[float], fmt: str) -> str:
 
 
 def tables(folder: str | Path, controlled: bool = False) -> str:
-    """The markdown of the README's §5 tables from an ``nbs compare`` output folder."""
+    """The markdown of docs/results.md's §5 tables from an ``nbs compare`` output folder."""
     folder = Path(folder)
     runs = {p: [_per_run(m) for m in _runs(folder, p)] for p in METHODS}
     missing = [p for p, r in runs.items() if not r]

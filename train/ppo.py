@@ -31,7 +31,7 @@ from train.arguments import parse_range
 
 __all__ = ["TrainConfig", "main", "train"]
 
-#: Seeds of the held-out test storeys (``generated:10000000`` on, the README's evaluation table).
+#: Seeds of the held-out test storeys (``generated:10000000`` on, docs/results.md).
 #: Training storeys are drawn by the env's own generator from the whole 31-bit range, with the
 #: training run's room range; a clash with one of these seeds has odds of about 1e-5 per run.
 HELD_OUT_BASE = 10_000_000

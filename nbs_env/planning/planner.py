@@ -1,7 +1,7 @@
 """The planning pipeline of one decision, assembled in one place (METHOD §6-7).
 
-Everything the robot, the compared methods, ``train.evaluate_gain`` and the README's example plan
-with goes through here::
+Everything the robot, the compared methods, ``train.evaluate_gain`` and the example plan of
+docs/environment.md goes through here::
 
     plan(belief, pose, stops, visited, config) -> Plan(candidates, gains, structural_voxels, seconds)
 

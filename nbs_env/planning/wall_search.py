@@ -365,7 +365,7 @@ def approach_position(
     of it, and only a scan from nearer measures the floor on the way. Built for
     ``corpus:edge_8rooms_1``, where an L-shaped room's far arm, behind a tall cabinet, holds the
     only door to two rooms; measured there, the rooms come back when an approach scan elsewhere
-    changes the order of the rooms, not through the arm (README, "The wall search"). What brings
+    changes the order of the rooms, not through the arm (docs/experiments/robot.md). What brings
     them back through the arm is ``narrow``: the arm's floor is measured, but the way in is
     narrower than the NVPs' clearance.
 

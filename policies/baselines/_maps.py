@@ -218,7 +218,7 @@ class MappingPolicy:
     :attr:`stop_area_power` (0: ε in the method's unit; 0.5: per √m²; 1: per m²), falls below
     ``stop_below``. Each method's default
     ``stop_below`` was calibrated on generated training storeys (``python -m train.calibrate_stops``;
-    the figures are in its module docstring and ``benchmarks/README.md``).
+    the figures are in its module docstring and ``docs/experiments/stopping.md``).
 
     Parameters
     ----------

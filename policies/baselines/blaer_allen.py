@@ -30,7 +30,7 @@ Phase 2: on a voxel grid, each next view maximises the number of visible "bounda
   times a voxel's face, so that it does not depend on the voxel size) per m² of the RoI's floor
   (the form the calibration chose). The paper gives no value for our rooms; :data:`STOP_BELOW`
   was calibrated on generated training storeys (``python -m train.calibrate_stops``, figures in
-  ``benchmarks/README.md``): the rule ends all 58 training rooms that reach the cap at ε = 0 at
+  ``docs/experiments/stopping.md``): the rule ends all 58 training rooms that reach the cap at ε = 0 at
   5.6 points of coverage (per √m² 6.5 points, a fixed ε 7.7).
 """
 

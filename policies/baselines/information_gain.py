@@ -39,7 +39,7 @@ reconstruction" (2016) compare such gains along rays:
   the formulation's own unit (nats, or P(visible)-weighted voxels; both are sums over the fixed
   ray pattern, so ε does not depend on the voxel size). No paper gives ε for our rooms;
   :data:`STOP_BELOW` was calibrated on generated training storeys (``python -m
-  train.calibrate_stops``, figures in ``benchmarks/README.md``). Potthast & Sukhatme's is per √m²
+  train.calibrate_stops``, figures in ``docs/experiments/stopping.md``). Potthast & Sukhatme's is per √m²
   of the RoI's floor, the form the calibration chose (to end all 59 training rooms it loses 2.6
   points, where a fixed ε loses 3.8 and one per m² 7.1). A fixed ε let the largest
   furnished rooms run to the cap (``five_rooms``' 57 m² lounge in every seed).

@@ -33,7 +33,7 @@ reachable view has gain above ε. Structure-agnostic.
   size) per m² of the RoI's floor (the form the calibration chose: it lost less coverage than a
   fixed ε or one per √m² for the same rooms ended). The paper gives no ε for our maps; :data:`STOP_BELOW` was
   calibrated on generated training storeys (``python -m train.calibrate_stops``, figures in
-  ``benchmarks/README.md``). The 2-D gain does not fall while clutter shadows in the band stay
+  ``docs/experiments/stopping.md``). The 2-D gain does not fall while clutter shadows in the band stay
   unseen, so the rule ends rooms only at an ε that gives up coverage: 8.6 points on the training
   storeys (to end all of them), where ending rooms within 1 point of their coverage at the cap left
   more than half of them to it.
