@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Regenerates docs/replay.png: a greedy scan of five_rooms (default preset, seed 0) recorded with
+# Regenerates docs/img/replay.png: a greedy scan of five_rooms (default preset, seed 0) recorded with
 # nbs_env.replay.RunRecorder and shown in rerun's native viewer, on a virtual X server (Xvfb) and
 # rendered in software by Mesa's lavapipe Vulkan driver: no GPU or screen needed.
 #
@@ -62,6 +62,6 @@ python -c "
 from PIL import Image
 image = Image.open('$WORK/replay.png').convert('RGB')
 image = image.resize((1200, round(1200 * image.height / image.width)), Image.LANCZOS)
-image.quantize(256, dither=Image.Dither.NONE).save('docs/replay.png', optimize=True)
+image.quantize(256, dither=Image.Dither.NONE).save('docs/img/replay.png', optimize=True)
 "
-echo "wrote docs/replay.png"
+echo "wrote docs/img/replay.png"
