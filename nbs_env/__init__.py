@@ -9,11 +9,58 @@ It reads buildings from :mod:`scenes` (the floor below) and never imports :mod:`
 scene's ground truth.
 
 Importing it registers the Gymnasium ids in :data:`ENV_IDS` (``gymnasium.make("nbs_env/NBS-v0")``).
+The public API is importable from the package itself (``from nbs_env import NBSEnv, make_config``);
+each name is imported from its module on first use, so that ``import nbs_env`` stays cheap.
 """
 
 from __future__ import annotations
 
+import importlib
+from typing import Any
+
 __version__ = "0.2.0"
+
+#: The public API: name -> the module that defines it.
+_EXPORTS = {
+    "NBSEnv": "nbs_env.env",
+    "make_config": "nbs_env.settings",
+    "PRESETS": "nbs_env.settings",
+    "EnvConfig": "nbs_env.settings",
+    "RobotConfig": "nbs_env.settings",
+    "RewardConfig": "nbs_env.settings",
+    "ScannerConfig": "nbs_env.config",
+    "OdometryConfig": "nbs_env.config",
+    "RegistrationConfig": "nbs_env.config",
+    "NavigationConfig": "nbs_env.planning.navigation",
+    "GainConfig": "nbs_env.planning.visibility",
+    "WallSearchConfig": "nbs_env.planning.wall_search",
+    "RoIConfig": "nbs_env.perception.roi",
+    "DoorConfig": "nbs_env.perception.doors",
+    "ObservationConfig": "nbs_env.observation",
+    "QualityConfig": "nbs_env.evaluation",
+    "scanner_config": "nbs_env.scanners",
+    "VoxelLabel": "nbs_env.labels",
+    "NBSError": "nbs_env.errors",
+    "ConfigError": "nbs_env.errors",
+    "InvalidActionError": "nbs_env.errors",
+    "ModelFileError": "nbs_env.errors",
+}
+
+__all__ = ["ENV_IDS", "__version__", *_EXPORTS]
+
+
+def __getattr__(name: str) -> Any:
+    # PEP 562: the env and its stack (open3d, numba kernels) load only when a name is first used.
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(_EXPORTS[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'nbs_env' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_EXPORTS})
+
 
 #: The registered environments: id → (preset, overrides, max_episode_steps).
 ENV_IDS: dict[str, tuple[str, dict, int]] = {

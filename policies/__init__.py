@@ -15,7 +15,42 @@ from policies.base import Policy
 from policies.greedy import GreedyPolicy
 from policies.random import RandomPolicy
 
-__all__ = ["POLICIES", "GreedyPolicy", "Policy", "RandomPolicy", "UnknownPolicyError", "env_settings", "make_policy"]
+__all__ = [
+    "POLICIES",
+    "BlaerAllenPolicy",
+    "GreedyPolicy",
+    "InformationGainPolicy",
+    "LearnedPolicy",
+    "NearestFrontierPolicy",
+    "Policy",
+    "PotthastSukhatmePolicy",
+    "RandomPolicy",
+    "StachnissBurgardPolicy",
+    "UnknownPolicyError",
+    "env_settings",
+    "make_policy",
+]
+
+#: Policy classes whose modules are imported on first use (the compared methods' maps and torch for
+#: the learned policy cost about a second; most users of this package need neither).
+_LAZY = {
+    "BlaerAllenPolicy": "policies.baselines",
+    "InformationGainPolicy": "policies.baselines",
+    "NearestFrontierPolicy": "policies.baselines",
+    "PotthastSukhatmePolicy": "policies.baselines",
+    "StachnissBurgardPolicy": "policies.baselines",
+    "LearnedPolicy": "policies.learned",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'policies' has no attribute {name!r}")
 
 
 class UnknownPolicyError(ValueError):
