@@ -16,6 +16,8 @@ each name is imported from its module on first use, so that ``import nbs_env`` s
 from __future__ import annotations
 
 import importlib
+import sys
+from collections.abc import Callable
 from typing import Any
 
 __version__ = "0.2.0"
@@ -49,13 +51,22 @@ _EXPORTS = {
 __all__ = ["ENV_IDS", "__version__", *_EXPORTS]
 
 
-def __getattr__(name: str) -> Any:
-    # PEP 562: the env and its stack (open3d, numba kernels) load only when a name is first used.
-    if name in _EXPORTS:
-        value = getattr(importlib.import_module(_EXPORTS[name]), name)
-        globals()[name] = value
+def lazy_getattr(package: str, names: dict[str, str]) -> Callable[[str], Any]:
+    """A PEP 562 ``__getattr__`` for ``package``: each of ``names`` (name -> module) is imported from its
+    module on first use and kept in the package; any other name raises AttributeError."""
+
+    def attribute(name: str) -> Any:
+        if name not in names:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        value = getattr(importlib.import_module(names[name]), name)
+        setattr(sys.modules[package], name, value)
         return value
-    raise AttributeError(f"module 'nbs_env' has no attribute {name!r}")
+
+    return attribute
+
+
+# The env and its stack (open3d, numba kernels) load only when a name is first used.
+__getattr__ = lazy_getattr(__name__, _EXPORTS)
 
 
 def __dir__() -> list[str]:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from nbs_env import lazy_getattr
 from policies.base import Policy
 from policies.greedy import GreedyPolicy
 from policies.random import RandomPolicy
@@ -43,14 +44,7 @@ _LAZY = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        import importlib
-
-        value = getattr(importlib.import_module(_LAZY[name]), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'policies' has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _LAZY)
 
 
 class UnknownPolicyError(ValueError):
