@@ -66,9 +66,9 @@ def main() -> None:
     import pstats
     import time
 
+    from nbs_env.config import make_config
     from nbs_env.env import NBSEnv
     from nbs_env.sensing.scanner import Scanner
-    from nbs_env.settings import make_config
     from policies import GreedyPolicy
 
     casts: list[float] = []

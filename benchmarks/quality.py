@@ -19,9 +19,9 @@ import time
 
 from _timing import median_seconds
 
+from nbs_env.config import make_config
 from nbs_env.env import NBSEnv
 from nbs_env.evaluation import CoverageMeter
-from nbs_env.settings import make_config
 
 
 def main() -> None:

@@ -136,9 +136,9 @@ def record_episode(label: str, spec: str, options: dict, seed: int, start=None) 
     """The scans ``Robot.scan`` registers in a greedy episode (default config), by monkeypatching."""
     import nbs_env.robot as robot_mod
     import policies
+    from nbs_env.config import make_config
     from nbs_env.env import NBSEnv
     from nbs_env.sensing import scanner as scanner_mod
-    from nbs_env.settings import make_config
     from train.episode import config_for, run_episode
 
     calls: list[dict] = []
@@ -256,9 +256,9 @@ def record_tour(
 ) -> Sequence:
     """Scans along a drivable tour of the storey's free floor (policy-independent), with the default
     scanner and odometry drift model; the drift grows with the distance driven to each stop."""
+    from nbs_env.config import RobotConfig
     from nbs_env.sensing.odometry import Odometry
     from nbs_env.sensing.scanner import Scanner
-    from nbs_env.settings import RobotConfig
 
     load = dict(options)
     if start is not None:

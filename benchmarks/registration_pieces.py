@@ -29,9 +29,9 @@ def main() -> None:
     pin_cores(args.cores)
 
     import nbs_env.robot as robot_module
+    from nbs_env.config import make_config
     from nbs_env.env import NBSEnv
     from nbs_env.sensing import registration as reg
-    from nbs_env.settings import make_config
     from policies import GreedyPolicy
 
     times: dict[str, list[float]] = defaultdict(list)

@@ -266,6 +266,20 @@ class RoomBelief:
             index, roi.polygon.copy(), roi.floor_z, roi.ceiling_z, se_faces, points, structure, roi.has_ceiling
         )
 
+    def keep_unobservable(self, expected: np.ndarray) -> None:
+        """Mark the Occluded-structure voxels a scan was predicted to see and did not.
+
+        Parameters
+        ----------
+        expected : (n, 3) float
+            Voxel centres the last scan was predicted to convert
+            (:func:`nbs_env.planning.planner.unobservable_after`); those still Occluded-structure
+            join :attr:`unobservable`, which later gains leave out.
+        """
+        if len(expected):
+            missed = expected[self.labels_at(expected) == VoxelLabel.OCCLUDED_STRUCTURE]
+            self.unobservable = np.concatenate([self.unobservable, missed])
+
     def occluded_structure_centres(self) -> np.ndarray:
         """(n, 3) float: world centres of the OCCLUDED_STRUCTURE voxels."""
         if self.grid is None:

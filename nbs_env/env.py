@@ -9,16 +9,15 @@ top-down: env → storey → robot → sensing and belief → planner.
 
 from __future__ import annotations
 
-from dataclasses import replace
 from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from nbs_env.config import PRESETS, EnvConfig, RewardConfig, make_config
 from nbs_env.errors import ConfigError, InvalidActionError
 from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES, BeliefView, candidate_table_of, observe
-from nbs_env.settings import PRESETS, EnvConfig, RewardConfig, make_config
 from nbs_env.storey import STAGES, StageTimes, StepOutcome, Storey, resolve_scene
 from scenes import Scene
 
@@ -53,7 +52,7 @@ class NBSEnv(gym.Env):
 
     `Discrete(K)` with K = `robot.navigation.max_candidates` (64): an index into the candidate
     list. Only the first `count` entries are real; `action_masks()` (and `info["action_mask"]`)
-    says which. With `completion="policy"` the space is `Discrete(K + 1)` and action K, always
+    says which. With `rooms.completion="policy"` the space is `Discrete(K + 1)` and action K, always
     allowed, declares the room complete (the robot then looks for the next door). A masked action
     takes no scan, costs `reward.invalid_action_penalty` and sets
     `info["invalid_action"] = True`. An action outside `Discrete(K)` raises `InvalidActionError`.
@@ -105,8 +104,26 @@ class NBSEnv(gym.Env):
     ## Arguments
 
     `NBSEnv(config=None, render_mode=None, **overrides)`: `config` is an `EnvConfig` or a preset
-    name (`"default"`, `"fast"`); `overrides` replace top-level `EnvConfig` fields (e.g.
-    `scene="five_rooms"`, `max_scans=30`). `render_mode="rgb_array"` draws a top-down picture.
+    name (`"default"`, `"fast"`); `overrides` replace its fields as `make_config` does (e.g.
+    `scene="five_rooms"`, `max_scans=30`, `completion="policy"`, `**{"rooms.wall_search.scans": 3}`).
+    `render_mode="rgb_array"` draws a top-down picture.
+
+    Parameters
+    ----------
+    config : EnvConfig or str, optional
+        The configuration, or the name of a preset of `PRESETS`; None (the default): `"default"`.
+    render_mode : str, optional
+        `"rgb_array"`: `render()` returns a top-down picture; None (the default): no rendering.
+    **overrides
+        Fields of `config` to replace, by the names `make_config` takes (a leaf's name where it is
+        unique, or its dotted path).
+
+    Raises
+    ------
+    ConfigError
+        `config` is neither an `EnvConfig` nor a preset name, `render_mode` is not one of
+        `metadata["render_modes"]`, or `make_config` refuses an override (an unknown preset or
+        field, a value out of range).
 
     ## Registered Configurations
 
@@ -122,8 +139,8 @@ class NBSEnv(gym.Env):
     def __init__(self, config: EnvConfig | str | None = None, render_mode: str | None = None, **overrides: Any) -> None:
         if config is None or isinstance(config, str):
             config = make_config(config or "default", **overrides)
-        elif overrides:
-            config = replace(config, **overrides)
+        elif isinstance(config, EnvConfig) and overrides:
+            config = make_config(config, **overrides)
         if not isinstance(config, EnvConfig):
             raise ConfigError(f"config must be an EnvConfig or a preset name, got {type(config).__name__}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -135,7 +152,7 @@ class NBSEnv(gym.Env):
         k = config.robot.navigation.max_candidates
         self.max_candidates = k
         #: The "room done" action of completion="policy" (None otherwise).
-        self.stop_action: int | None = k if config.completion == "policy" else None
+        self.stop_action: int | None = k if config.rooms.completion == "policy" else None
         self.n_actions = k + (self.stop_action is not None)
         self.action_space = spaces.Discrete(self.n_actions)
         self.observation_space = spaces.Dict(
@@ -161,6 +178,35 @@ class NBSEnv(gym.Env):
 
     # ------------------------------------------------------------------ gymnasium API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Start an episode: pick the storey, put the robot at its start and take the first scan.
+
+        Parameters
+        ----------
+        seed : int, optional
+            Seeds the env's random generator ``np_random``, which all randomness of an episode comes
+            from (a generated storey, the robot's noise); None: the generator runs on (seeded from
+            entropy at the first reset).
+        options : dict of str to Any, optional
+            ``"scene"``: the storey, anything ``scenes.load_scene`` takes, a ``Scene``, a ``FloorPlan`` or
+            ``"generated"`` (a fresh storey from ``np_random``); default ``config.scene``. ``"start"``: (2,)
+            or (3,) float, the robot's start position in the scene (m); default the scene's own.
+
+        Returns
+        -------
+        obs : dict of str to numpy.ndarray
+            The observation (Observation Space above): ``"voxels"`` ``observation.shape`` ((64, 64, 16)
+            by default) uint8, ``"candidates"`` (K·5,) float32, ``"pose"`` (4,) float32, ``"room"`` (5,)
+            float32.
+        info : dict of str to Any
+            As :meth:`step` returns it.
+
+        Raises
+        ------
+        ConfigError
+            An option other than ``"scene"`` and ``"start"``, or a scene of no known kind.
+        nbs_env.errors.InvalidPoseError
+            The start is not free floor of the storey.
+        """
         super().reset(seed=seed)
         options = dict(options or {})
         unknown = sorted(set(options) - {"scene", "start"})
@@ -180,6 +226,49 @@ class NBSEnv(gym.Env):
         self.storey = Storey(scene, config, self.np_random, count_conversions=config.reward.kind == "conversions")
 
     def step(self, action: Any):
+        """Scan at the chosen candidate (or, with ``rooms.completion="policy"``, end the room).
+
+        The robot drives to the candidate, scans, registers the scan and updates its belief; when
+        the room is then complete it also crosses to the next room and takes its first scan. A masked
+        action, or any action while there is no candidate, takes no scan and costs
+        ``reward.invalid_action_penalty``; a step after the episode ended changes nothing (reward 0).
+
+        Parameters
+        ----------
+        action : int or numpy.integer or numpy.ndarray
+            An index in ``[0, n_actions)``: a Python or numpy integer, or a 0-d integer array (not a
+            bool, not a float).
+
+        Returns
+        -------
+        obs : dict of str to numpy.ndarray
+            The observation, as :meth:`reset` returns it.
+        reward : float
+            The step's reward (Rewards above); ``-reward.invalid_action_penalty`` for a masked action.
+        terminated : bool
+            The storey is complete.
+        truncated : bool
+            The ``max_scans`` scan budget is spent and the storey is not complete.
+        info : dict of str to Any
+            ``scans``, ``room``, ``rooms_done`` (int); ``structure_sensed_pct`` (float, % of the storey's true
+            structural surface: evaluation only); ``path_length_m`` (float); ``times``
+            (:class:`~nbs_env.storey.StageTimes`, this step's seconds per stage);
+            ``registration_error_m``, ``registration_error_deg`` (float, the last scan's pose error);
+            ``registration_refused`` (str, why ICP's pose was refused; "" when accepted);
+            ``door_events`` (list of dict); ``action_mask`` ((n_actions,) bool, :meth:`action_masks`);
+            ``candidate_gains`` ((K,) int64, :meth:`candidate_gains`); ``gain_rule_done`` (bool,
+            :meth:`gain_rule_done`); ``invalid_action`` (bool); ``conversions`` (int, the realised
+            Occluded-structure→Structure conversions of the last decision, counted only with
+            ``reward.kind="conversions"``); ``complete`` (bool); and with ``expose_belief=True``, ``belief``
+            (:class:`~nbs_env.observation.BeliefView`).
+
+        Raises
+        ------
+        gymnasium.error.ResetNeeded
+            Called before :meth:`reset`.
+        InvalidActionError
+            ``action`` is not an integer in ``[0, n_actions)``.
+        """
         storey = self._storey()
         a = self._check_action(action)
         storey.begin_step()
@@ -223,8 +312,15 @@ class NBSEnv(gym.Env):
         return int(action)
 
     def action_masks(self) -> np.ndarray:
-        """(n_actions,) bool: which actions are real candidates (sb3-contrib's MaskablePPO reads
-        this); with completion="policy" the last, "room done", is always allowed."""
+        """Which actions are real candidates (sb3-contrib's MaskablePPO reads this).
+
+        Returns
+        -------
+        (n_actions,) bool
+            True for the real candidates; with ``rooms.completion="policy"`` the last action, "room
+            done", is always allowed. All False before :meth:`reset`; once the episode is over only
+            action 0, which changes nothing, so that a masked sampler always has a choice.
+        """
         mask = np.zeros(self.n_actions, dtype=bool)
         if self.storey is None:
             return mask
@@ -239,15 +335,40 @@ class NBSEnv(gym.Env):
         return mask
 
     def gain_rule_done(self, fraction: float | None = None) -> bool:
-        """Whether the robot's gain rule would end the room now (:meth:`Storey.gain_rule_done`; False
-        before ``reset``): what the greedy declares by with ``completion="policy"``; also
-        ``info["gain_rule_done"]``. ``fraction`` reads the rule at another completion fraction
-        (None: the robot's)."""
+        """Whether the robot's gain rule would end the room now (:meth:`Storey.gain_rule_done`): what
+        the greedy declares by with ``rooms.completion="policy"``; also ``info["gain_rule_done"]``.
+
+        Parameters
+        ----------
+        fraction : float, optional
+            Reads the rule at this completion fraction, in [0, 1); None (the default): the robot's
+            ``rooms.completion_fraction``.
+
+        Returns
+        -------
+        bool
+            True when no candidate predicts ``fraction`` of the room's structural voxels; False before
+            :meth:`reset`, once the episode is over and when the robot predicts no gains
+            (``robot.predict_gains=False``). Reads the robot's plan only, never ground truth.
+
+        Raises
+        ------
+        ValueError
+            ``fraction`` is not in [0, 1) (checked once an episode has started).
+        """
         return self.storey is not None and self.storey.gain_rule_done(fraction)
 
     def candidate_gains(self) -> np.ndarray:
-        """(K,) int64: predicted Occluded-structure→Structure conversions of each candidate, from the
-        robot's own grid (the paper's greedy criterion); 0 for padding."""
+        """The greedy's predicted gain of each candidate (the paper's criterion); also
+        ``info["candidate_gains"]``.
+
+        Returns
+        -------
+        (K,) int64
+            Predicted Occluded-structure→Structure conversions of each candidate, voxels, from the
+            robot's own grid; 0 for padding, and all zeros before :meth:`reset`, once the storey is
+            complete and when the robot predicts no gains.
+        """
         if self.storey is None or self.storey.complete:
             return np.zeros(self.max_candidates, dtype=np.int64)
         return self.storey.plan.gains.copy()
@@ -282,10 +403,35 @@ class NBSEnv(gym.Env):
         }
 
     def belief_view(self) -> BeliefView:
-        """The robot's belief now (see :class:`~nbs_env.observation.BeliefView`)."""
+        """The robot's belief now: its grid, RoI, candidates and scans, never ground truth.
+
+        Returns
+        -------
+        BeliefView
+            References into the live belief (:class:`~nbs_env.observation.BeliefView`): read, never
+            write.
+
+        Raises
+        ------
+        gymnasium.error.ResetNeeded
+            Called before :meth:`reset`.
+        """
         return self._storey().view()
 
     def render(self):
+        """A top-down picture of the robot's belief: the current room's voxel labels, RoI and
+        candidates, the rooms finished before, and its stops and paths.
+
+        Returns
+        -------
+        (h, w, 3) uint8 or None
+            The picture with ``render_mode="rgb_array"``; None (and a warning) without a render mode.
+
+        Raises
+        ------
+        gymnasium.error.ResetNeeded
+            Called before :meth:`reset` with a render mode.
+        """
         if self.render_mode is None:
             gym.logger.warn("render() was called without a render_mode; pass render_mode='rgb_array'")
             return None

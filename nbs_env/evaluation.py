@@ -82,7 +82,7 @@ scene's ground truth (true positions, true rooms), which the robot never sees.
                             crossed, abandoned (with reason)
     room_ends               list, one per room the robot completed: {room (the robot's number),
                             scans, reason: "gain" | "declared" | "cap" | "no NVP"}
-    wall_searches           list, one per wall-search scan (RobotConfig.wall_search_scans > 0):
+    wall_searches           list, one per wall-search scan (RoomRules.wall_search.scans > 0):
                             {scan (its index in steps), room (the robot's number)}
     config                  the env's EnvConfig as a dict (tuples as lists)
 
@@ -112,7 +112,7 @@ from scipy.spatial import cKDTree
 from shapely.geometry import Point, Polygon
 
 from nbs_env import threads
-from nbs_env.config import Config, _finite, _require
+from nbs_env.config import QualityConfig
 from scenes import Scene, SurfaceClass
 from scenes.interior import interior_samples
 
@@ -219,50 +219,6 @@ class _SampleColumns:
             nearest[k :: len(parts)] = which
             distance[k :: len(parts)] = dist
         return near, nearest, distance
-
-
-@dataclass(frozen=True)
-class QualityConfig(Config):
-    """The scan-quality thresholds of the evaluation (:meth:`CoverageMeter.quality`).
-
-    Coverage counts a structural sample as sensed once one point lies within 5 cm of it, whether
-    that point came head-on from 3 m or at a grazing 85° from 20 m. Scan-to-BIM work judges a scan
-    plan also by how densely and how squarely each surface was sampled; these thresholds say when a
-    sample counts as well sensed.
-
-    Attributes
-    ----------
-    min_density : float
-        Least point density around a sample, points per m² of surface, over all scans. Default
-        400 per m², one point per 5 cm × 5 cm: the scale at which the method works (its 5 cm
-        working copies and voxels, RegistrationConfig.voxel_size, RobotConfig.voxel_size), so a
-        surface below it is one the structural model rests on single points for. For context, the
-        US GSA's BIM Guide for 3D Imaging (Series 03, v1.0, 2009; figures as recalled, not checked
-        against a stored copy) asks for a 152 mm grid (about 43 per m²) at its level 1 and 25 mm
-        (1,600 per m²) at its level 2. The env's 0.5° pattern puts 400 per m² on a wall seen head-on
-        from at most 6.5 m; the fast preset's 1° pattern from 3.3 m.
-    max_incidence : float
-        Largest incidence angle, in degrees from the surface normal, at which a sample must have
-        been seen at least once. Default 70°: there the laser footprint is 2.9 times as long as
-        head-on, and the incidence angle's share of the range noise grows steeply (Soudarissanane
-        et al. 2011, "Scanning geometry: influencing factor on the quality of terrestrial laser
-        scanning points", ISPRS J. Photogramm. 66(4)), the range where scan planners set their limit.
-    density_radius : float
-        The density around a sample is the points attributed to the samples within this distance of
-        it, over their area (the samples' count times the sample spacing squared), metres. 0.1 m
-        holds about 12 samples at the default 5 cm spacing, so that one sample's share of a sparse
-        pattern does not decide it.
-    """
-
-    min_density: float = 400.0
-    max_incidence: float = 70.0
-    density_radius: float = 0.1
-
-    def __post_init__(self) -> None:
-        _finite(min_density=self.min_density, max_incidence=self.max_incidence, density_radius=self.density_radius)
-        _require(self.min_density >= 0, f"min_density must be >= 0 points per m², got {self.min_density}")
-        _require(0 < self.max_incidence <= 90, f"max_incidence must be in (0, 90] degrees, got {self.max_incidence}")
-        _require(self.density_radius > 0, f"density_radius must be > 0 m, got {self.density_radius}")
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ from enum import IntEnum
 import numba
 import numpy as np
 
-from nbs_env.config import Config, ScannerConfig, _finite, _require
+from nbs_env.config import ObservationConfig, ScannerConfig
 from nbs_env.labels import VoxelLabel
 from nbs_env.mapping.voxels import VoxelGrid
 from nbs_env.perception.faces import WallFace
@@ -163,39 +163,6 @@ class BeliefView:
     def count(self) -> int:
         """How many NVPs are real."""
         return int(np.count_nonzero(self.mask))
-
-
-@dataclass(frozen=True)
-class ObservationConfig(Config):
-    """The voxel window of the observation.
-
-    Attributes
-    ----------
-    shape : (int, int, int)
-        Cells along x, y and z.
-    cell : float
-        Edge of an observation cell in metres (a whole number of voxels is best: 0.2 m pools 4³
-        voxels of 5 cm or 2³ of 10 cm).
-    below_floor : float
-        How far below the robot's floor the window starts, metres (the floor slab must be inside).
-    """
-
-    shape: tuple[int, int, int] = (64, 64, 16)
-    cell: float = 0.2
-    below_floor: float = 0.2
-
-    def __post_init__(self) -> None:
-        _require(
-            len(self.shape) == 3 and all(isinstance(n, int) and n >= 1 for n in self.shape),
-            f"shape must be three positive integers, got {self.shape}",
-        )
-        _finite(cell=self.cell, below_floor=self.below_floor)
-        _require(self.cell > 0, f"cell must be > 0 metres, got {self.cell}")
-
-    @property
-    def extent(self) -> np.ndarray:
-        """(3,) float: the window's size in metres."""
-        return np.asarray(self.shape, dtype=float) * self.cell
 
 
 def pool_labels(labels: np.ndarray, cell_of: tuple[np.ndarray, np.ndarray, np.ndarray], shape) -> np.ndarray:

@@ -69,7 +69,7 @@ from nbs_env.labels import LABEL_COLOURS, VoxelLabel
 if TYPE_CHECKING:
     from nbs_env.env import NBSEnv
     from nbs_env.perception.faces import WallFace
-    from nbs_env.robot import KnownDoor
+    from nbs_env.planning.rooms import KnownDoor
     from nbs_env.storey import Storey
     from scenes import Scene
 
@@ -552,7 +552,7 @@ class RunRecorder:
 
     def _log_room_models(self, storey: Storey) -> None:
         """Each room finished since the last call: its final RoI and SE faces, at its last scan."""
-        models = storey.robot.room_models
+        models = storey.rooms.models
         for model in models[self._models :]:
             last = max((s.scan for s in storey.scans if s.room == model.index), default=len(storey.scans) - 1)
             self._at(last + 1)
@@ -568,7 +568,7 @@ class RunRecorder:
         rec = self._rec
         now = len(storey.scans)
         detected = [e for e in storey.door_events if e["event"] == "detected"]
-        for i, door in enumerate(storey.robot.doors):
+        for i, door in enumerate(storey.rooms.doors):
             state = _door_state(door)
             if i < len(self._doors) and self._doors[i] == state:
                 continue
@@ -603,10 +603,10 @@ def _cut_height(storey: Storey, room: int) -> float | None:
     """Where ``world/ceiling`` starts in the robot's room ``room`` (:data:`CEILING_CUT` below its RoI's
     ceiling), or None: a room open to the sky, or no RoI known."""
     robot = storey.robot
-    roi = robot.belief.roi if room == robot.room_index else None
+    roi = robot.belief.roi if room == storey.rooms.current else None
     if roi is not None:
         return roi.ceiling_z - CEILING_CUT if roi.has_ceiling else None
-    model = next((m for m in robot.room_models if m.index == room), None)
+    model = next((m for m in storey.rooms.models if m.index == room), None)
     if model is None or not model.has_ceiling:
         return None
     return model.ceiling_z - CEILING_CUT

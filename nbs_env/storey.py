@@ -1,8 +1,9 @@
 """The storey session: one episode of the method over a storey, room by room through doors.
 
-A :class:`Storey` owns the :class:`~nbs_env.robot.Robot`, the
+A :class:`Storey` owns the :class:`~nbs_env.robot.Robot`, the robot's door memory
+(:class:`~nbs_env.planning.rooms.Rooms`), the room rules (:class:`~nbs_env.config.RoomRules`), the
 :class:`~nbs_env.evaluation.CoverageMeter` (the evaluation's reader of ground truth) and the
-episode log. Its decisions are the method's loop (paper Fig. 2, METHOD §7-8)::
+episode log. It runs the method's loop (paper Fig. 2, METHOD §7-8)::
 
     storey = Storey(scene, config, rng)        # the first scan, then advance()
     while storey.open:
@@ -11,8 +12,9 @@ episode log. Its decisions are the method's loop (paper Fig. 2, METHOD §7-8)::
 - :meth:`Storey.scan_at`: the robot drives to an NVP and scans there; then :meth:`Storey.advance`.
 - :meth:`Storey.advance`: while the room is complete (METHOD §7: no NVP predicts enough
   Occluded-structure→Structure conversions, or the agent declared it done; the scan cap and running
-  out of NVPs end it too), detect its doors, drive to the nearest unvisited door and take the first
-  scan of the next room (METHOD §8); with no door left, the storey is complete.
+  out of NVPs end it too), search for doors no scan faced (``rooms.wall_search``), detect its doors,
+  drive to the nearest unvisited door and take the first scan of the next room (METHOD §8); with no
+  door left, the storey is complete.
 
 No gymnasium import: :class:`~nbs_env.env.NBSEnv` puts spaces, reward and observation around it.
 """
@@ -31,12 +33,14 @@ from shapely.geometry import Polygon
 
 from nbs_env import threads
 from nbs_env.belief import RoomModel
+from nbs_env.config import EnvConfig
 from nbs_env.errors import ConfigError, InvalidPoseError, UnreachableDoorError
 from nbs_env.evaluation import CoverageMeter
 from nbs_env.observation import BeliefView
+from nbs_env.perception.roi import RoIError
 from nbs_env.planning.planner import Plan
-from nbs_env.robot import KnownDoor, Robot, SearchStop, StepReport
-from nbs_env.settings import EnvConfig
+from nbs_env.planning.rooms import KnownDoor, Rooms, SearchStop
+from nbs_env.robot import Robot, StepReport
 from scenes import FloorPlan, Scene, load_scene
 from scenes.generator import generate_storey
 from scenes.geometry import point_is_free
@@ -211,7 +215,7 @@ class Storey:
     scene : Scene
         The true building (the simulator's and the meter's; the robot's decisions never read it).
     config : EnvConfig
-        ``robot``, ``completion``, ``max_scans`` and the evaluation's ``coverage_*`` are read.
+        ``robot``, ``rooms``, ``max_scans`` and the evaluation's ``coverage_*`` are read.
     rng : numpy.random.Generator
         The only source of randomness.
     count_conversions : bool
@@ -220,6 +224,10 @@ class Storey:
     Attributes
     ----------
     robot : Robot
+    rooms : Rooms
+        The robot's door memory and record of rooms.
+    rules : RoomRules
+        ``config.rooms``: when a room ends, its scan cap, the door searches.
     meter : CoverageMeter
     scans : list of ScanRecord
         The episode log, one record per scan.
@@ -230,9 +238,9 @@ class Storey:
         One per room completed, in order: the robot's ``room`` number, its ``scans`` and the
         ``reason`` it ended (``"gain"``, ``"declared"``, ``"cap"`` or ``"no NVP"``).
     wall_searches : list of dict
-        One per wall-search scan (``config.robot.wall_search_scans`` > 0), in order: the index of
+        One per search scan (``config.rooms.wall_search.scans`` > 0), in order: the index of
         its ``scan``, the robot's ``room`` number and the ``kind`` of stop
-        (:class:`~nbs_env.robot.SearchStop`; ``"door"``: a scan toward a door of the room no route
+        (:class:`~nbs_env.planning.rooms.SearchStop`; ``"door"``: a scan toward a door of the room no route
         reaches, taken once no other door is left).
     paths : list of (p, 2) float
         The planned paths driven.
@@ -248,7 +256,9 @@ class Storey:
         self.scene = scene
         self.config = config
         self.count_conversions = count_conversions
+        self.rules = config.rooms
         self.robot = Robot(scene, config.robot, rng)
+        self.rooms = Rooms(config.robot, config.rooms)
         self.meter = CoverageMeter(scene, config.coverage_spacing, config.coverage_radius)
         self.scans: list[ScanRecord] = []
         self.door_events: list[dict[str, Any]] = []
@@ -276,12 +286,12 @@ class Storey:
     @property
     def room(self) -> int:
         """The robot's number of the room it is in."""
-        return self.robot.room_index
+        return self.rooms.current
 
     @property
     def rooms_done(self) -> int:
         """How many rooms were completed."""
-        return len(self.robot.rooms_done)
+        return len(self.rooms.done)
 
     @property
     def path_length(self) -> float:
@@ -295,22 +305,22 @@ class Storey:
         ----------
         fraction : float, optional
             The completion fraction to read the rule at, in [0, 1); None (the default):
-            ``robot.completion_fraction``. A behaviour-cloning teacher that ends rooms at another
+            ``rooms.completion_fraction``. A behaviour-cloning teacher that ends rooms at another
             fraction (``greedy:stop=F``) asks with its own.
 
         Returns
         -------
         bool
-            True when no NVP predicts ``robot.completion_fraction`` of the room's structural voxels;
+            True when no NVP predicts ``rooms.completion_fraction`` of the room's structural voxels;
             False once the episode is over and when the robot predicts no gains
             (``robot.predict_gains=False``: the rule has nothing to read). With
-            ``completion="gain"`` the session ends such a room itself; with ``"policy"`` it is what
+            ``rooms.completion="gain"`` the session ends such a room itself; with ``"policy"`` it is what
             the greedy (and the behaviour-cloning teacher) declares by. Reads the robot's plan
             only, never ground truth.
         """
         robot = self.robot
         if fraction is None:
-            fraction = robot.config.completion_fraction
+            fraction = self.rules.completion_fraction
         elif not 0.0 <= fraction < 1.0:
             raise ValueError(f"fraction is a share in [0, 1), got {fraction}")
         return self.open and robot.config.predict_gains and self.plan.gain_below(fraction)
@@ -321,10 +331,10 @@ class Storey:
 
     def room_models(self, current: bool = True) -> list[RoomModel]:
         """The recovered model of every room completed, and of the current one (``current``)."""
-        robot = self.robot
-        models = list(robot.room_models)
-        if current and robot.room_index not in robot.rooms_done:
-            model = robot.room_model()
+        rooms = self.rooms
+        models = list(rooms.models)
+        if current and rooms.current not in rooms.done:
+            model = self.robot.belief.model(rooms.current)
             if model is not None:
                 models.append(model)
         return models
@@ -346,7 +356,7 @@ class Storey:
             labels = planned.labels if planned.labels is not None else labels
         return BeliefView(
             pose=robot.pose,
-            room=robot.room_index,
+            room=self.rooms.current,
             new_room=self.new_room,
             scans=list(self.step_scans),
             grid=belief.grid,
@@ -361,7 +371,7 @@ class Storey:
             gain_share=share,
             scanner=robot.config.scanner,
             scans_in_room=robot.scans_in_room,
-            rooms_done=len(robot.rooms_done),
+            rooms_done=len(self.rooms.done),
         )
 
     # ------------------------------------------------------------------ decisions
@@ -405,12 +415,12 @@ class Storey:
             if reason in ("gain", "declared") and self._wall_search():
                 # The search scan may open the room again (the gain rule says so); otherwise the
                 # agent's declaration stands, so that completion="policy" scans as "gain" does.
-                done = reason == "declared" and robot.plan().gain_below(robot.config.completion_fraction)
+                done = reason == "declared" and robot.plan().gain_below(self.rules.completion_fraction)
                 continue
-            self.room_ends.append({"room": robot.room_index, "scans": robot.scans_in_room, "reason": reason})
-            before = len(robot.doors)
-            robot.finish_room()
-            for door in robot.doors[before:]:
+            self.room_ends.append({"room": self.rooms.current, "scans": robot.scans_in_room, "reason": reason})
+            before = len(self.rooms.doors)
+            self.rooms.finish_room(robot)
+            for door in self.rooms.doors[before:]:
                 self.door_events.append(
                     {
                         "event": "detected",
@@ -429,27 +439,27 @@ class Storey:
     def _room_complete(self, done: bool) -> str | None:
         """Why the current room is done, or None: ``"gain"`` (the gain rule), ``"declared"`` (the
         agent's declaration), ``"cap"`` (the room's scan cap) or ``"no NVP"``."""
-        robot = self.robot
-        if robot.scans_in_room >= robot.config.max_scans_per_room:
+        robot, rules = self.robot, self.rules
+        if robot.scans_in_room >= rules.max_scans_per_room:
             return "cap"
         planned = robot.plan()
         if planned.count == 0:
             return "no NVP"
-        if self.config.completion == "gain":
-            return "gain" if planned.gain_below(robot.config.completion_fraction) else None
+        if rules.completion == "gain":
+            return "gain" if planned.gain_below(rules.completion_fraction) else None
         return "declared" if done else None
 
     def _wall_search(self) -> bool:
         """Before the hand-over: scan from the NVP that views most of the room's wall no stop viewed
-        frontally (:meth:`Robot.wall_search`), at most ``wall_search_scans`` times a room and
+        frontally (:meth:`Rooms.wall_search`), at most ``rules.wall_search.scans`` times a room and
         never past the room's cap; whether it scanned."""
-        robot = self.robot
-        room = robot.room_index
-        if sum(search["room"] == room for search in self.wall_searches) >= robot.config.wall_search_scans:
+        robot, rules = self.robot, self.rules
+        room = self.rooms.current
+        if sum(search["room"] == room for search in self.wall_searches) >= rules.wall_search.scans:
             return False
-        if robot.scans_in_room >= robot.config.max_scans_per_room:
+        if robot.scans_in_room >= rules.max_scans_per_room:
             return False
-        stop = robot.wall_search()
+        stop = self.rooms.wall_search(robot)
         if stop is None:
             return False
         self._search_scan(stop)
@@ -457,21 +467,21 @@ class Storey:
 
     def _door_search(self) -> bool:
         """With no door left that a route reaches: scan to come nearer to a door of the current room
-        that none reaches (:meth:`Robot.door_search`), at most ``wall_search_scans`` times a room
-        and never past the room's cap or the budget; whether it scanned."""
-        robot = self.robot
-        if not robot.config.wall_search.doors:
+        that none reaches (:meth:`Rooms.door_search`), at most ``rules.wall_search.scans`` times a
+        room and never past the room's cap or the budget; whether it scanned."""
+        robot, rules, rooms = self.robot, self.rules, self.rooms
+        if not rules.wall_search.doors:
             return False
-        room = robot.room_index
+        room = rooms.current
         searches = sum(s["room"] == room and s["kind"] == "door" for s in self.wall_searches)
-        if searches >= robot.config.wall_search_scans or robot.scans_in_room >= robot.config.max_scans_per_room:
+        if searches >= rules.wall_search.scans or robot.scans_in_room >= rules.max_scans_per_room:
             return False
         if len(self.scans) >= self.config.max_scans:
             return False
         here = robot.pose[:2, 3]
-        doors = [d for d in robot.doors if d.found_in_room == room and robot.door_open(d)]
+        doors = [d for d in rooms.doors if d.found_in_room == room and rooms.door_open(d)]
         for door in sorted(doors, key=lambda d: float(np.linalg.norm(d.centre[:2] - here))):
-            stop = robot.door_search(door)
+            stop = rooms.door_search(robot, door)
             if stop is not None:
                 self._search_scan(stop)
                 return True
@@ -479,8 +489,11 @@ class Storey:
 
     def _search_scan(self, stop: SearchStop) -> None:
         """Scan from a search stop and log it in :attr:`wall_searches`."""
-        room = self.robot.room_index
-        report = self.robot.search_scan(stop, count_conversions=self.count_conversions)
+        room, robot = self.rooms.current, self.robot
+        if stop.nvp is not None:
+            report = robot.move_to(stop.nvp, count_conversions=self.count_conversions)
+        else:
+            report = robot.scan_from(stop.point, stop.path, stop.length, count_conversions=self.count_conversions)
         self.paths.append(report.path)
         self._record(report, door=False)
         self.wall_searches.append({"scan": len(self.scans) - 1, "room": room, "kind": stop.kind})
@@ -488,22 +501,22 @@ class Storey:
     def _enter_next_room(self) -> bool:
         """Cross the nearest reachable unvisited door and scan the next room; False when the storey
         is complete or the budget is spent."""
-        robot = self.robot
+        robot, rooms = self.robot, self.rooms
         while True:
-            k = robot.next_door()
+            k = rooms.next_door(robot)
             if k is None and self._door_search():
                 continue
             if k is None:
-                for door in robot.abandon_unreachable():
+                for door in rooms.abandon_unreachable():
                     self._abandoned(door)
                 self.complete = True
                 return False
             if len(self.scans) >= self.config.max_scans:
                 return False
-            door = robot.doors[k]
+            door = rooms.doors[k]
             start = robot.pose[:2, 3].copy()
             try:
-                report = robot.cross_door(k)
+                report = self._cross_door(k)
             except UnreachableDoorError:
                 self._abandoned(door)
                 continue
@@ -513,12 +526,42 @@ class Storey:
                     "event": "crossed",
                     "scan": len(self.scans),
                     "centre": door.centre[:2].round(3).tolist(),
-                    "into_room": robot.room_index,
+                    "into_room": rooms.current,
                 }
             )
             self._record(report, door=True)
             self.new_room = True
             return True
+
+    def _cross_door(self, k: int) -> StepReport:
+        """Drive to door ``k``, stand under its frame, and take the first scan of the room beyond.
+
+        Raises
+        ------
+        UnreachableDoorError
+            No route reaches it, or its frame scan measured no room beyond it; the door is given up.
+        """
+        robot, rooms = self.robot, self.rooms
+        door = rooms.doors[k]
+        length, reason = rooms.route_length(robot, door)
+        if length is None:
+            rooms.give_up(door, str(reason))
+            raise UnreachableDoorError(f"door {k} at {door.centre[:2].round(2).tolist()} cannot be reached: {reason}")
+        # The door leads out of the room it was found in: the robot enters the room beyond.
+        into = door.outward
+        robot.drive_to(door.centre[:2], float(np.arctan2(into[1], into[0])), length)
+        room, entrance = rooms.enter(door)
+        robot.enter_room(room, entrance, exclude=[m.polygon for m in rooms.models])
+        try:
+            return robot.scan(length, 0, keep_direction=into)
+        except RoIError as exc:
+            # The frame scan measured no floor or ceiling beyond the door (a false door onto a wall
+            # just behind it, a shaft): there is no room to scan there. The door is given up and the
+            # storey goes on to the next one; the scan, taken, is in S(t) but not in the episode log.
+            rooms.give_up(door, f"no room measured beyond it ({exc})")
+            raise UnreachableDoorError(
+                f"door {k} at {door.centre[:2].round(2).tolist()}: no room measured beyond it ({exc})"
+            ) from exc
 
     def _abandoned(self, door: KnownDoor) -> None:
         self.door_events.append(
@@ -553,7 +596,7 @@ class Storey:
         self.scans.append(
             ScanRecord(
                 scan=len(self.scans),
-                room=robot.room_index,
+                room=self.rooms.current,
                 door=door,
                 true_position=report.true_pose[:3, 3].copy(),
                 estimated_position=report.estimated_pose[:3, 3].copy(),

@@ -3,16 +3,15 @@
 Policies see only what the robot measured (its voxel labels, candidates and pose estimate), never a
 scene's ground truth; the one exception is the documented ``oracle`` yardstick.
 
-Every policy follows :class:`policies.base.Policy`: ``reset()``, ``act(obs, info) -> int``.
+Every policy follows :class:`policies.base.Policy`: ``reset()``, ``act(obs, info) -> int``, and
+what it runs with (``config_overrides``) and requires of the robot (``requires``).
 :func:`make_policy` builds one by name.
 """
 
 from __future__ import annotations
 
-from typing import Any
-
 from nbs_env import lazy_getattr
-from policies.base import Policy
+from policies.base import Policy, agreed_requirements, config_for
 from policies.greedy import GreedyPolicy
 from policies.random import RandomPolicy
 
@@ -28,7 +27,8 @@ __all__ = [
     "RandomPolicy",
     "StachnissBurgardPolicy",
     "UnknownPolicyError",
-    "env_settings",
+    "agreed_requirements",
+    "config_for",
     "make_policy",
 ]
 
@@ -155,6 +155,19 @@ def make_policy(name: str, seed: int | None = None) -> Policy:
     rooms by the greedy's rule (``stachniss_burgard:controlled``,
     ``information_gain:rear_side_voxel+controlled``), or a checkpoint (``ppo:PATH``).
 
+    Parameters
+    ----------
+    name : str
+        A name of :data:`POLICIES`, optionally followed by ``:OPTION`` (``greedy:0.8+stop=0.08``,
+        ``ppo:reference``).
+    seed : int, optional
+        Seeds the policies that draw at random (``random``); the others do not read it.
+
+    Returns
+    -------
+    Policy
+        A new policy.
+
     Raises
     ------
     UnknownPolicyError
@@ -167,8 +180,3 @@ def make_policy(name: str, seed: int | None = None) -> Policy:
         raise UnknownPolicyError(f"unknown policy {name!r}; policies: {', '.join(POLICIES)}")
     # A constructor's own errors (a bug, a bad checkpoint) pass through as they are.
     return POLICIES[base](seed, option or None)
-
-
-def env_settings(policy: Any) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(EnvConfig overrides, RobotConfig overrides) a policy needs, e.g. completion="policy"."""
-    return dict(getattr(policy, "env_overrides", {})), dict(getattr(policy, "robot_overrides", {}))

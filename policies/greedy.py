@@ -24,9 +24,9 @@ class GreedyPolicy:
     """The paper's NBS as a policy: argmax of ``info["candidate_gains"]`` (predicted conversions the
     env computes from the robot's own voxel grid) over the mask, ties to the shorter path.
 
-    In an env with ``completion="policy"`` (a "room done" action after the K candidates) it
-    declares the room done where the robot's gain rule would end it (``info["gain_rule_done"]``),
-    so that it scans as with ``completion="gain"``.
+    In an env with ``rooms.completion="policy"`` (a "room done" action after the K candidates) it
+    declares the room done where the gain rule would end it (``info["gain_rule_done"]``), so that it
+    scans as with ``rooms.completion="gain"``.
 
     Parameters
     ----------
@@ -37,8 +37,8 @@ class GreedyPolicy:
         much of the greedy's path a choice of positions can save (docs/experiments/learning.md).
     stop : float, optional
         In [0, 1). The completion fraction the greedy's rooms end at (``greedy:stop=0.08`` by name):
-        the robot's gain rule (:attr:`nbs_env.settings.RobotConfig.completion_fraction`, 0.03 by
-        default) with this fraction instead, through :attr:`robot_overrides`. Larger fractions end
+        the gain rule (:attr:`nbs_env.config.RoomRules.completion_fraction`, 0.03 by default) with
+        this fraction instead, through :attr:`config_overrides`. Larger fractions end
         rooms sooner: the greedy's own trade of coverage for scans, against which a policy that
         ends rooms itself is measured (docs/experiments/learning.md). None (the default): the robot's.
     """
@@ -51,13 +51,15 @@ class GreedyPolicy:
         if not 0.0 < near <= 1.0:
             raise ValueError(f"near must be in (0, 1], got {near}")
         options = [] if near == 1.0 else [f"{near:g}"]
-        #: RobotConfig fields this policy sets (:func:`train.episode.config_for` applies them).
-        self.robot_overrides: dict[str, float] = {}
+        #: What it runs with (:func:`policies.config_for` applies it): its own stopping fraction.
+        self.config_overrides: dict[str, Any] = {}
+        #: The greedy runs on any robot.
+        self.requires: dict[str, Any] = {}
         if stop is not None:
             stop = float(stop)
             if not 0.0 <= stop < 1.0:
                 raise ValueError(f"stop must be in [0, 1), got {stop}")
-            self.robot_overrides = {"completion_fraction": stop}
+            self.config_overrides = {"rooms.completion_fraction": stop}
             options.append(f"stop={stop:g}")
         self.near = near
         self.stop = stop
@@ -67,6 +69,31 @@ class GreedyPolicy:
         """The greedy keeps no state."""
 
     def act(self, obs: dict[str, np.ndarray], info: dict[str, Any]) -> int:
+        """The allowed candidate with the most predicted conversions, ties to the shorter path (with
+        ``near`` < 1: the shortest path among those near the best gain); "room done" where the gain
+        rule ends the room.
+
+        Parameters
+        ----------
+        obs : dict of str to numpy.ndarray
+            The env's observation; the greedy reads the path lengths of its ``"candidates"`` table
+            ((K·5,) float32), and its valid column when ``info`` has no ``"action_mask"``.
+        info : dict of str to Any
+            The env's ``info``: ``"candidate_gains"`` (K,) int64, ``"action_mask"`` (n_actions,) bool
+            (optional), and ``"gain_rule_done"`` bool where there is a "room done" action.
+
+        Returns
+        -------
+        int
+            A candidate index in [0, K); K ("room done") when the mask has that action and
+            ``info["gain_rule_done"]`` is True or no candidate is allowed.
+
+        Raises
+        ------
+        KeyError
+            ``info`` lacks ``"candidate_gains"``, or lacks ``"gain_rule_done"`` where there is a
+            "room done" action.
+        """
         if "candidate_gains" not in info:
             raise KeyError("GreedyPolicy needs info['candidate_gains'], which NBSEnv's reset and step provide")
         mask = mask_of(obs, info)
@@ -91,7 +118,7 @@ def scan_storey(storey: Storey, max_rooms: int | None = None) -> int:
     Parameters
     ----------
     storey : Storey
-        A session with gain completion (``completion="gain"``).
+        A session with gain completion (``rooms.completion="gain"``).
     max_rooms : int, optional
         Stop once this many rooms are done.
 

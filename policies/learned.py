@@ -7,7 +7,7 @@ A checkpoint is a folder (or the path of its ``policy.json``) holding:
 - ``policy.pt``: the network's ``state_dict``, written by ``torch.save`` and read back with
   ``torch.load(weights_only=True)``: tensors only, never a pickle that could run code.
 
-The network (:class:`ScanNet`) reads the observation of :class:`nbs_env.env.NBSEnv`: a small 3-D CNN
+The network (:func:`build_network`) reads the observation of :class:`nbs_env.env.NBSEnv`: a small 3-D CNN
 over the one-hot voxel labels gives a grid vector g; each candidate's features c_k go with g through
 one shared MLP to the candidate's logit (with the candidate's gain and path relative to the step's
 largest), so an action's score depends on its own candidate and the grid, not on its slot. Masked
@@ -43,6 +43,7 @@ __all__ = [
     "load_checkpoint",
     "resolve_checkpoint",
     "save_checkpoint",
+    "trained_rules",
 ]
 
 CHECKPOINT_FORMAT = "nbs-policy"
@@ -53,6 +54,42 @@ _RELATIVE = (int(CandidateColumn.PREDICTED_GAIN), int(CandidateColumn.PATH_LENGT
 
 #: Checkpoints shipped inside the package, by name: ``ppo:reference`` loads the reference run.
 BUNDLED = {"reference": Path(__file__).parent / "data" / "ppo_reference"}
+
+
+def trained_rules(document: dict[str, Any]) -> dict[str, Any]:
+    """The room rules a checkpoint's network was trained with, as dotted configuration names.
+
+    Parameters
+    ----------
+    document : dict
+        A ``policy.json``.
+
+    Returns
+    -------
+    dict
+        ``{"rooms.FIELD": value}`` for every room rule of the training configuration it records
+        (``training.config.rooms``; who ends rooms aside, which the network's head decides), or
+        ``{"rooms.wall_search.scans": N}`` from a checkpoint that recorded only ``--wall-search``;
+        empty when it records neither (checkpoints written during a run, older runs).
+    """
+    training = document.get("training") if isinstance(document.get("training"), dict) else {}
+    rooms = (training.get("config") or {}).get("rooms") if isinstance(training.get("config"), dict) else None
+    if isinstance(rooms, dict):
+        out: dict[str, Any] = {}
+
+        def leaves(node: dict[str, Any], prefix: str) -> None:
+            for key, value in node.items():
+                if isinstance(value, dict):
+                    leaves(value, f"{prefix}{key}.")
+                elif f"{prefix}{key}" != "rooms.completion":
+                    out[f"{prefix}{key}"] = value
+
+        leaves(rooms, "rooms.")
+        return out
+    value = training.get("wall_search")
+    if isinstance(value, int) and not isinstance(value, bool):
+        return {"rooms.wall_search.scans": value}
+    return {}
 
 
 def resolve_checkpoint(spec: str | Path) -> Path:
@@ -83,7 +120,7 @@ def _torch():
 
 @dataclass(frozen=True)
 class NetworkConfig(Config):
-    """The shape of a :class:`ScanNet` (JSON-safe).
+    """The shape of the network :func:`build_network` builds (JSON-safe).
 
     Attributes
     ----------
@@ -317,12 +354,18 @@ def load_checkpoint(path: str | Path):
 
 
 class LearnedPolicy:
-    """A trained :class:`ScanNet` as a policy: the masked argmax of its logits.
+    """A trained network (:func:`build_network`) as a policy: the masked argmax of its logits.
 
     Parameters
     ----------
     path : str or Path
         A checkpoint folder or its ``policy.json``, or a :data:`BUNDLED` name (``"reference"``).
+
+    Raises
+    ------
+    ModelFileError
+        No such checkpoint, or a missing, corrupt or mismatched one, or torch missing
+        (:func:`load_checkpoint`).
     """
 
     #: Runs our pipeline (RoI, SE classification); only the choice is learned.
@@ -332,22 +375,38 @@ class LearnedPolicy:
         self.path = resolve_checkpoint(path)
         self.config, self.encoder, self.scorer, self.layout, self.document = load_checkpoint(self.path)
         self.name = f"ppo:{path}"
-        if self.config.actions > self.config.candidates:
-            self.env_overrides = {"completion": "policy"}
-
-    @property
-    def trained_wall_search(self) -> int | None:
-        """The robot's wall-search scans per room the network was trained with (``nbs train
-        --wall-search``; :attr:`nbs_env.settings.RobotConfig.wall_search_scans`), None when its
-        checkpoint does not record it (checkpoints written during a run, older runs)."""
-        value = self.document.get("training", {}).get("wall_search")
-        return value if isinstance(value, int) and not isinstance(value, bool) else None
+        #: A network with a "room done" head ends rooms itself.
+        self.config_overrides: dict[str, Any] = (
+            {"rooms.completion": "policy"} if self.config.actions > self.config.candidates else {}
+        )
+        #: The room rules it was trained with (:func:`trained_rules`).
+        self.requires: dict[str, Any] = trained_rules(self.document)
 
     def reset(self) -> None:
         """A learned policy keeps no episode state."""
 
     def logits(self, obs: dict[str, np.ndarray]) -> np.ndarray:
-        """(actions,) float: the network's logits for one observation."""
+        """The network's logits for one observation.
+
+        Parameters
+        ----------
+        obs : dict of str to numpy.ndarray
+            One observation, not a batch: ``"voxels"`` of ``config.voxel_shape`` ((64, 64, 16) by
+            default) uint8, ``"candidates"`` (K·5,) float32, and ``"room"`` (5,) float32 when the
+            network reads it (``config.room_features`` > 0).
+
+        Returns
+        -------
+        (actions,) float32
+            One logit per action: the K candidate slots, then "room done" where the network has
+            that head.
+
+        Raises
+        ------
+        ValueError
+            The voxel window or the candidate table does not have the network's shape, or the
+            network reads a ``"room"`` vector the observation lacks or has of another length.
+        """
         torch = _torch()
         voxels = np.asarray(obs["voxels"])
         if voxels.shape != tuple(self.config.voxel_shape):
@@ -375,6 +434,27 @@ class LearnedPolicy:
             return self.scorer(torch.cat([g, flat], dim=1))[0].numpy()
 
     def act(self, obs: dict[str, np.ndarray], info: dict[str, Any]) -> int:
+        """The allowed action with the largest logit (:meth:`logits`).
+
+        Parameters
+        ----------
+        obs : dict of str to numpy.ndarray
+            One observation, as :meth:`logits` takes it.
+        info : dict of str to Any
+            The env's ``info``; its ``"action_mask"`` (n_actions,) bool is the mask, else the valid
+            column of the observation's candidate table.
+
+        Returns
+        -------
+        int
+            An index the mask allows (0 when it allows none).
+
+        Raises
+        ------
+        ValueError
+            The env has another number of actions than the network, or the observation does not fit
+            the network (:meth:`logits`).
+        """
         mask = mask_of(obs, info)
         logits = self.logits(obs)
         if len(mask) != len(logits):

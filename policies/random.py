@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -21,6 +21,9 @@ class RandomPolicy:
     """
 
     name = "random"
+    #: It needs no setting and runs on any robot.
+    config_overrides: ClassVar[dict[str, Any]] = {}
+    requires: ClassVar[dict[str, Any]] = {}
     #: Runs our pipeline (RoI, SE classification); only the choice is random.
     structure_aware = True
 
@@ -32,6 +35,27 @@ class RandomPolicy:
         """Random keeps no episode state (its generator runs on across episodes)."""
 
     def act(self, obs: dict[str, np.ndarray], info: dict[str, Any]) -> int:
+        """A uniformly random action among those the mask allows.
+
+        Parameters
+        ----------
+        obs : dict of str to numpy.ndarray
+            The env's observation; its ``"candidates"`` table's valid column ((K·5,) float32) is the
+            mask when ``info`` has no ``"action_mask"``.
+        info : dict of str to Any
+            The env's ``info``; ``"action_mask"`` (n_actions,) bool, when given, is the mask (with
+            ``rooms.completion="policy"`` it allows "room done" too).
+
+        Returns
+        -------
+        int
+            An index the mask allows.
+
+        Raises
+        ------
+        ValueError
+            The mask allows no action.
+        """
         valid = np.flatnonzero(mask_of(obs, info))
         if not len(valid):
             raise ValueError("no valid action: the mask is all False")

@@ -7,10 +7,9 @@ import numpy as np
 import pytest
 
 from nbs_env.env import NBSEnv, make_config
-from policies import POLICIES, UnknownPolicyError, make_policy
+from policies import POLICIES, UnknownPolicyError, config_for, make_policy
 from policies.baselines import FORMULATIONS
 from policies.baselines._maps import march, stop_value, visible_cells_2d
-from train.episode import config_for
 
 BASELINES = ["stachniss_burgard", "blaer_allen", "potthast_sukhatme", "nearest_frontier"] + [
     f"information_gain:{f}" for f in FORMULATIONS
@@ -121,7 +120,7 @@ def test_each_compared_method_ends_a_small_room_by_its_own_rule_before_the_cap(n
     policy = make_policy(name, 0)
     env = _episode(policy, box_room(5.0, 4.0, 2.6))
     ends = env.storey.room_ends
-    cap = env.config.robot.max_scans_per_room
+    cap = env.config.rooms.max_scans_per_room
     assert len(ends) == 1 and ends[0]["reason"] == "declared" and ends[0]["scans"] < cap, ends
 
     # The rule, not chance: the last decision's statistic was below the method's calibrated ε and
@@ -158,7 +157,7 @@ def test_the_controlled_mode_ends_rooms_by_the_greedys_rule(name):
     policy = make_policy(full, 0)
     env = _episode(policy, "l_room", max_scans=40)
     # No "room done" action: the greedy's gain rule (or the cap, or no NVP) ends every room.
-    assert env.stop_action is None and env.config.completion == "gain"
+    assert env.stop_action is None and env.config.rooms.completion == "gain"
     assert {e["reason"] for e in env.storey.room_ends} <= {"gain", "cap", "no NVP"}
     assert env.storey.room_ends and not any(t.get("stop") for t in getattr(policy, "trace", []))
 

@@ -98,3 +98,49 @@ def test_compare_help_names_every_registered_policy():
     )
     help_text = next(a.help for a in compare._actions if "--policies" in a.option_strings)
     assert all(name in help_text for name in POLICIES), help_text
+
+
+def test_the_command_line_names_every_preset():
+    from nbs_env.config import PRESETS
+    from train.arguments import PRESET_NAMES
+
+    assert tuple(PRESETS) == PRESET_NAMES
+
+
+def _subparser(name: str) -> argparse.ArgumentParser:
+    from train.cli import build_parser
+
+    return next(
+        action.choices[name] for action in build_parser()._actions if isinstance(action, argparse._SubParsersAction)
+    )
+
+
+def test_scan_compare_and_train_share_one_group_of_robot_options():
+    """The robot's options are one group, the same flags with the same choices and defaults on the
+    three commands that run a robot."""
+    from train.ppo import build_parser as train_parser
+
+    def robot_options(parser: argparse.ArgumentParser) -> dict:
+        group = next(g for g in parser._action_groups if g.title == "robot and building")
+        return {
+            tuple(a.option_strings): (a.default, a.choices, getattr(a.type, "__qualname__", a.type), a.help)
+            for a in group._group_actions
+        }
+
+    scan, compare, train = (
+        robot_options(_subparser("scan")),
+        robot_options(_subparser("compare")),
+        robot_options(train_parser()),
+    )
+    assert scan == compare == train
+    flags = {flag for option in scan for flag in option}
+    assert {
+        "--preset",
+        "--scanner",
+        "--storey",
+        "--ifc-doors",
+        "--y-up",
+        "--wall-search",
+        "--set",
+        "--max-scans",
+    } <= flags

@@ -11,7 +11,9 @@ import pytest
 from train.cli import main
 from train.compare import CompareError, expand_scenes, grid, run_grid, summarise, write_outputs
 
-TINY = dict(scenes="l_room", policies="greedy,random,stachniss_burgard", seeds="0,1", preset="fast", max_scans=3)
+TINY = dict(
+    scenes="l_room", policies="greedy,random,stachniss_burgard", seeds="0,1", preset="fast", overrides={"max_scans": 3}
+)
 
 
 def strip_times(rows):
@@ -188,18 +190,13 @@ def test_resume_reuses_finished_runs_and_reruns_the_rest(tiny, monkeypatch):
     again, again_oracles = compare.run_grid(specs, jobs=1, progress=False, finished=finished)
     assert [(c.policy, c.seed) for c in calls] == [("random", 1)]
     assert strip_times(summarise(again, again_oracles)) == strip_times(rows)
-    # Another preset, scan budget or wall search is another spec: nothing is reused.
-    other = grid(**{**TINY, "max_scans": 2})
+    # Another preset, scan budget or wall search is another spec: nothing is reused, no oracle either
+    # when the scanner differs.
+    other = grid(**{**TINY, "overrides": {"max_scans": 2}})
     assert compare.load_finished(resumed, other)["runs"] == {}
-    assert compare.load_finished(resumed, grid(**{**TINY, "wall_search": 1}))["runs"] == {}
-    # A record written before RunSpec had wall_search reads as the default (0): still reused.
-    import json
-
-    record_file = resumed / "runs" / "l_room" / "random" / "seed0" / "run.json"
-    record = json.loads(record_file.read_text())
-    del record["spec"]["wall_search"]
-    record_file.write_text(json.dumps(record))
-    assert len(compare.load_finished(resumed, specs)["runs"]) == 5
+    searching = grid(**{**TINY, "overrides": {"max_scans": 3, "rooms.wall_search.scans": 1}})
+    assert compare.load_finished(resumed, searching)["runs"] == {}
+    assert compare.load_finished(resumed, grid(**{**TINY, "preset": "default"}))["oracles"] == {}
 
 
 def test_the_calibration_raises_epsilon_until_the_rule_ends_the_share_of_rooms():

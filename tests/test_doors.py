@@ -189,7 +189,7 @@ def test_a_face_is_not_followed_past_a_corner_into_the_next_room():
 
 @pytest.mark.expensive
 def test_the_living_room_of_five_rooms_has_its_two_doors():
-    from nbs_env.settings import EnvConfig
+    from nbs_env.config import EnvConfig
     from nbs_env.storey import Storey
     from policies.greedy import scan_storey
     from scenes import load_scene
@@ -197,7 +197,7 @@ def test_the_living_room_of_five_rooms_has_its_two_doors():
     scene = load_scene("five_rooms")
     storey = Storey(scene, EnvConfig(), np.random.default_rng(0))
     scan_storey(storey, max_rooms=1)
-    found = [d for d in storey.robot.doors if d.found_in_room == 0]  # what the robot detected in the room
+    found = [d for d in storey.rooms.doors if d.found_in_room == 0]  # what the robot detected in the room
     truth = [d for d in scene.doors if 0 in d.rooms]  # evaluation: the living room's true doors
     assert len(found) == len(truth) == 2
     for door in truth:

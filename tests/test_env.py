@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 import nbs_env
+from nbs_env.config import make_config
 from nbs_env.env import NBSEnv
 from nbs_env.errors import ConfigError, InvalidActionError, InvalidPoseError
 from nbs_env.labels import VoxelLabel
 from nbs_env.observation import CandidateColumn, ObservationConfig, RoomColumn, candidate_table_of, pool_labels
-from nbs_env.settings import make_config
 from policies import GreedyPolicy, RandomPolicy
 from scenes.corpus import corpus_entry
 
@@ -273,7 +273,7 @@ def test_reset_options_and_bad_input():
 
 
 def test_conversions_reward_reads_no_ground_truth(monkeypatch):
-    from nbs_env.settings import RewardConfig
+    from nbs_env.config import RewardConfig
 
     env = NBSEnv("fast", scene="l_room", reward=RewardConfig(kind="conversions", scan_cost=0.0, metre_cost=0.0))
     obs, info = env.reset(seed=0)
@@ -448,7 +448,7 @@ def test_the_gain_rule_reads_at_another_fraction_on_request():
     best = int(plan.gains[: plan.count].max()) / plan.structural_voxels
     assert 0.0 < best < 0.9
     assert env.gain_rule_done(min(0.99, 2 * best)) and not env.gain_rule_done(best / 2)
-    assert env.gain_rule_done() == env.gain_rule_done(env.config.robot.completion_fraction)
+    assert env.gain_rule_done() == env.gain_rule_done(env.config.rooms.completion_fraction)
     for bad in (-0.1, 1.0):
         with pytest.raises(ValueError, match="fraction"):
             env.gain_rule_done(bad)

@@ -234,15 +234,15 @@ def test_greedy_near_takes_the_nearest_candidate_close_enough_to_the_best_gain()
 
 
 def test_greedy_stop_ends_rooms_at_its_completion_fraction():
+    from nbs_env.config import make_config
     from nbs_env.env import NBSEnv
-    from nbs_env.settings import make_config
-    from policies import UnknownPolicyError, make_policy
-    from train.episode import config_for, run_episode
+    from policies import UnknownPolicyError, config_for, make_policy
+    from train.episode import run_episode
 
     policy = make_policy("greedy:0.8+stop=0.2")
     assert (policy.name, policy.near) == ("greedy:0.8+stop=0.2", 0.8)
-    assert policy.robot_overrides == {"completion_fraction": 0.2}
-    assert make_policy("greedy").robot_overrides == {}
+    assert policy.config_overrides == {"rooms.completion_fraction": 0.2} and policy.requires == {}
+    assert make_policy("greedy").config_overrides == {}
     bad_options = ("stop=1", "stop=-0.1", "stop=nan", "stop=x", "far=0.5", "0.8+0.9", "stop=0.1+stop=0.2")
     for bad in (f"greedy:{option}" for option in bad_options):
         with pytest.raises(UnknownPolicyError, match=r"stop=FRACTION"):
@@ -253,7 +253,7 @@ def test_greedy_stop_ends_rooms_at_its_completion_fraction():
     for name in ("greedy", "greedy:stop=0.4"):
         policy = make_policy(name, 0)
         env = NBSEnv(config_for(make_config("fast", scene="l_room"), policy))
-        assert env.config.robot.completion_fraction == (0.4 if "stop" in name else 0.03)
+        assert env.config.rooms.completion_fraction == (0.4 if "stop" in name else 0.03)
         run_episode(env, policy, 0)
         assert [end["reason"] for end in env.storey.room_ends] == ["gain"]
         scans[name] = len(env.storey.scans)

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from shapely.geometry import Polygon
 
+from nbs_env.config import make_config
 from nbs_env.env import NBSEnv
-from nbs_env.settings import make_config
 from policies import make_policy
 from scenes import SurfaceClass, load_scene
 from scenes.importers import export_scene

@@ -112,6 +112,7 @@ STEP_LAYERS = [
     "nbs_env/env.py",
     "nbs_env/storey.py",
     "nbs_env/robot.py",
+    "nbs_env/planning/rooms.py",
     "nbs_env/planning/planner.py",
     "nbs_env/belief.py",
 ]
@@ -127,7 +128,7 @@ def _module_path(module: str) -> str:
 
 
 def test_a_step_reads_top_down():
-    """env → storey → robot → planner → belief: nothing lower imports a module above it."""
+    """env → storey → robot → rooms → planner → belief: nothing lower imports a module above it."""
     for k, name in enumerate(STEP_LAYERS):
         above = set(STEP_LAYERS[:k])
         imported = {_module_path(m) for m in _runtime_nbs_imports(ROOT / name)}
@@ -137,7 +138,7 @@ def test_a_step_reads_top_down():
 def test_the_env_talks_to_the_storey_only():
     """The env never reaches into the robot, its belief or the planner: it reads the storey session,
     the belief view and the configuration."""
-    allowed = {"nbs_env.errors", "nbs_env.observation", "nbs_env.settings", "nbs_env.storey", "nbs_env.render"}
+    allowed = {"nbs_env.errors", "nbs_env.observation", "nbs_env.config", "nbs_env.storey", "nbs_env.render"}
     path = ROOT / "nbs_env" / "env.py"
     assert _runtime_nbs_imports(path) <= allowed
     tree = ast.parse(path.read_text())
@@ -171,19 +172,47 @@ def _module_name(path: Path) -> str:
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
-def test_no_import_cycles_between_modules():
-    """Run-time imports between a package's modules form no cycle (``if TYPE_CHECKING:`` aside; a
-    package importing its own ``__init__`` is not counted)."""
+def _all_imports(path: Path) -> set[str]:
+    """Every module ``path`` imports, wherever the import stands (module top, a function body,
+    ``if TYPE_CHECKING:``), by absolute name; ``from package import name`` also names
+    ``package.name``, which is a module when it is one."""
+    tree = ast.parse(path.read_text())
+    name = _module_name(path)
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package
+                for _ in range(node.level - 1):
+                    base = base.rpartition(".")[0]
+                module = base + (f".{node.module}" if node.module else "")
+            else:
+                module = node.module or ""
+            out.add(module)
+            out |= {f"{module}.{alias.name}" for alias in node.names}
+        elif isinstance(node, ast.Import):
+            out |= {alias.name for alias in node.names}
+    return out
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """Module -> the modules of the same floor it imports (a package's ``__init__`` counts as the
+    package's module)."""
     files = {_module_name(p): p for floor in FLOORS for p in (ROOT / floor).rglob("*.py")}
     graph = {}
     for name, path in files.items():
         deps = set()
-        for module in _full_modules(path, runtime_only=True):
+        for module in _all_imports(path):
             while module and module not in files:
                 module = module.rpartition(".")[0]
-            if module and module != name and "." in module and module.split(".")[0] == name.split(".")[0]:
+            if module and module != name and module.split(".")[0] == name.split(".")[0]:
                 deps.add(module)
         graph[name] = deps
+    return graph
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     state: dict[str, int] = {}
     stack: list[str] = []
     found: list[list[str]] = []
@@ -191,7 +220,7 @@ def test_no_import_cycles_between_modules():
     def visit(u: str) -> None:
         state[u] = 1
         stack.append(u)
-        for v in sorted(graph[u]):
+        for v in sorted(graph.get(u, ())):
             if state.get(v) == 1:
                 found.append([*stack[stack.index(v) :], v])
             elif v not in state:
@@ -202,4 +231,71 @@ def test_no_import_cycles_between_modules():
     for name in sorted(graph):
         if name not in state:
             visit(name)
+    return found
+
+
+def test_no_import_cycles_between_modules():
+    """No module imports, however indirectly, one that imports it: counting imports in function
+    bodies and under ``if TYPE_CHECKING:``, and a package's ``__init__`` as a module."""
+    found = _cycles(_import_graph())
     assert not found, "import cycles: " + "; ".join(" -> ".join(c) for c in found)
+
+
+def test_no_import_cycles_between_the_parts_of_nbs_env():
+    """nbs_env's parts (its subpackages and top-level modules) import one another one way, and the
+    pipeline's subpackages in its order: sensing, perception, mapping, planning."""
+    units: dict[str, set[str]] = {}
+    for name, deps in _import_graph().items():
+        parts = name.split(".")
+        if parts[0] != "nbs_env" or len(parts) < 2:
+            continue
+        units.setdefault(parts[1], set()).update(
+            d.split(".")[1] for d in deps if d.count(".") >= 1 and d.split(".")[1] != parts[1]
+        )
+    found = _cycles(units)
+    assert not found, "cycles between nbs_env's parts: " + "; ".join(" -> ".join(c) for c in found)
+    order = ["sensing", "perception", "mapping", "planning"]
+    for k, part in enumerate(order):
+        later = units.get(part, set()) & set(order[k + 1 :])
+        assert not later, f"{part} imports {sorted(later)}, which come after it"
+
+
+def test_the_robot_senses_moves_and_keeps_its_belief():
+    """robot.py holds no door memory, route, approach or search: those are the planning side's
+    (nbs_env/planning/rooms.py); and nothing outside the belief writes into it."""
+    robot = ROOT / "nbs_env" / "robot.py"
+    tree = ast.parse(robot.read_text())
+    methods = {n.name for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)}
+    words = ("door", "route", "approach", "search", "finish_room")
+    planning = {m for m in methods if any(w in m for w in words)}
+    assert not planning, f"robot.py plans: {sorted(planning)}"
+    imported = _all_imports(robot)
+    assert not {m for m in imported if m.startswith(("nbs_env.planning.rooms", "nbs_env.planning.wall_search"))}
+    assert "nbs_env.perception.doors" not in imported
+    for floor in FLOORS:
+        for path in (ROOT / floor).rglob("*.py"):
+            if path.name == "belief.py":
+                continue
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, ast.Assign):
+                    targets = node.targets
+                elif isinstance(node, ast.AugAssign):
+                    targets = [node.target]
+                else:
+                    continue
+                for target in targets:
+                    inner = target.value if isinstance(target, ast.Attribute) else None
+                    assert not (isinstance(inner, ast.Attribute) and inner.attr == "belief"), (
+                        f"{path.relative_to(ROOT)}:{node.lineno} writes into the belief"
+                    )
+
+
+def test_one_home_for_each_setting_and_what_policies_need_is_declared():
+    """The search count lives in WallSearchConfig alone, and no code asks a policy for an attribute
+    the Policy protocol does not declare."""
+    for floor in [*FLOORS, "benchmarks"]:
+        for path in (ROOT / floor).rglob("*.py"):
+            text = path.read_text()
+            assert "wall_search_scans" not in text, path
+            for attribute in ("robot_overrides", "env_overrides", "config_overrides", "requires"):
+                assert f'getattr(policy, "{attribute}"' not in text, (path, attribute)

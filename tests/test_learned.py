@@ -11,11 +11,12 @@ import pytest
 pytest.importorskip("sb3_contrib")
 torch = pytest.importorskip("torch")
 
+from nbs_env.config import make_config  # noqa: E402
 from nbs_env.env import NBSEnv  # noqa: E402
 from nbs_env.errors import ModelFileError  # noqa: E402
 from nbs_env.observation import CandidateColumn  # noqa: E402
 from policies import make_policy  # noqa: E402
-from policies.learned import LearnedPolicy, NetworkConfig, build_network, save_checkpoint  # noqa: E402
+from policies.learned import BUNDLED, LearnedPolicy, NetworkConfig, build_network, save_checkpoint  # noqa: E402
 
 
 @pytest.fixture(scope="module", params=["policy", "gain"])
@@ -66,7 +67,12 @@ def test_loaded_policy_acts_as_the_trained_model(trained):
     path, model = trained
     policy = make_policy(f"ppo:{path.parent}")
     completion = json.loads(path.read_text())["training"]["completion"]
-    assert getattr(policy, "env_overrides", {}).get("completion", "gain") == completion
+    assert policy.config_overrides.get("rooms.completion", "gain") == completion
+    # The checkpoint records the configuration its envs ran with, and the policy requires its room rules.
+    recorded = json.loads(path.read_text())["training"]["config"]
+    assert recorded["preset"] == "fast" and recorded["rooms"]["completion"] == completion
+    assert policy.requires["rooms.wall_search.scans"] == recorded["rooms"]["wall_search"]["scans"]
+    assert "rooms.completion" not in policy.requires
     for obs, info in observations(completion=completion):
         expected, _ = model.predict(
             {k: v[None] for k, v in obs.items()}, deterministic=True, action_masks=info["action_mask"][None]
@@ -163,7 +169,7 @@ def test_a_policy_reading_the_room_vector_refuses_an_observation_without_it(tmp_
     state = {f"encoder.{k}": v for k, v in encoder.state_dict().items()}
     state.update({f"scorer.{k}": v for k, v in scorer.state_dict().items()})
     policy = LearnedPolicy(save_checkpoint(tmp_path, config, state))
-    assert policy.env_overrides == {"completion": "policy"}
+    assert policy.config_overrides == {"rooms.completion": "policy"} and policy.requires == {}
     (obs, info), *_ = observations(completion="policy")
     assert 0 <= policy.act(obs, info) <= 64
     with pytest.raises(ValueError, match="'room' vector"):
@@ -250,21 +256,33 @@ def test_bad_checkpoints_raise_clear_errors(tmp_path):
         LearnedPolicy(evil)
 
 
-def test_a_policy_run_with_another_wall_search_than_it_was_trained_with_gets_a_note(capsys):
+def test_a_policy_requires_the_room_rules_it_was_trained_with(tmp_path):
+    """The reference checkpoint was trained with 3 search scans a room: a grid without --wall-search
+    runs every policy with them, one that sets another count is refused with the flag to pass, and
+    two checkpoints trained with different rules are not compared in one grid."""
+    from nbs_env.errors import ConfigError
+    from policies import config_for
     from train.compare import grid
-    from train.episode import wall_search_note
 
     policy = make_policy("ppo:reference")
-    trained = policy.trained_wall_search
-    assert trained == 3 and policy.env_overrides == {"completion": "policy"}
-    assert wall_search_note(policy, trained) is None
-    note = wall_search_note(policy, 0)
-    assert note is not None and "--wall-search 3" in note and "--wall-search 0" in note
-    assert wall_search_note(make_policy("greedy"), 0) is None  # nothing to say of a policy not trained
-    grid("l_room", "greedy,ppo:reference", "0", "fast", 80, 0)
-    assert "note: ppo:reference was trained with --wall-search 3" in capsys.readouterr().err
-    grid("l_room", "greedy,ppo:reference", "0", "fast", 80, 3)
-    assert "note" not in capsys.readouterr().err
+    assert policy.requires == {"rooms.wall_search.scans": 3}
+    assert policy.config_overrides == {"rooms.completion": "policy"}
+    specs = grid("l_room", "greedy,ppo:reference", "0", "fast", {"max_scans": 80})
+    assert {s.overrides["rooms.wall_search.scans"] for s in specs} == {3}
+    assert grid("l_room", "greedy,ppo:reference", "0", "fast", {"rooms.wall_search.scans": 3})
+    with pytest.raises(ConfigError, match=r"ppo:reference requires rooms\.wall_search\.scans=3.*--wall-search 3"):
+        grid("l_room", "greedy,ppo:reference", "0", "fast", {"rooms.wall_search.scans": 0})
+    with pytest.raises(ConfigError, match=r"requires rooms\.wall_search\.scans=3 \(it was trained so\)"):
+        config_for(make_config("fast"), policy)
+    # Another checkpoint of the same network, trained without searches.
+    other = tmp_path / "other"
+    other.mkdir()
+    document = json.loads((BUNDLED["reference"] / "policy.json").read_text())
+    document["training"] = {**document["training"], "wall_search": 0}
+    (other / "policy.json").write_text(json.dumps(document))
+    (other / "policy.pt").write_bytes((BUNDLED["reference"] / "policy.pt").read_bytes())
+    with pytest.raises(ConfigError, match="made for different robots"):
+        grid("l_room", f"ppo:reference,ppo:{other}", "0", "fast", {})
 
 
 @pytest.mark.expensive
@@ -278,7 +296,6 @@ def test_the_bundled_reference_policy_keeps_its_standing_against_the_greedy():
     points) with no more than 1.3 times the greedy's scans. The network itself is pinned by the
     stored-logits test below, which holds on any CPU."""
     from policies.greedy import GreedyPolicy
-    from policies.learned import BUNDLED
     from train.ppo import VALIDATION_BASE, evaluate
 
     folder = BUNDLED["reference"]
@@ -295,11 +312,11 @@ def test_the_bundled_reference_policy_keeps_its_standing_against_the_greedy():
         return action
 
     storeys = [VALIDATION_BASE + k for k in range(training["eval_storeys"])]
-    # A policy trained before issue 19 has no "completion" in its record: the gain rule ended its rooms.
-    completion = training.get("completion", "gain")
-    search = policy.trained_wall_search or 0
-    replay = evaluate(act, storeys, training["max_episode_steps"], completion, search)
-    greedy = evaluate(GreedyPolicy().act, storeys, training["max_episode_steps"], completion, search)
+    # A policy trained before room completion was learned has no "completion" in its record: the
+    # gain rule ended its rooms.
+    config = make_config("fast", completion=training.get("completion", "gain"), **policy.requires)
+    replay = evaluate(act, storeys, training["max_episode_steps"], config)
+    greedy = evaluate(GreedyPolicy().act, storeys, training["max_episode_steps"], config)
     # The curve's record at the steps the shipped checkpoint was trained for.
     recorded = next(r for r in records if r["timesteps"] == training["timesteps"])
     margin = recorded["greedy"]["structure_sensed_pct"] - recorded["learned"]["structure_sensed_pct"]
@@ -330,12 +347,19 @@ def test_training_envs_charge_the_run_s_prices():
     as the run says."""
     from train.ppo import TrainConfig, make_training_envs
 
-    config = TrainConfig(envs=1, rooms=(1, 1), scan_cost=0.25, metre_cost=0.1, completion="policy", wall_search=1)
+    config = TrainConfig(
+        envs=1,
+        rooms=(1, 1),
+        scan_cost=0.25,
+        metre_cost=0.1,
+        completion="policy",
+        overrides={"rooms.wall_search.scans": 1},
+    )
     venv = make_training_envs(config)
     try:
         env = venv.envs[0].unwrapped
         assert (env.config.reward.scan_cost, env.config.reward.metre_cost) == (0.25, 0.1)
-        assert env.config.robot.wall_search_scans == 1  # and the run's robot
+        assert env.config.rooms.wall_search.scans == 1  # and the run's robot
         venv.reset()
         action = int(np.flatnonzero(venv.reset_infos[0]["action_mask"][:-1])[0])
         _, reward, _, _ = venv.step(np.array([action]))

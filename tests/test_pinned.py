@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from nbs_env.config import make_config
 from nbs_env.env import NBSEnv
-from nbs_env.settings import make_config
 
 PINNED = Path(__file__).parent / "data" / "pinned_trajectories.json"
 #: (scene, seed, steps): a generated two-room storey through its door, and the paper's scene.

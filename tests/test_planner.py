@@ -7,6 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from nbs_env.config import RobotConfig, make_config
 from nbs_env.env import NBSEnv
 from nbs_env.errors import ConfigError
 from nbs_env.labels import VoxelLabel
@@ -20,7 +21,6 @@ from nbs_env.planning.planner import (
     register_gain_model,
 )
 from nbs_env.planning.visibility import GainConfig
-from nbs_env.settings import RobotConfig, make_config
 from policies import GreedyPolicy
 
 TOY = "toy_within_3m"
@@ -74,9 +74,9 @@ def test_the_greedy_follows_a_gain_model_chosen_by_configuration(toy_model):
     assert env.storey.scans[1].predicted_gain == expected[action]
 
 
-def test_an_unknown_gain_model_is_refused_on_construction():
+def test_an_unknown_gain_model_is_refused_before_a_scan():
     with pytest.raises(ConfigError, match=r"unknown gain model 'nope'.*visibility"):
-        RobotConfig(gain=GainConfig(model="nope"))
+        NBSEnv("fast", scene="l_room", **{"robot.gain.model": "nope"}).reset(seed=0)
     with pytest.raises(ConfigError, match="registered already"):
         register_gain_model("visibility", WithinThreeMetres)
     with pytest.raises(ConfigError, match="gain model"):

@@ -255,9 +255,9 @@ def test_an_empty_scan_is_refused_and_a_refused_scan_stays_out_of_the_target():
 def test_a_refused_registration_is_reported_in_info_and_metrics():
     from dataclasses import replace
 
+    from nbs_env.config import make_config
     from nbs_env.env import NBSEnv
     from nbs_env.evaluation import metrics_dict
-    from nbs_env.settings import make_config
 
     config = make_config("default", scene="l_room", max_scans=3)
     # No pose can have every point of its overlap on S(t)'s planes within 1 mm: every ICP is refused.

@@ -5,10 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nbs_env.config import ScannerConfig
+from nbs_env.config import EnvConfig, RobotConfig, ScannerConfig
 from nbs_env.evaluation import CoverageMeter, QualityConfig
 from nbs_env.robot import Robot
-from nbs_env.settings import EnvConfig, RobotConfig
 from nbs_env.storey import Storey
 from policies.greedy import scan_storey
 from scenes import SurfaceClass, load_scene
@@ -156,8 +155,8 @@ def test_the_robot_finds_the_door_and_scans_the_next_room(tmp_path, plan_dict):
     scene = load(str(path))
     storey = Storey(scene, EnvConfig(), np.random.default_rng(1))
     scan_storey(storey)
-    robot, meter = storey.robot, storey.meter
-    rooms_entered, doors = robot.room_index + 1, robot.doors
+    meter = storey.meter
+    rooms_entered, doors = storey.rooms.current + 1, storey.rooms.doors
     assert storey.complete
     assert rooms_entered == 2 and len(doors) == 1
     assert np.linalg.norm(doors[0].centre[:2] - [5.0, 2.0]) < 0.3  # the door between the rooms

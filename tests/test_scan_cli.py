@@ -357,7 +357,7 @@ def test_bad_start_is_refused(tmp_path, capsys, start, message):
         (["--start", "1,2,3"], "expected X,Y"),
         (["--resolution", "0"], "angular_step must be > 0"),
         (["--resolution", "-1"], "angular_step must be > 0"),
-        (["--voxel", "0"], "--voxel must be"),
+        (["--voxel", "0"], "voxel_size must be within"),
         (["--storey", "Erdgeschoss"], "--storey applies to .ifc files only"),
         (["--max-scans", "0"], "expected an integer >= 1"),
         (["--scanner", "vz-400"], "unknown scanner 'vz-400'"),
@@ -551,7 +551,7 @@ def test_door_frame_scans_belong_to_the_room_entered():
 def test_nbs_scan_with_each_scanner_preset_times_its_stations(tmp_path, spec):
     """Each preset drives a run (a steep -60° field with a 0.5 m minimum range once left the robot no
     way off its first stop), and the acquisition time is the preset's station time per scan."""
-    from nbs_env.scanners import scanner_config
+    from nbs_env.config.scanners import scanner_config
 
     out = tmp_path / "report"
     with contextlib.redirect_stdout(io.StringIO()) as stdout:

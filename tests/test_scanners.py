@@ -1,4 +1,5 @@
-"""Scanner presets (nbs_env.scanners): the table's consistency, the spec parser, and real scans with each preset."""
+"""Scanner presets (nbs_env.config.scanners): the table's consistency, the spec parser, and real scans
+with each preset."""
 
 from __future__ import annotations
 
@@ -10,10 +11,10 @@ import numpy as np
 import pytest
 from helpers import box_room
 
-import nbs_env.scanners as scanners_module
+import nbs_env.config.scanners as scanners_module
 from nbs_env.config import ScannerConfig
+from nbs_env.config.scanners import SCANNERS, ResolutionSetting, ScannerModel, scanner_config, step_for_spacing
 from nbs_env.errors import ConfigError
-from nbs_env.scanners import SCANNERS, ResolutionSetting, ScannerModel, scanner_config, step_for_spacing
 from nbs_env.sensing.pose import pose_from_xyz_rpy
 from nbs_env.sensing.scanner import Scanner
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from nbs_env.config import make_config
 from nbs_env.env import NBSEnv
 from nbs_env.evaluation import metrics_dict
 from nbs_env.sensing.scanner import Scanner
-from nbs_env.settings import make_config
 from policies import GreedyPolicy
 from train.episode import run_episode
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from nbs_env.config import make_config
 from nbs_env.env import NBSEnv
-from nbs_env.settings import make_config
 from policies import make_policy
 from tests.helpers import boxed_storey
 from train.episode import run_episode
@@ -89,7 +89,7 @@ def test_a_scanner_that_sees_the_jambs_leaves_the_door_frame_it_scanned_from():
     robot leaves the door it came in by with its radius of clearance (navigation.Passage)."""
     from dataclasses import replace
 
-    from nbs_env.scanners import scanner_config
+    from nbs_env.config.scanners import scanner_config
 
     narrow = ((5, 0), (5, 4), [(1.6, 2.4, 2.0)])
     walls = [(a, b, []) for a, b in OUTLINE] + [narrow]

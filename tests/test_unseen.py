@@ -7,8 +7,8 @@ import pytest
 import shapely
 from shapely.geometry import Polygon
 
+from nbs_env.config import make_config
 from nbs_env.env import NBSEnv
-from nbs_env.settings import make_config
 from policies import make_policy
 from train.episode import run_episode
 
@@ -24,11 +24,11 @@ def test_a_u_room_ends_by_its_gain_with_its_roi_over_its_floor():
     """The U's arms cannot be seen from its door: the RoI must grow to the whole U as scans see it,
     and the gain rule, not the scan cap, ends the room."""
     env = _episode("corpus:u_office_rooms", "fast")
-    robot, scene = env.storey.robot, env.storey.scene
+    scene = env.storey.scene
     u = Polygon(scene.room_by_name("room0").polygon)
     assert u.area > 50 and u.convex_hull.area > 1.3 * u.area  # it is a U
     ious = []
-    for polygon in robot.room_polygons.values():
+    for polygon in env.storey.rooms.polygons.values():
         if polygon.intersection(u).area > 0.5 * polygon.area:
             ious.append(polygon.intersection(u).area / polygon.union(u).area)
     assert ious and max(ious) >= 0.9, ious

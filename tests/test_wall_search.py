@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from shapely.geometry import Polygon
 
+from nbs_env.config import RoomRules, make_config
 from nbs_env.env import NBSEnv
 from nbs_env.errors import ConfigError
 from nbs_env.perception.roi import RoI
 from nbs_env.planning.wall_search import WallSearchConfig, approach_position, search_position, unviewed_wall
-from nbs_env.settings import RobotConfig, make_config
 
 # A corridor 20 m by 2 m, floor at 0: from its middle the far ends of the long walls are seen at
 # grazing incidence (a point 9 m along, 1 m across: 84° off the normal).
@@ -136,18 +136,19 @@ def test_bad_wall_search_config_raises(field, value):
         WallSearchConfig(**{field: value})
 
 
-def test_wall_search_scans_is_checked_and_off_by_default():
-    assert RobotConfig().wall_search_scans == 0
-    with pytest.raises(ConfigError, match="wall_search_scans"):
-        RobotConfig(wall_search_scans=-1)
+def test_the_search_count_is_checked_and_off_by_default():
+    assert RoomRules().wall_search.scans == 0 and make_config("fast").rooms.wall_search.scans == 0
+    with pytest.raises(ConfigError, match="scans"):
+        WallSearchConfig(scans=-1)
 
 
 def test_room_done_takes_one_search_scan_which_can_reopen_the_room():
     # After its first scan the L-shaped room's far arm was never faced: "room done" takes the
     # search scan, the gain rule finds the room goes on, and the agent keeps it; a second
     # declaration ends it (one search a room).
-    config = make_config("fast", scene="l_room", completion="policy", expose_belief=True)
-    env = NBSEnv(replace(config, robot=replace(config.robot, wall_search_scans=1)))
+    env = NBSEnv(
+        make_config("fast", scene="l_room", completion="policy", expose_belief=True, **{"rooms.wall_search.scans": 1})
+    )
     _, info = env.reset(seed=0)
     _, _, terminated, _, info = env.step(env.stop_action)
     storey = env.storey
@@ -159,15 +160,13 @@ def test_room_done_takes_one_search_scan_which_can_reopen_the_room():
 
 
 def l_room_with_safety(safety: float, narrow: bool) -> NBSEnv:
-    config = make_config("fast", scene="l_room", completion="policy")
-    robot = config.robot
-    robot = replace(
-        robot,
-        wall_search_scans=3,
-        navigation=replace(robot.navigation, safety_distance=safety),
-        wall_search=replace(robot.wall_search, narrow=narrow),
+    return NBSEnv(
+        "fast",
+        scene="l_room",
+        completion="policy",
+        safety_distance=safety,
+        **{"rooms.wall_search.scans": 3, "rooms.wall_search.narrow": narrow},
     )
-    return NBSEnv(replace(config, robot=robot))
 
 
 def test_a_gap_the_safety_distance_closes_leads_the_search_to_the_wall_keeping_the_radius_clear():
@@ -179,10 +178,10 @@ def test_a_gap_the_safety_distance_closes_leads_the_search_to_the_wall_keeping_t
     for narrow in (True, False):
         env = l_room_with_safety(1.0, narrow)
         env.reset(seed=0)
-        robot = env.storey.robot
+        robot, rooms = env.storey.robot, env.storey.rooms
         env.step(env.stop_action)  # the first search: an NVP views the wall
         nvps = robot.plan().candidates.points.copy()
-        stop = robot.wall_search()
+        stop = rooms.wall_search(robot)
         if not narrow:
             assert stop is None
         else:
@@ -190,7 +189,7 @@ def test_a_gap_the_safety_distance_closes_leads_the_search_to_the_wall_keeping_t
             assert np.allclose(stop.path[-1], stop.point) and np.allclose(stop.path[0], robot.pose[:2, 3])
             assert stop.length >= np.linalg.norm(stop.point - robot.pose[:2, 3]) - 1e-6
             assert not len(nvps) or np.linalg.norm(nvps - stop.point, axis=1).min() > 0.1
-            tmap, _ = robot._door_routes()
+            tmap, _ = rooms.door_routes(robot)
             clearance = float(tmap.clearance_at(stop.point[None])[0])
             nav = robot.config.navigation
             assert nav.robot_radius - 1e-9 <= clearance < nav.robot_radius + nav.safety_distance
@@ -264,9 +263,12 @@ def test_a_door_no_route_reaches_gets_a_scan_toward_it_before_it_is_given_up():
     # the room behind it is never scanned; with it, a scan from nearer measures the way.
     results = {}
     for doors in (True, False):
-        config = make_config("fast", scene="generated:10000006", completion="policy")
-        robot = replace(config.robot, wall_search_scans=1, wall_search=WallSearchConfig(doors=doors))
-        env = NBSEnv(replace(config, robot=robot))
+        env = NBSEnv(
+            "fast",
+            scene="generated:10000006",
+            completion="policy",
+            **{"rooms.wall_search": WallSearchConfig(scans=1, doors=doors)},
+        )
         env.reset(seed=0)
         terminated = False
         while not terminated:

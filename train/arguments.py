@@ -1,11 +1,25 @@
-"""Values the ``nbs`` commands read from their command lines, parsed in one place."""
+"""Values the ``nbs`` commands read from their command lines, parsed in one place: among them the
+robot's options, one argument group that ``nbs scan``, ``nbs compare`` and ``nbs train`` share."""
 
 from __future__ import annotations
 
+import argparse
+import json
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
-__all__ = ["output_folder_problem", "parse_range"]
+__all__ = [
+    "add_robot_arguments",
+    "add_scene_arguments",
+    "adopt_requirements",
+    "config_from_arguments",
+    "output_folder_problem",
+    "parse_range",
+    "scene_option_error",
+    "scene_options",
+]
 
 
 def parse_range(text: str) -> tuple[int, int]:
@@ -46,3 +60,253 @@ def output_folder_problem(path: str | Path) -> str | None:
     except OSError as exc:
         return f"cannot write in {here} ({exc.strerror or exc})"
     return None
+
+
+# ---------------------------------------------------------------------- the robot's options
+#: :data:`nbs_env.config.PRESETS`' names, written out so that ``--help`` loads no configuration
+#: (tests/test_cli.py checks them against the presets).
+PRESET_NAMES = ("default", "fast")
+WALL_SEARCH_HELP = (
+    "search scans per room (rooms.wall_search.scans): before a room ends, scan from where most of its "
+    "wall that no scan faced is seen, so that doors there can be found (default: the preset's, 0: the paper's "
+    "method)"
+)
+IFC_DOORS_HELP = "IFC doors open (frames only, the default) or closed (as drawn); IFC files only"
+#: The flag that sets a configuration path, for messages that name what a user typed.
+FLAGS = {
+    "rooms.wall_search.scans": "--wall-search",
+    "max_scans": "--max-scans",
+    "robot.voxel_size": "--voxel",
+    "robot.scanner": "--scanner",
+    "robot.scanner.angular_step": "--resolution",
+    "quality.min_density": "--min-density",
+    "quality.max_incidence": "--max-incidence",
+}
+
+
+def _number(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    return value  # its range, finiteness included, is the configuration's to check, by the field's name
+
+
+def _count(least: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < least:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {least}, got {text!r}")
+        return value
+
+    return parse
+
+
+def storey_name(text: str) -> str | int:
+    """``--storey``: an index when it is an integer, else a name."""
+    return int(text) if text.lstrip("-").isdigit() else text
+
+
+def _assignment(text: str) -> tuple[str, Any]:
+    key, eq, value = text.partition("=")
+    if not eq or not key.strip():
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE (e.g. rooms.completion_fraction=0.05), got {text!r}")
+    try:
+        parsed = json.loads(value)
+    except ValueError:
+        parsed = value  # a bare word: a string
+    return key.strip(), parsed
+
+
+def _scanner_help() -> str:
+    from nbs_env.config.scanners import SCANNERS
+
+    return ", ".join(f"{name} ({', '.join(s.name for s in model.settings)})" for name, model in SCANNERS.items())
+
+
+def add_scene_arguments(parser: argparse.ArgumentParser | Any) -> None:
+    """``--storey``, ``--ifc-doors`` and ``--y-up``: how a building file is read."""
+    parser.add_argument("--storey", type=storey_name, default=None, help="IFC storey name or index (IFC files only)")
+    parser.add_argument("--ifc-doors", choices=("open", "closed"), default=None, help=IFC_DOORS_HELP)
+    parser.add_argument(
+        "--y-up", action="store_true", help="mesh coordinates are y-up (glTF convention); labelled meshes only"
+    )
+
+
+def add_robot_arguments(parser: argparse.ArgumentParser, presets: Sequence[str] = PRESET_NAMES) -> None:
+    """The options of every command that runs a robot (``nbs scan``, ``nbs compare``, ``nbs train``),
+    in one group with one meaning; :func:`config_from_arguments` reads them."""
+    group = parser.add_argument_group(
+        "robot and building", "the same on nbs scan, nbs compare and nbs train; metrics.json records the result"
+    )
+    group.add_argument("--preset", choices=tuple(presets), default=None, help="configuration preset")
+    group.add_argument(
+        "--scanner",
+        default=None,
+        metavar="NAME[:SETTING]",
+        help="a scanner from its datasheet: " + _scanner_help() + " (default: METHOD's simulated VZ-400)",
+    )
+    group.add_argument(
+        "--resolution", type=_number, default=None, help="simulated angular step in degrees (default 0.5, fast 1)"
+    )
+    group.add_argument("--voxel", type=_number, default=None, help="voxel size of V(t) in metres (default 0.05)")
+    group.add_argument("--wall-search", type=_count(0), default=None, metavar="N", help=WALL_SEARCH_HELP)
+    group.add_argument("--max-scans", type=_count(1), default=None, help="scan budget of an episode")
+    group.add_argument("--min-density", type=_number, default=None, help="quality: least points per m² (default 400)")
+    group.add_argument(
+        "--max-incidence", type=_number, default=None, help="quality: largest incidence angle in degrees (default 70)"
+    )
+    group.add_argument(
+        "--set",
+        type=_assignment,
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="any configuration field by its dotted name, the value as JSON (repeatable; e.g. "
+        "--set rooms.completion_fraction=0.05; docs/environment.md lists the names)",
+    )
+    add_scene_arguments(group)
+
+
+def scene_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``load_scene`` options of ``--storey``, ``--ifc-doors`` and ``--y-up`` (only those given)."""
+    options: dict[str, Any] = {}
+    if getattr(args, "storey", None) is not None:
+        options["storey"] = args.storey
+    if getattr(args, "ifc_doors", None) is not None:
+        options["doors"] = args.ifc_doors
+    if getattr(args, "y_up", False):
+        options["y_up"] = True
+    return options
+
+
+def config_from_arguments(args: argparse.Namespace, preset: str, **defaults: Any) -> tuple[str, dict[str, Any]]:
+    """The preset and the dotted configuration overrides the robot options of a command line give.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed by a parser with :func:`add_robot_arguments`.
+    preset : str
+        The command's preset when ``--preset`` is not given.
+    **defaults
+        The command's own defaults of configuration paths (``max_scans=80``), used when no option
+        sets them.
+
+    Returns
+    -------
+    preset : str
+    overrides : dict
+        Dotted configuration names to values, for :func:`nbs_env.config.make_config`: only what the
+        command line (or the command's defaults) set, so that what a policy requires may fill the
+        rest.
+
+    Raises
+    ------
+    ConfigError
+        A bad scanner name, a ``--set`` name the configuration has not, or two options setting one
+        field; the message names the options.
+    """
+    from nbs_env.config import make_config
+    from nbs_env.config.presets import config_paths
+    from nbs_env.errors import ConfigError
+
+    preset = args.preset or preset
+    given: dict[str, Any] = {}
+    if args.scanner is not None:
+        from nbs_env.config.scanners import scanner_config
+
+        scanner = make_config(preset).robot.scanner  # the preset's simulated step and height stay
+        step = scanner.angular_step if args.resolution is None else args.resolution
+        given["robot.scanner"] = scanner_config(args.scanner, simulated_step=step, height=scanner.height).to_dict()
+    elif args.resolution is not None:
+        given["robot.scanner.angular_step"] = args.resolution
+    flags = {
+        "robot.voxel_size": args.voxel,
+        "rooms.wall_search.scans": args.wall_search,
+        "max_scans": args.max_scans,
+        "quality.min_density": args.min_density,
+        "quality.max_incidence": args.max_incidence,
+    }
+    given.update({k: v for k, v in flags.items() if v is not None})
+    options = scene_options(args)
+    if options:
+        given["scene_options"] = options
+    paths = config_paths()
+    for key, value in args.set:
+        if key not in paths:
+            raise ConfigError(f"--set {key}: the configuration has no such field (dotted names, e.g. robot.voxel_size)")
+        clash = [p for p in given if p == key or p.startswith(key + ".") or key.startswith(p + ".")]
+        if clash:
+            raise ConfigError(f"--set {key} and {FLAGS.get(clash[0], clash[0])} both set {key}")
+        given[key] = value
+    for key, value in defaults.items():
+        given.setdefault(key, value)
+    make_config(preset, **given)  # checked now, before any work starts
+    return preset, given
+
+
+def adopt_requirements(overrides: dict[str, Any], requirements: dict[str, tuple[Any, str]]) -> dict[str, Any]:
+    """``overrides`` with what the policies require added where the command line set nothing.
+
+    Parameters
+    ----------
+    overrides : dict
+        :func:`config_from_arguments`'s overrides.
+    requirements : dict
+        Path -> (value, the policy that requires it), from :func:`policies.agreed_requirements`.
+
+    Raises
+    ------
+    ConfigError
+        The command line set a required field to another value; the message names the policy, the
+        value it requires and the option that sets it.
+    """
+    from nbs_env.errors import ConfigError
+
+    out = dict(overrides)
+    for path, (value, who) in requirements.items():
+        if path in out and out[path] != value:
+            flag = FLAGS.get(path, f"--set {path}")
+            raise ConfigError(
+                f"{who} requires {path}={json.dumps(value)} (it was trained so), but this run sets "
+                f"{json.dumps(out[path])}: pass {flag} {json.dumps(value)} or leave it out"
+            )
+        out[path] = value
+    return out
+
+
+#: Scene files by kind, for the options that apply to one kind only.
+MESH_SUFFIXES = (".obj", ".glb", ".gltf", ".ply")
+
+
+def scene_option_error(scene: str, storey: object, y_up: bool, ifc_doors: object = None) -> str | None:
+    """Why ``--storey``, ``--ifc-doors`` or ``--y-up`` does not apply to ``scene`` (None when they do).
+
+    A corpus entry (``corpus:NAME``) carries its own options; only IFC's apply to it."""
+    suffix = Path(scene).suffix.lower()
+    ifc = suffix == ".ifc" or _corpus_suffix(scene) == ".ifc"
+    if storey is not None and not ifc:
+        return f"--storey applies to .ifc files only, not to scene {scene!r}"
+    if ifc_doors is not None and not ifc:
+        return f"--ifc-doors applies to .ifc files only, not to scene {scene!r}"
+    if y_up and suffix not in MESH_SUFFIXES:
+        return f"--y-up applies to labelled meshes ({', '.join(MESH_SUFFIXES)}) only, not to scene {scene!r}"
+    return None
+
+
+def _corpus_suffix(scene: str) -> str | None:
+    """The file suffix of corpus entry ``scene`` (None when it is no corpus entry or has no file)."""
+    if not str(scene).startswith("corpus:"):
+        return None
+    from scenes import SceneError
+    from scenes.corpus import corpus_entry
+
+    try:
+        entry = corpus_entry(str(scene)[len("corpus:") :])
+    except SceneError:
+        return None
+    return Path(entry.file).suffix.lower() if entry.file else None

@@ -51,9 +51,9 @@ METHODS = ("stachniss_burgard", "blaer_allen", "potthast_sukhatme")
 def log_episode(scene: str, method: str, seed: int, preset: str, max_scans: int) -> dict[str, Any]:
     """Play ``method`` with ε = 0 on ``scene``: per decision its room, stop statistic and the storey
     coverage (%) before and after the scan it led to."""
+    from nbs_env.config import make_config
     from nbs_env.env import NBSEnv
     from nbs_env.evaluation import metrics_dict
-    from nbs_env.settings import make_config
     from policies import make_policy
     from train.episode import config_for
 

@@ -16,8 +16,13 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from train.arguments import add_robot_arguments, add_scene_arguments, scene_option_error
+
 EXIT_SCENE_ERROR = 1
 EXIT_USAGE = 2
+#: The scan budget of ``nbs scan`` and ``nbs compare`` runs when ``--max-scans`` is not given (the
+#: presets' own budgets are the env's: 80 default, 40 fast).
+SCAN_BUDGET = 80
 
 
 def _rooms(text: str) -> int | tuple[int, int]:
@@ -61,13 +66,6 @@ def _integer_from(least: int, what: str = "expected an integer"):
 
 _seed = _integer_from(0, "a seed is an integer")
 _positive_int = _integer_from(1)
-_count = _integer_from(0)
-
-WALL_SEARCH_HELP = (
-    "wall-search scans per room: before a room ends, scan from where most of its wall that no scan "
-    "faced is seen, so that doors there can be found (default 0: the paper's method)"
-)
-
 
 #: What matplotlib's savefig writes, by file suffix.
 PICTURE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".eps", ".ps", ".tif", ".tiff", ".webp")
@@ -82,13 +80,6 @@ def _picture(text: str) -> Path:
     return path
 
 
-IFC_DOORS_HELP = "IFC doors open (frames only, the default) or closed (as drawn); IFC files only"
-
-
-def _storey(text: str) -> str | int:
-    return int(text) if text.lstrip("-").isdigit() else text
-
-
 def _start(text: str) -> tuple[float, float]:
     parts = text.split(",")
     try:
@@ -100,22 +91,6 @@ def _start(text: str) -> tuple[float, float]:
     if not (math.isfinite(x) and math.isfinite(y)):
         raise argparse.ArgumentTypeError(f"expected finite X,Y, got {text!r}")
     return x, y
-
-
-def _number(text: str) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-
-
-def _scanner_help() -> str:
-    from nbs_env.scanners import SCANNERS
-
-    return "; ".join(
-        f"{name} ({model.title}: {', '.join(s.name for s in model.settings)}, default {model.default_setting})"
-        for name, model in SCANNERS.items()
-    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -132,9 +107,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     def scene_args(p: argparse.ArgumentParser) -> None:
         p.add_argument("scene", help="bundled name, .json/.obj/.glb/.gltf/.ply/.ifc path, or generated:SEED")
-        p.add_argument("--storey", type=_storey, help="IFC storey name or index")
-        p.add_argument("--ifc-doors", choices=("open", "closed"), default=None, help=IFC_DOORS_HELP)
-        p.add_argument("--y-up", action="store_true", help="mesh coordinates are y-up (glTF convention)")
+        add_scene_arguments(p)
 
     show = ssub.add_parser("show", help="draw a top-down picture of a scene")
     scene_args(show)
@@ -165,17 +138,6 @@ def build_parser() -> argparse.ArgumentParser:
     scan.add_argument("--policy", default="greedy", help="who chooses the next scan (default: greedy)")
     scan.add_argument("--seed", type=_seed, default=0, help="seed of the episode, >= 0 (default 0)")
     scan.add_argument("--out", type=Path, default=None, help="report folder (default: ./scan-<scene>)")
-    scan.add_argument("--max-scans", type=_positive_int, default=80, help="scan budget (default 80)")
-    scan.add_argument(
-        "--resolution", type=_number, default=None, help="simulated scanner angular step in degrees (default 0.5)"
-    )
-    scan.add_argument(
-        "--scanner",
-        default=None,
-        metavar="NAME[:SETTING]",
-        help="a scanner preset from its datasheet: " + _scanner_help() + " (default: METHOD's simulated VZ-400, "
-        "acquisition time = points / 122,000 per s)",
-    )
     scan.add_argument(
         "--record",
         type=Path,
@@ -183,13 +145,6 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="RUN.rrd",
         help="also log the run as a rerun recording, for nbs view (needs the viz extra)",
     )
-    scan.add_argument("--min-density", type=_number, default=None, help="quality: least points per m² (default 400)")
-    scan.add_argument(
-        "--max-incidence", type=_number, default=None, help="quality: largest incidence angle in degrees (default 70)"
-    )
-    scan.add_argument("--voxel", type=_number, default=None, help="voxel size of V(t) in metres (default 0.05)")
-    scan.add_argument("--storey", type=_storey, default=None, help="IFC storey name or index (IFC files only)")
-    scan.add_argument("--ifc-doors", choices=("open", "closed"), default=None, help=IFC_DOORS_HELP)
     scan.add_argument(
         "--start",
         type=_start,
@@ -197,9 +152,9 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="X,Y",
         help="start position in metres (--start=-1,2 for a negative X)",
     )
-    scan.add_argument("--wall-search", type=_count, default=0, metavar="N", help=WALL_SEARCH_HELP)
     scan.add_argument("--no-steps", action="store_true", help="do not save a picture per step")
     scan.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_robot_arguments(scan)
 
     view = sub.add_parser("view", help="replay a run recorded with `nbs scan --record` in rerun's viewer")
     view.add_argument("recording", type=Path, help="a .rrd file")
@@ -230,13 +185,11 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--jobs", type=_positive_int, default=1, help="worker processes (default 1)")
     compare.add_argument("--backend", choices=("local", "ray"), default="local", help="local processes or Ray")
     compare.add_argument("--address", default=None, help="Ray cluster address (default: start a local instance)")
-    compare.add_argument("--preset", choices=("default", "fast"), default="default", help="env preset (default)")
-    compare.add_argument("--max-scans", type=_positive_int, default=80, help="scan budget per run (default 80)")
-    compare.add_argument("--wall-search", type=_count, default=0, metavar="N", help=WALL_SEARCH_HELP)
     compare.add_argument("--quiet", action="store_true", help="no progress bar")
     compare.add_argument(
         "--resume", action="store_true", help="reuse the successful runs and oracles already in --out (same specs)"
     )
+    add_robot_arguments(compare)
     return parser
 
 
@@ -249,10 +202,13 @@ def run_train(argv: Sequence[str]) -> int:
 
 def run_compare(args: argparse.Namespace) -> int:
     """``nbs compare``: the grid, its table and plots."""
+    from nbs_env.errors import ConfigError
+    from train.arguments import config_from_arguments
     from train.compare import CompareError, check_out_dir, grid, load_finished, run_grid, write_outputs, write_record
 
     try:
-        specs = grid(args.scenes, args.policies, args.seeds, args.preset, args.max_scans, args.wall_search)
+        preset, overrides = config_from_arguments(args, "default", max_scans=SCAN_BUDGET)
+        specs = grid(args.scenes, args.policies, args.seeds, preset, overrides)
         out = check_out_dir(args.out)  # before anything runs
         finished = load_finished(out, specs) if args.resume else None
         if finished and not args.quiet:
@@ -268,7 +224,7 @@ def run_compare(args: argparse.Namespace) -> int:
             finished=finished,
             on_done=lambda kind, record: write_record(out, kind, record),
         )
-    except CompareError as exc:
+    except (CompareError, ConfigError) as exc:
         print(f"nbs compare: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     try:
@@ -283,39 +239,6 @@ def run_compare(args: argparse.Namespace) -> int:
         spec = r["spec"]
         print(f"failed: {spec['scene']} {spec['policy']} seed {spec['seed']}: {r['error']}", file=sys.stderr)
     return 0 if not failed else 1
-
-
-#: Scene files by kind, for the options that apply to one kind only.
-MESH_SUFFIXES = (".obj", ".glb", ".gltf", ".ply")
-
-
-def scene_option_error(scene: str, storey: object, y_up: bool, ifc_doors: object = None) -> str | None:
-    """Why ``--storey``, ``--ifc-doors`` or ``--y-up`` does not apply to ``scene`` (None when they do).
-
-    A corpus entry (``corpus:NAME``) carries its own options; only IFC's apply to it."""
-    suffix = Path(scene).suffix.lower()
-    ifc = suffix == ".ifc" or _corpus_suffix(scene) == ".ifc"
-    if storey is not None and not ifc:
-        return f"--storey applies to .ifc files only, not to scene {scene!r}"
-    if ifc_doors is not None and not ifc:
-        return f"--ifc-doors applies to .ifc files only, not to scene {scene!r}"
-    if y_up and suffix not in MESH_SUFFIXES:
-        return f"--y-up applies to labelled meshes ({', '.join(MESH_SUFFIXES)}) only, not to scene {scene!r}"
-    return None
-
-
-def _corpus_suffix(scene: str) -> str | None:
-    """The file suffix of corpus entry ``scene`` (None when it is no corpus entry or has no file)."""
-    if not str(scene).startswith("corpus:"):
-        return None
-    from scenes import SceneError
-    from scenes.corpus import corpus_entry
-
-    try:
-        entry = corpus_entry(str(scene)[len("corpus:") :])
-    except SceneError:
-        return None
-    return Path(entry.file).suffix.lower() if entry.file else None
 
 
 def _load(args: argparse.Namespace):
@@ -410,39 +333,6 @@ def _default_out(scene: str) -> Path:
     return Path(f"scan-{re.sub(r'[^A-Za-z0-9_.-]+', '-', stem)}")
 
 
-def _scan_config(args: argparse.Namespace):
-    """The EnvConfig of ``nbs scan``'s options (raises ConfigError for bad values)."""
-    from dataclasses import replace
-
-    from nbs_env.errors import ConfigError
-    from nbs_env.settings import make_config
-
-    # The scans are kept for scans.e57, the report's scan project.
-    overrides: dict = {"scene": args.scene, "max_scans": args.max_scans, "keep_scans": True}
-    options = {"storey": args.storey, "doors": args.ifc_doors}
-    if any(v is not None for v in options.values()):
-        overrides["scene_options"] = {k: v for k, v in options.items() if v is not None}
-    cfg = make_config("default", **overrides)
-    robot = cfg.robot
-    if args.scanner is not None:
-        from nbs_env.scanners import scanner_config
-
-        scanner = scanner_config(args.scanner, simulated_step=args.resolution, height=robot.scanner.height)
-        robot = replace(robot, scanner=scanner)
-    elif args.resolution is not None:
-        robot = replace(robot, scanner=replace(robot.scanner, angular_step=args.resolution))
-    quality = {"min_density": args.min_density, "max_incidence": args.max_incidence}
-    if any(v is not None for v in quality.values()):
-        from nbs_env.evaluation import QualityConfig
-
-        cfg = replace(cfg, quality=QualityConfig(**{k: v for k, v in quality.items() if v is not None}))
-    if args.voxel is not None:
-        if not (math.isfinite(args.voxel) and 0.01 <= args.voxel <= 1.0):
-            raise ConfigError(f"--voxel must be a voxel size in metres within 0.01..1, got {args.voxel}")
-        robot = replace(robot, voxel_size=args.voxel)
-    return replace(cfg, robot=replace(robot, wall_search_scans=args.wall_search))
-
-
 def _table(rows: list[list[str]], right: set[int]) -> str:
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     lines = []
@@ -533,11 +423,13 @@ def run_scan(args: argparse.Namespace) -> int:
     """``nbs scan``: run one episode with a policy and write its report."""
     from scenes.errors import SceneError
 
-    problem = scene_option_error(args.scene, args.storey, False, args.ifc_doors)
+    problem = scene_option_error(args.scene, args.storey, args.y_up, args.ifc_doors)
     if problem is not None:
         return _scan_error(problem, EXIT_USAGE)
+    from nbs_env.config import make_config
     from nbs_env.errors import ConfigError, ModelFileError, NBSError
-    from policies import POLICIES, UnknownPolicyError, make_policy
+    from policies import POLICIES, UnknownPolicyError, agreed_requirements, config_for, make_policy
+    from train.arguments import adopt_requirements, config_from_arguments
 
     try:
         policy = make_policy(args.policy, args.seed)
@@ -546,11 +438,13 @@ def run_scan(args: argparse.Namespace) -> int:
         return _scan_error(detail, EXIT_USAGE)
     except ModelFileError as exc:
         return _scan_error(exc, EXIT_SCENE_ERROR)
-    from train.episode import wall_search_note
-
-    note = wall_search_note(policy, args.wall_search)
-    if note:
-        print(f"nbs scan: note: {note}", file=sys.stderr)
+    try:
+        # The scans are kept for scans.e57, the report's scan project.
+        preset, overrides = config_from_arguments(args, "default", max_scans=SCAN_BUDGET)
+        overrides = adopt_requirements(overrides, agreed_requirements([policy]))
+        config = config_for(make_config(preset, scene=args.scene, keep_scans=True, **overrides), policy)
+    except ConfigError as exc:
+        return _scan_error(exc, EXIT_USAGE)
     if args.record is not None:
         try:
             from nbs_env.replay import require_rerun
@@ -567,7 +461,7 @@ def run_scan(args: argparse.Namespace) -> int:
     if problem is not None:
         return _scan_error(f"--out {out}: {problem}", EXIT_USAGE)
     try:
-        return _scan(args, policy, out)
+        return _scan(args, policy, out, config)
     except ConfigError as exc:
         return _scan_error(exc, EXIT_USAGE)
     except (SceneError, NBSError) as exc:  # InvalidPoseError: a start inside a wall or outside
@@ -579,15 +473,14 @@ def run_scan(args: argparse.Namespace) -> int:
         return 130
 
 
-def _scan(args: argparse.Namespace, policy, out: Path) -> int:
+def _scan(args: argparse.Namespace, policy, out: Path, cfg) -> int:
     import matplotlib.pyplot as plt
     from tqdm import tqdm
 
     from nbs_env.env import NBSEnv
     from nbs_env.export import REPORT_FILES, write_report
-    from train.episode import config_for, run_episode
+    from train.episode import run_episode
 
-    cfg = config_for(_scan_config(args), policy)
     env = NBSEnv(cfg, render_mode="rgb_array")
     options = {} if args.start is None else {"start": args.start}
     steps_dir = out / "steps"

@@ -40,7 +40,7 @@ import time
 import traceback
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import MISSING, asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -66,22 +66,40 @@ class CompareError(ValueError):
 
 @dataclass(frozen=True)
 class RunSpec:
-    """One run of the grid (JSON-safe)."""
+    """One run of the grid (JSON-safe).
+
+    Attributes
+    ----------
+    scene, policy : str
+    seed : int
+    preset : str
+        The configuration preset (:data:`nbs_env.config.PRESETS`).
+    overrides : dict
+        The grid's dotted configuration overrides (:func:`nbs_env.config.make_config`): the robot
+        options of the command line and what the grid's policies require. The policy's own
+        settings are applied on top when the run starts (:func:`policies.config_for`).
+    """
 
     scene: str
     policy: str
     seed: int
     preset: str = "default"
-    max_scans: int = 80
-    wall_search: int = 0
+    overrides: dict[str, Any] = field(default_factory=dict)
 
     @property
     def key(self) -> str:
         return f"{self.scene}|{self.policy}|{self.seed}"
 
+    def config(self):
+        """The run's configuration, the policy's own settings aside (raises ConfigError)."""
+        from nbs_env.config import make_config
 
-#: RunSpec's defaults, for run records written before a field was added.
-SPEC_DEFAULTS = {f.name: f.default for f in fields(RunSpec) if f.default is not MISSING}
+        return make_config(self.preset, scene=self.scene, **self.overrides)
+
+
+def _json_form(value: Any) -> Any:
+    """``value`` as it reads back from JSON (tuples become lists), for comparing a record with a spec."""
+    return json.loads(json.dumps(value))
 
 
 def expand_scenes(text: str, skipped: list[str] | None = None) -> list[str]:
@@ -123,14 +141,11 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
     try:
         from nbs_env.env import NBSEnv
         from nbs_env.evaluation import metrics_dict
-        from nbs_env.settings import make_config
-        from policies import make_policy
-        from train.episode import config_for, run_episode
+        from policies import config_for, make_policy
+        from train.episode import run_episode
 
         policy = make_policy(spec.policy, spec.seed)
-        config = config_for(make_config(spec.preset, scene=spec.scene, max_scans=spec.max_scans), policy)
-        config = replace(config, robot=replace(config.robot, wall_search_scans=spec.wall_search))
-        env = NBSEnv(config)
+        env = NBSEnv(config_for(spec.config(), policy))
         times = run_episode(env, policy, spec.seed)
         metrics = metrics_dict(env.storey, spec.scene, policy, spec.seed, times)
         metrics["policy"] = spec.policy
@@ -145,23 +160,23 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
         }
 
 
-def _oracle(scene: str, preset: str = "default") -> dict[str, Any]:
-    """The oracle's plan of ``scene`` with the preset's scanner and evaluation (never raises)."""
+def _oracle(scene: str, preset: str = "default", overrides: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The oracle's plan of ``scene`` with the grid's scanner and evaluation (never raises)."""
+    setting = {"preset": preset, "overrides": _json_form(overrides or {})}
     try:
-        from nbs_env.settings import make_config
         from policies.oracle import oracle_plan
         from scenes import load_scene
 
-        cfg = make_config(preset, scene=scene)
+        cfg = RunSpec(scene, "oracle", 0, preset, overrides or {}).config()
         plan = oracle_plan(
             load_scene(scene, **cfg.scene_options),
             cfg.robot.scanner,
             spacing=cfg.coverage_spacing,
             radius=cfg.coverage_radius,
         )
-        return {"scene": scene, "preset": preset, "ok": True, **plan.to_dict()}
+        return {"scene": scene, **setting, "ok": True, **plan.to_dict()}
     except Exception as exc:
-        return {"scene": scene, "preset": preset, "ok": False, "error": f"{type(exc).__name__}: {exc}"}
+        return {"scene": scene, **setting, "ok": False, "error": f"{type(exc).__name__}: {exc}"}
 
 
 def run_grid(
@@ -200,10 +215,10 @@ def run_grid(
     from tqdm import tqdm
 
     scenes = sorted({s.scene for s in specs})
-    presets = {s.preset for s in specs}
-    if len(presets) > 1:
-        raise CompareError(f"one preset per grid, got {sorted(presets)}")
-    preset = presets.pop() if presets else "default"
+    settings = {json.dumps([s.preset, s.overrides], sort_keys=True) for s in specs}
+    if len(settings) > 1:
+        raise CompareError(f"one configuration per grid, got {sorted(settings)}")
+    preset, overrides = json.loads(settings.pop()) if settings else ("default", {})
     finished = finished or {}
     old_runs, old_oracles = finished.get("runs", {}), finished.get("oracles", {})
     tasks: list[tuple[str, Any]] = [("run", s) for s in specs] + [("oracle", s) for s in scenes]
@@ -227,13 +242,13 @@ def run_grid(
     elif backend == "local":
         if jobs <= 1:
             for k, (kind, arg) in todo:
-                finish(k, run_one(arg) if kind == "run" else _oracle(arg, preset))
+                finish(k, run_one(arg) if kind == "run" else _oracle(arg, preset, overrides))
         else:
             # spawn: forked children would inherit open3d's and OpenBLAS's threads mid-state.
             context = multiprocessing.get_context("spawn")
             with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
                 futures = {
-                    (pool.submit(run_one, arg) if kind == "run" else pool.submit(_oracle, arg, preset)): k
+                    (pool.submit(run_one, arg) if kind == "run" else pool.submit(_oracle, arg, preset, overrides)): k
                     for k, (kind, arg) in todo
                 }
                 for future in as_completed(futures):
@@ -253,7 +268,7 @@ def run_grid(
             run_remote = ray.remote(run_one)
             oracle_remote = ray.remote(_oracle)
             index = {
-                (run_remote.remote(arg) if kind == "run" else oracle_remote.remote(arg, preset)): k
+                (run_remote.remote(arg) if kind == "run" else oracle_remote.remote(arg, preset, overrides)): k
                 for k, (kind, arg) in todo
             }
             refs = list(index)
@@ -742,9 +757,9 @@ def _run_folder(out: Path, spec: dict[str, Any]) -> Path:
 def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
     """The successful runs and oracles an earlier ``nbs compare --out OUT`` left, for ``--resume``.
 
-    A run is reused when its ``run.json`` holds the same spec (scene, policy name, seed, preset,
-    scan budget, wall search; a field a record predates counts as its default); an oracle when
-    ``oracle.json`` has it for the same preset. Failed runs are run again. A checkpoint replaced
+    A run is reused when its ``run.json`` holds the same spec (scene, policy name, seed, preset and
+    configuration overrides); an oracle when ``oracle.json`` has it for the same preset and
+    overrides. Failed runs are run again. A checkpoint replaced
     under the same ``ppo:PATH`` is not noticed: use a new ``--out``.
     """
     out = Path(out)
@@ -753,28 +768,51 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
         folder = _run_folder(out, asdict(spec))
         try:
             record = json.loads((folder / "run.json").read_text())
-            if record.get("ok") and {**SPEC_DEFAULTS, **record.get("spec", {})} == asdict(spec):
+            if record.get("ok") and record.get("spec") == _json_form(asdict(spec)):
                 runs[spec.key] = {**record, "metrics": json.loads((folder / "metrics.json").read_text())}
         except (OSError, ValueError, TypeError, AttributeError):
             continue  # not there, unreadable or malformed: run it again
     oracles: dict[str, Any] = {}
-    presets = {s.preset for s in specs}
+    settings = [{"preset": s.preset, "overrides": _json_form(s.overrides)} for s in specs]
     try:
         stored = json.loads((out / "oracle.json").read_text())
     except (OSError, ValueError):
         stored = {}
     for scene, plan in stored.items() if isinstance(stored, dict) else ():
-        if isinstance(plan, dict) and plan.get("ok") and plan.get("preset") in presets:
+        if (
+            isinstance(plan, dict)
+            and plan.get("ok")
+            and {"preset": plan.get("preset"), "overrides": plan.get("overrides")} in settings
+        ):
             oracles[scene] = plan
     return {"runs": runs, "oracles": oracles}
 
 
 def grid(
-    scenes: str, policies: str, seeds: str, preset: str = "default", max_scans: int = 80, wall_search: int = 0
+    scenes: str, policies: str, seeds: str, preset: str = "default", overrides: dict[str, Any] | None = None
 ) -> list[RunSpec]:
-    """The RunSpecs of comma-separated scenes, policies and seeds (checked: bad names raise), with
-    ``wall_search`` scans per room (:attr:`nbs_env.settings.RobotConfig.wall_search_scans`)."""
-    from policies import UnknownPolicyError, make_policy
+    """The RunSpecs of comma-separated scenes, policies and seeds, checked before anything runs.
+
+    Parameters
+    ----------
+    scenes, policies, seeds : str
+        Comma-separated; scenes as :func:`expand_scenes` reads them.
+    preset : str
+        The configuration preset of every run.
+    overrides : dict, optional
+        Dotted configuration overrides of every run (the command line's robot options); what the
+        policies require (:attr:`policies.Policy.requires`) is added where they set nothing.
+
+    Raises
+    ------
+    CompareError
+        An unknown scene, policy or checkpoint, bad seeds, or scene options (``--storey``,
+        ``--ifc-doors``, ``--y-up``) that do not apply to one of the scenes.
+    ConfigError
+        A configuration value out of range, policies that require different robots, or options
+        that contradict what a policy requires; the message names them.
+    """
+    from policies import UnknownPolicyError, agreed_requirements, make_policy
 
     skipped: list[str] = []
     scene_list = expand_scenes(scenes, skipped)
@@ -784,15 +822,13 @@ def grid(
     if not policy_list:
         raise CompareError("no policies given")
     from nbs_env.errors import ModelFileError
-    from train.episode import wall_search_note
+    from train.arguments import adopt_requirements, scene_option_error
 
-    for p in policy_list:
-        try:
-            note = wall_search_note(make_policy(p, 0), wall_search)
-        except (UnknownPolicyError, ModelFileError) as exc:
-            raise CompareError(str(exc)) from None
-        if note:
-            print(f"nbs compare: note: {note}", file=sys.stderr)
+    try:
+        made = [make_policy(p, 0) for p in policy_list]
+    except (UnknownPolicyError, ModelFileError) as exc:
+        raise CompareError(str(exc)) from None
+    overrides = adopt_requirements(dict(overrides or {}), agreed_requirements(made))
     try:
         seed_list = [int(s) for s in str(seeds).split(",") if s.strip()]
     except ValueError:
@@ -801,11 +837,19 @@ def grid(
         raise CompareError("no seeds given")
     if min(seed_list) < 0:
         raise CompareError(f"seeds are integers >= 0, got {seeds!r}")
-    if not isinstance(wall_search, int) or isinstance(wall_search, bool) or wall_search < 0:
-        raise CompareError(f"wall_search is a number of scans per room >= 0, got {wall_search!r}")
-    return [
-        replace(RunSpec(scene, policy, seed), preset=preset, max_scans=max_scans, wall_search=wall_search)
+    options = overrides.get("scene_options", {})
+    for scene in scene_list:
+        problem = scene_option_error(scene, options.get("storey"), bool(options.get("y_up")), options.get("doors"))
+        if problem is not None:
+            raise CompareError(problem)
+    specs = [
+        RunSpec(scene, policy, seed, preset, overrides)
         for scene in scene_list
         for policy in policy_list
         for seed in seed_list
     ]
+    from policies import config_for
+
+    for policy in made:  # every run's configuration is checked here, not in a worker
+        config_for(specs[0].config(), policy)
+    return specs

@@ -4,33 +4,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import replace
 from typing import Any
 
 from nbs_env.env import NBSEnv
-from nbs_env.settings import EnvConfig
-from policies import Policy, env_settings
+from policies import Policy
 
-__all__ = ["config_for", "run_episode", "wall_search_note"]
-
-
-def config_for(config: EnvConfig, policy: Policy) -> EnvConfig:
-    """``config`` with the settings the policy needs (its own room completion, the belief view)."""
-    env_overrides, robot_overrides = env_settings(policy)
-    robot = replace(config.robot, **robot_overrides) if robot_overrides else config.robot
-    return replace(config, robot=robot, **env_overrides)
-
-
-def wall_search_note(policy: Policy, wall_search: int) -> str | None:
-    """A note when ``policy`` was trained with another robot wall search than ``wall_search``
-    (a learned policy that ends rooms leans on the search it was trained with); None otherwise."""
-    trained = getattr(policy, "trained_wall_search", None)
-    if trained is None or trained == wall_search:
-        return None
-    return (
-        f"{policy.name} was trained with --wall-search {trained}; this run uses --wall-search {wall_search} "
-        f"(pass --wall-search {trained} to run it, and the policies beside it, as it was trained)"
-    )
+__all__ = ["run_episode"]
 
 
 def run_episode(

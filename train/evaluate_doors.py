@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from nbs_env.settings import EnvConfig
+from nbs_env.config import EnvConfig
 from nbs_env.storey import Storey
 from policies.greedy import scan_storey
 from scenes import load_scene
@@ -49,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
             scene = load_scene(f"generated:{storey - 1}", rooms=(2, 4), start=tuple(start[0]))
             session = Storey(scene, EnvConfig(), rng)
             scan_storey(session, max_rooms=1)
-            found = [d for d in session.robot.doors if d.found_in_room == 0]
+            found = [d for d in session.rooms.doors if d.found_in_room == 0]
             truth = [d for d in scene.doors if room.id in d.rooms]
             matched, width_errors = set(), []
             for f in found:

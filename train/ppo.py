@@ -17,17 +17,18 @@ import json
 import os
 import sys
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from nbs_env import threads
-from nbs_env.config import Config, _finite, _integer, _require
+from nbs_env.config import Config, EnvConfig, _finite, _integer, _require
 from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import ROOM_FEATURES
 from policies.learned import NetworkConfig, build_network, save_checkpoint
-from train.arguments import parse_range
+from train.arguments import add_robot_arguments, config_from_arguments, parse_range, scene_option_error
 
 __all__ = ["TrainConfig", "main", "train"]
 
@@ -92,9 +93,14 @@ class TrainConfig(Config):
         missed point dearer relative to them.
     ent_coef : float
         PPO's entropy bonus (stable-baselines3's ``ent_coef``; 0 is its default).
-    wall_search : int
-        The robot's wall-search scans per room (:attr:`nbs_env.settings.RobotConfig.wall_search_scans`)
-        in the training and validation envs; 0 (default) is the paper's robot.
+    preset : str
+        The configuration preset of the training and validation envs (``"fast"``).
+    overrides : dict
+        Dotted configuration overrides on the preset (:func:`nbs_env.config.make_config`): the
+        robot options of ``nbs train``'s command line (``--scanner``, ``--wall-search``, ``--set``
+        ...), the same as ``nbs scan`` and ``nbs compare`` take. The checkpoint records the
+        resulting configuration, and a policy trained with room rules requires them
+        (:attr:`policies.Policy.requires`).
     cell_size : (float, float)
         The range of the generator's cell edge, metres: rooms are unions of such cells, so larger
         cells make larger rooms and open spaces.
@@ -123,7 +129,8 @@ class TrainConfig(Config):
     metre_cost: float = 0.05
     scan_cost: float = 0.5
     ent_coef: float = 0.0
-    wall_search: int = 0
+    preset: str = "fast"
+    overrides: dict[str, Any] = field(default_factory=dict)
     completion: str = "gain"
     cell_size: tuple[float, float] = (2.0, 3.6)
     init: str = ""
@@ -142,7 +149,7 @@ class TrainConfig(Config):
         _teacher(self.bc_teacher)  # an unknown or non-greedy teacher fails here, before any worker starts
         for name in ("timesteps", "envs", "n_steps", "batch_size", "eval_storeys", "max_episode_steps"):
             _integer(self, name, 1)
-        for name in ("seed", "eval_every", "checkpoint_every", "bc_steps", "wall_search"):
+        for name in ("seed", "eval_every", "checkpoint_every", "bc_steps"):
             _integer(self, name, 0)
         _require(
             len(self.rooms) == 2
@@ -163,6 +170,28 @@ class TrainConfig(Config):
         _require(
             self.completion in ("policy", "gain"), f"completion must be 'policy' or 'gain', got {self.completion!r}"
         )
+        _require(isinstance(self.overrides, dict), f"overrides must be a dict, got {self.overrides!r}")
+        self.env_config()  # a bad preset or override fails here, before any worker starts
+
+    def env_config(self, **overrides: Any) -> EnvConfig:
+        """The configuration of the run's envs: the preset with the run's overrides, its storeys,
+        prices and room completion, and ``overrides`` (e.g. ``scene=``) on top.
+
+        Raises
+        ------
+        ConfigError
+            The preset or an override is refused.
+        """
+        from nbs_env.config import make_config
+
+        run = {
+            "generator.rooms": self.rooms,
+            "generator.cell_size": self.cell_size,
+            "reward.metre_cost": self.metre_cost,
+            "reward.scan_cost": self.scan_cost,
+            "rooms.completion": self.completion,
+        }
+        return make_config(make_config(self.preset, **{**self.overrides, **run}), **overrides)
 
     @property
     def network(self) -> NetworkConfig:
@@ -180,17 +209,7 @@ def _env_factory(run: TrainConfig):
         import gymnasium as gym
         from stable_baselines3.common.monitor import Monitor
 
-        from nbs_env.settings import make_config
-        from scenes.generator import GeneratorConfig
-
-        config = make_config("fast")
-        config = replace(
-            config,
-            generator=GeneratorConfig(rooms=run.rooms, cell_size=run.cell_size),
-            reward=replace(config.reward, metre_cost=run.metre_cost, scan_cost=run.scan_cost),
-            completion=run.completion,
-            robot=replace(config.robot, wall_search_scans=run.wall_search),
-        )
+        config = run.env_config()
         # Monitor puts each episode's return in info["episode"], for the learning-curve log.
         env = gym.make("nbs_env:nbs_env/NBS-Fast-v0", config=config, max_episode_steps=run.max_episode_steps)
         return Monitor(env)
@@ -250,18 +269,26 @@ def _layout(model) -> str:
     return "xyz" if shape == (64, 64, 16) else "zxy"
 
 
-def evaluate(
-    policy_fn, storeys: list[int], max_episode_steps: int, completion: str = "gain", wall_search: int = 0
-) -> dict[str, float]:
-    """Mean scans, SE % and path of a policy over held-out generated storeys (the fast preset, with
-    ``completion`` and ``wall_search`` scans per room)."""
+def evaluate(policy_fn, storeys: list[int], max_episode_steps: int, config: EnvConfig) -> dict[str, float]:
+    """Mean scans, SE % and path of a policy over held-out generated storeys.
+
+    Parameters
+    ----------
+    policy_fn : callable
+        ``policy_fn(obs, info) -> action``.
+    storeys : list of int
+        Seeds of the generated storeys.
+    max_episode_steps : int
+        Decisions per episode at the most, and its scan budget.
+    config : EnvConfig
+        The envs' configuration (:meth:`TrainConfig.env_config`); its scene and budget are replaced.
+    """
+    from nbs_env.config import make_config
     from nbs_env.env import NBSEnv
-    from nbs_env.settings import make_config
 
     scans, pct, path = [], [], []
     for seed in storeys:
-        config = make_config("fast", scene=f"generated:{seed}", max_scans=max_episode_steps, completion=completion)
-        env = NBSEnv(replace(config, robot=replace(config.robot, wall_search_scans=wall_search)))
+        env = NBSEnv(make_config(config, scene=f"generated:{seed}", max_scans=max_episode_steps))
         obs, info = env.reset(seed=seed)
         # At most max_episode_steps decisions, as training's TimeLimit, and as many scans: with the
         # gain rule a step takes at least one scan, with "room done" steps the decisions bind first.
@@ -347,7 +374,7 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
     greedy = GreedyPolicy()
     baseline = None
     if config.eval_every:
-        baseline = evaluate(greedy.act, held_out, config.max_episode_steps, config.completion, config.wall_search)
+        baseline = evaluate(greedy.act, held_out, config.max_episode_steps, config.env_config())
 
     class Progress(BaseCallback):
         def _on_training_start(self) -> None:
@@ -382,7 +409,7 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
                 )
                 return int(action[0])
 
-            learned = evaluate(act, held_out, config.max_episode_steps, config.completion, config.wall_search)
+            learned = evaluate(act, held_out, config.max_episode_steps, config.env_config())
             record = {"timesteps": n, "learned": learned, "greedy": baseline}
             record["train_return"] = float(np.mean(self.episodes[-20:])) if self.episodes else None
             with log.open("a") as f:
@@ -408,6 +435,9 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
         _layout(model),
         training={
             **config.to_dict(),
+            # The full configuration the envs ran with: what a user of the checkpoint reproduces,
+            # and the room rules the policy then requires (policies.learned.trained_rules).
+            "config": config.env_config().to_dict(),
             "seconds": time.time() - started,
             "device": device,
             "algo": "maskable_ppo",
@@ -583,9 +613,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scan-cost", type=float, default=0.5, help="reward per scan, subtracted")
     p.add_argument("--ent-coef", type=float, default=0.0, help="PPO's entropy bonus")
     p.add_argument(
-        "--wall-search", type=int, default=0, help="the robot's wall-search scans per room (default 0: the paper's)"
-    )
-    p.add_argument(
         "--completion",
         choices=("policy", "gain"),
         default="gain",
@@ -596,6 +623,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--init", default="", help="checkpoint to start the network from (default: random weights)")
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--quiet", action="store_true")
+    add_robot_arguments(p)
     return p
 
 
@@ -612,7 +640,12 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         print(f"nbs train: error: --cell-size: expected A-B in metres, got {args.cell_size!r}", file=sys.stderr)
         return 2
+    problem = scene_option_error("generated", args.storey, args.y_up, args.ifc_doors)
+    if problem is not None:
+        print(f"nbs train: error: {problem} (nbs train scans generated storeys)", file=sys.stderr)
+        return 2
     try:
+        preset, overrides = config_from_arguments(args, "fast")
         config = TrainConfig(
             timesteps=args.timesteps,
             envs=args.envs,
@@ -628,7 +661,8 @@ def main(argv: list[str] | None = None) -> int:
             metre_cost=args.metre_cost,
             scan_cost=args.scan_cost,
             ent_coef=args.ent_coef,
-            wall_search=args.wall_search,
+            preset=preset,
+            overrides=overrides,
             completion=args.completion,
             max_episode_steps=args.max_episode_steps,
             cell_size=cell_size,

@@ -47,96 +47,11 @@ import numpy as np
 import shapely
 from scipy.spatial import cKDTree
 
-from nbs_env.config import Config, _finite_fields, _integer, _require
+from nbs_env.config import DoorConfig
 from nbs_env.perception.faces import PointIndex, WallFace
 from nbs_env.perception.structure import face_image
 
 __all__ = ["DetectedDoor", "DoorConfig", "detect_doors"]
-
-
-@dataclass(frozen=True)
-class DoorConfig(Config):
-    """Limits of a door opening (METHOD §8).
-
-    Attributes
-    ----------
-    min_width, max_width : float
-        Clear width, metres. Up to 4 m, so that a wide passage under a lintel between open-plan
-        rooms counts (FZK-Haus: 3.5 m from the living room to the hall; with 1.5 m the robot never
-        left the living room).
-    min_height, max_height : float
-        Clear height, metres; the lintel must have been seen within this range.
-    floor_gap : float
-        How far above the floor the opening must start at the latest (a threshold), metres.
-    behind : float
-        Points at least this far behind the face plane count as seen through the opening, metres.
-    min_behind_points : int
-        Least number of such points.
-    pixel : float
-        Pixel size of the face image, metres.
-    covered_share : float
-        Least share of the rising rays through an opening that must return a point beyond it for
-        the opening to lead indoors (module docstring).
-    min_rising_rays : int
-        Fewer rising rays through an opening than this decide nothing: the door counts as interior.
-    cross_exterior : bool
-        Cross exterior doors as if they led into rooms (off by default: the robot stays inside).
-    fill_gap : float
-        Gaps up to this wide between points of a row of the face image are filled before the
-        search (a lintel seen in stripes, module docstring), metres; below ``min_width``.
-    max_extension : float
-        How far beyond either end of a face its line may be followed along measured points
-        (module docstring), metres; 0 searches the faces as given.
-    """
-
-    min_width: float = 0.6
-    max_width: float = 4.0
-    min_height: float = 1.8
-    max_height: float = 2.3
-    floor_gap: float = 0.15
-    behind: float = 0.3
-    min_behind_points: int = 50
-    pixel: float = 0.05
-    covered_share: float = 0.5
-    min_rising_rays: int = 20
-    cross_exterior: bool = False
-    fill_gap: float = 0.2
-    max_extension: float = 8.0
-
-    def __post_init__(self) -> None:
-        _finite_fields(
-            self,
-            "min_width",
-            "max_width",
-            "min_height",
-            "max_height",
-            "floor_gap",
-            "behind",
-            "pixel",
-            "covered_share",
-            "fill_gap",
-            "max_extension",
-        )
-        _require(
-            0 < self.min_width <= self.max_width,
-            f"need 0 < min_width <= max_width, got {self.min_width}, {self.max_width}",
-        )
-        _require(
-            0 < self.min_height <= self.max_height,
-            f"need 0 < min_height <= max_height, got {self.min_height}, {self.max_height}",
-        )
-        _require(self.floor_gap >= 0, f"floor_gap must be >= 0 metres, got {self.floor_gap}")
-        _require(self.behind >= 0, f"behind must be >= 0 metres, got {self.behind}")
-        _require(self.pixel > 0, f"pixel must be > 0 metres, got {self.pixel}")
-        _integer(self, "min_behind_points", 0)
-        _integer(self, "min_rising_rays", 1)
-        _require(0 <= self.covered_share <= 1, f"covered_share must be in [0, 1], got {self.covered_share}")
-        _require(isinstance(self.cross_exterior, bool), f"cross_exterior must be a bool, got {self.cross_exterior!r}")
-        _require(
-            0 <= self.fill_gap < self.min_width,
-            f"need 0 <= fill_gap < min_width, got {self.fill_gap}, {self.min_width}",
-        )
-        _require(self.max_extension >= 0, f"max_extension must be >= 0 metres, got {self.max_extension}")
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ from scipy import ndimage
 from shapely.geometry import Polygon
 from shapely.geometry.polygon import orient
 
-from nbs_env.config import Config, _finite_fields, _integer, _require
+from nbs_env.config import RoIConfig
 from nbs_env.errors import NBSError
 from nbs_env.perception.faces import WallFace
 
@@ -59,53 +59,6 @@ SKY_SHARE = 0.9
 
 class RoIError(NBSError, ValueError):
     """The points do not define a room (too few, or no floor/ceiling found)."""
-
-
-@dataclass(frozen=True)
-class RoIConfig(Config):
-    """Options of the RoI computation.
-
-    Attributes
-    ----------
-    pixel : float
-        Grid size of the top projection, metres.
-    histogram_bin : float
-        Bin width of the z histogram, metres.
-    band_above_floor : float
-        Lower edge of the band whose points bound the seen free space, metres above the floor. It
-        must clear door heads (2.0-2.1 m in most buildings) and tall furniture, yet stay inside the
-        scanner's +60° field of view from the robot's 0.45 m clearance to a wall: at 2.25 m the wall
-        above a door is seen from 0.45 m away (59°).
-    band_below_ceiling : float
-        Upper edge of that band, metres below the ceiling.
-    azimuth_bins : int
-        Angular bins per scan for the free-space outline.
-    max_range : float
-        Free space farther than this from a scan position is ignored, metres.
-    corner_distance : float
-        Least distance between two polygon vertices, metres.
-    collinear_deg : float
-        Consecutive edges closer than this in direction merge into one.
-    """
-
-    pixel: float = 0.05
-    histogram_bin: float = 0.02
-    band_above_floor: float = 2.25
-    band_below_ceiling: float = 0.05
-    azimuth_bins: int = 1440
-    max_range: float = 30.0
-    corner_distance: float = 0.30
-    collinear_deg: float = 8.0
-
-    def __post_init__(self) -> None:
-        lengths = ("pixel", "histogram_bin", "band_above_floor", "max_range")
-        _finite_fields(self, *lengths, "band_below_ceiling", "corner_distance", "collinear_deg")
-        for name in lengths:
-            _require(getattr(self, name) > 0, f"{name} must be > 0 metres, got {getattr(self, name)}")
-        _require(self.band_below_ceiling >= 0, f"band_below_ceiling must be >= 0, got {self.band_below_ceiling}")
-        _require(self.corner_distance >= 0, f"corner_distance must be >= 0, got {self.corner_distance}")
-        _require(0 <= self.collinear_deg < 90, f"collinear_deg must be in [0, 90), got {self.collinear_deg}")
-        _integer(self, "azimuth_bins", 4)
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from nbs_env.config import Config, _finite, _require
+from nbs_env.config import NavigationConfig, _finite, _require
 from nbs_env.labels import VoxelLabel, is_occupied
 
 __all__ = [
@@ -62,68 +62,6 @@ _DIST_EPS = 1e-9
 _EIGHT = np.ones((3, 3), dtype=bool)
 #: Neighbour offsets whose edges, taken both ways, make the 8-connected graph.
 _HALF_NEIGHBOURHOOD = ((1, 0), (0, 1), (1, 1), (1, -1))
-
-
-@dataclass(frozen=True)
-class NavigationConfig(Config):
-    """The robot's footprint and the NVP candidate list, METHOD §6.
-
-    Attributes
-    ----------
-    robot_radius : float
-        Radius of the robot's footprint, metres.
-    safety_distance : float
-        Extra distance to any occupied voxel, metres (the paper's 20 cm).
-    robot_height : float
-        Top of the column above the floor that must be Empty, metres.
-    floor_clearance : float
-        Voxels whose centre is less than this above the floor are ignored, metres: the floor itself
-        is Structure, and range noise spreads it over a voxel or two.
-    lattice : float
-        Spacing of the candidate lattice, metres. The lattice is anchored at world multiples of it.
-    max_candidates : int
-        K, the length of the candidate list (the action space).
-    min_distance : float
-        Candidates closer than this to the robot (Euclidean, metres) are dropped: scanning again
-        from where the robot stands gains nothing.
-    """
-
-    robot_radius: float = 0.25
-    safety_distance: float = 0.20
-    robot_height: float = 1.8
-    floor_clearance: float = 0.10
-    lattice: float = 0.5
-    max_candidates: int = 64
-    min_distance: float = 0.5
-
-    def __post_init__(self) -> None:
-        _finite(
-            robot_radius=self.robot_radius,
-            safety_distance=self.safety_distance,
-            robot_height=self.robot_height,
-            floor_clearance=self.floor_clearance,
-            lattice=self.lattice,
-            min_distance=self.min_distance,
-        )
-        _require(self.robot_radius > 0, f"robot_radius must be > 0, got {self.robot_radius}")
-        _require(self.safety_distance >= 0, f"safety_distance must be >= 0, got {self.safety_distance}")
-        _require(self.floor_clearance >= 0, f"floor_clearance must be >= 0, got {self.floor_clearance}")
-        _require(
-            self.robot_height > self.floor_clearance,
-            f"robot_height ({self.robot_height} m) must exceed floor_clearance ({self.floor_clearance} m)",
-        )
-        _require(self.lattice > 0, f"lattice must be > 0, got {self.lattice}")
-        _require(
-            isinstance(self.max_candidates, int) and not isinstance(self.max_candidates, bool),
-            f"max_candidates must be an integer, got {self.max_candidates!r}",
-        )
-        _require(self.max_candidates >= 1, f"max_candidates must be >= 1, got {self.max_candidates}")
-        _require(self.min_distance >= 0, f"min_distance must be >= 0, got {self.min_distance}")
-
-    @property
-    def required_clearance(self) -> float:
-        """Least distance from a traversable cell to an occupied voxel: radius plus safety distance."""
-        return self.robot_radius + self.safety_distance
 
 
 @dataclass(frozen=True)

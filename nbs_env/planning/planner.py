@@ -36,7 +36,7 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
-from nbs_env.config import ScannerConfig
+from nbs_env.config import PlanningConfig, ScannerConfig
 from nbs_env.errors import ConfigError
 from nbs_env.labels import VoxelLabel
 from nbs_env.mapping.voxels import VoxelGrid
@@ -59,6 +59,7 @@ __all__ = [
     "GainModel",
     "Plan",
     "PlanningConfig",
+    "check_gain_model",
     "greedy_order",
     "make_gain_model",
     "plan",
@@ -114,35 +115,22 @@ def register_gain_model(name: str, factory: GainModelFactory, *, replace: bool =
     GAIN_MODELS[name] = factory
 
 
-def make_gain_model(labels: np.ndarray, origin: np.ndarray, voxel_size: float, config: GainConfig) -> GainModel:
-    """The gain model ``config.model`` names, built on one state of V(t)."""
+def check_gain_model(config: GainConfig) -> None:
+    """Refuse a configuration whose gain model is not registered (before a robot takes a scan).
+
+    Raises
+    ------
+    ConfigError
+        ``config.model`` names no registered model; the message lists those that are.
+    """
     if config.model not in GAIN_MODELS:
         raise ConfigError(f"unknown gain model {config.model!r}; registered: {', '.join(sorted(GAIN_MODELS))}")
+
+
+def make_gain_model(labels: np.ndarray, origin: np.ndarray, voxel_size: float, config: GainConfig) -> GainModel:
+    """The gain model ``config.model`` names, built on one state of V(t)."""
+    check_gain_model(config)
     return GAIN_MODELS[config.model](labels, origin, voxel_size, config)
-
-
-@dataclass(frozen=True)
-class PlanningConfig:
-    """What the planner is given: the scanner, the robot's footprint, the gain (JSON-safe, frozen).
-
-    Attributes
-    ----------
-    scanner : ScannerConfig
-        Its height over the floor places the sensors; its lowest elevation and minimum range make
-        the blind zone; its field of view and range limit the gain.
-    navigation : NavigationConfig
-        The robot's footprint and the candidate list.
-    gain : GainConfig
-        Which gain model, and its options.
-    predict_gains : bool
-        Predict the gain of every NVP. Off for policies with their own utility (their processing
-        time then does not carry the greedy's); :attr:`Plan.gains` is all zero.
-    """
-
-    scanner: ScannerConfig = field(default_factory=ScannerConfig)
-    navigation: NavigationConfig = field(default_factory=NavigationConfig)
-    gain: GainConfig = field(default_factory=GainConfig)
-    predict_gains: bool = True
 
 
 def greedy_order(gains: np.ndarray, path_lengths: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:

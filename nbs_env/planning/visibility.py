@@ -9,58 +9,14 @@ compiled kernel; only V(t) is used, never the scene.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numba
 import numpy as np
 
 from nbs_env import threads
-from nbs_env.config import Config, ScannerConfig, _finite_fields, _integer, _require
+from nbs_env.config import GainConfig, ScannerConfig
 from nbs_env.labels import VoxelLabel
 
 __all__ = ["COARSE", "GainConfig", "VisibilityModel", "coarse_blocking"]
-
-
-@dataclass(frozen=True)
-class GainConfig(Config):
-    """Options of the gain.
-
-    Attributes
-    ----------
-    model : str
-        The gain model, by its name in :data:`nbs_env.planning.planner.GAIN_MODELS`: ``"visibility"``
-        (this module's :class:`VisibilityModel`, the paper's gain) or one registered with
-        :func:`nbs_env.planning.planner.register_gain_model`. The options below are the visibility
-        model's; another model may read them or not.
-    occluded_clutter_blocks : bool
-        Whether OCCLUDED_CLUTTER voxels block lines of sight as occupied ones do. Unsensed space
-        may hold furniture; blocking is the pessimistic reading (see benchmarks/README.md for the
-        measurement that chose the default).
-    tolerance_voxels : float
-        A line of sight that reaches within this many voxels of the target counts: the target's own
-        neighbours on the same wall must not hide it at grazing angles.
-    group : int
-        Occluded-structure voxels are cast to in groups of ``group``³ voxels: one line of sight to
-        the mean centre of a group's members stands for all of them. Surfaces are thin, so groups of
-        2 cut the rays about fourfold at 5 cm (measured in benchmarks/gain.py); 1 casts to every voxel.
-    """
-
-    model: str = "visibility"
-    occluded_clutter_blocks: bool = False
-    tolerance_voxels: float = 1.0
-    group: int = 2
-
-    def __post_init__(self) -> None:
-        _require(
-            isinstance(self.model, str) and self.model != "", f"model must be a gain model's name, got {self.model!r}"
-        )
-        _require(
-            isinstance(self.occluded_clutter_blocks, bool),
-            f"occluded_clutter_blocks must be true or false, got {self.occluded_clutter_blocks!r}",
-        )
-        _finite_fields(self, "tolerance_voxels")
-        _require(self.tolerance_voxels >= 0, f"tolerance_voxels must be >= 0, got {self.tolerance_voxels}")
-        _integer(self, "group", 1)
 
 
 #: Edge of the coarse cells of the traversal, in voxels: a line of sight crosses a coarse cell that

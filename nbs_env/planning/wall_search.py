@@ -19,7 +19,7 @@ keeping only its radius clear (``narrow``; the NVPs keep a safety distance more)
 
 ``sees(sensors, targets)`` is a line-of-sight test through V(t)
 (:meth:`~nbs_env.planning.visibility.VisibilityModel.sees`). Not part of the paper's method
-(METHOD §7 ends a room by its gain alone): :attr:`nbs_env.settings.RobotConfig.wall_search_scans`
+(METHOD §7 ends a room by its gain alone): :attr:`nbs_env.config.WallSearchConfig.scans`
 switches it on, 0 (off) by default.
 """
 
@@ -32,115 +32,13 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
-from nbs_env.config import Config, ScannerConfig, _finite_fields, _integer, _require
+from nbs_env.config import ScannerConfig, WallSearchConfig
 from nbs_env.perception.roi import RoI
 
 __all__ = ["WallSamples", "WallSearchConfig", "approach_position", "search_position", "unviewed_wall"]
 
 #: ``sees(sensors (c, 3), targets (n, 3)) -> (c, n) bool``.
 LineOfSight = Callable[[np.ndarray, np.ndarray], np.ndarray]
-
-
-@dataclass(frozen=True)
-class WallSearchConfig(Config):
-    """How walls are sampled and when a sample counts as viewed (JSON-safe, frozen).
-
-    Attributes
-    ----------
-    step : float
-        Metres between sample columns along a wall face.
-    heights : tuple of float
-        Heights of a column's samples above the RoI's floor, metres (a door's opening spans them).
-    inset : float
-        Samples lie this far (metres) in front of the face, so that the wall's own voxels do not
-        block the line of sight to them.
-    incidence_deg : float
-        A stop views a sample that it sees at most this far off the face's normal: a wall seen
-        edge-on shows no gap.
-    max_range : float
-        ... and at most this far (metres): beyond it a door's opening is crossed by too few rays.
-    min_rays : int
-        ... and its scan would send at least this many rays through an opening of
-        ``opening_width`` x ``opening_height`` there (the scanner's angular step, its elevation
-        band): door detection asks for rays seen through the gap
-        (:attr:`~nbs_env.perception.doors.DoorConfig.min_behind_points`). 0: no such condition.
-    opening_width, opening_height : float
-        The opening ``min_rays`` is counted through, metres (a narrow door); its top, the lintel,
-        must lie beyond the scanner's minimum range.
-    wall_thickness : float
-        Metres: seen obliquely, the opening's far jamb hides ``wall_thickness`` x sin(incidence)
-        of its width.
-    beyond : float
-        A column needs no view when the point this far (metres) behind the face lies in a room
-        already scanned (the robot's ``BEYOND_DOOR``).
-    min_run : float
-        Unviewed stretches shorter than this (metres) are no target (narrower than a door), and a
-        position must view at least this much of the targets to be worth a scan.
-    approach : float
-        When no NVP views the targets, the NVP nearest to them is scanned from if it is at least
-        this much (metres) nearer to them than every stop of the room (:func:`approach_position`).
-        0: no such scan.
-    narrow : bool
-        When no NVP views the targets or approaches them, scan from a place that keeps only the
-        robot's radius clear of obstacles (the clearance a door crossing keeps, without the NVPs'
-        safety distance) if one views them: a gap between furniture narrower than the NVPs'
-        clearance may be the only way to the wall (:meth:`nbs_env.robot.Robot.wall_search`).
-    doors : bool
-        Once no door is left that a route reaches, scan to come nearer to a door of the room that
-        none reaches, across floor not yet measured (:meth:`nbs_env.robot.Robot.door_search`), at
-        least ``approach`` metres nearer than every stop; the door is given up only when no such
-        scan is left.
-    """
-
-    step: float = 0.25
-    heights: tuple[float, ...] = (1.0, 1.8)
-    inset: float = 0.15
-    incidence_deg: float = 72.0
-    max_range: float = 10.0
-    min_rays: int = 0
-    opening_width: float = 0.8
-    opening_height: float = 2.0
-    wall_thickness: float = 0.2
-    beyond: float = 0.6
-    min_run: float = 0.75
-    approach: float = 1.0
-    narrow: bool = True
-    doors: bool = True
-
-    def __post_init__(self) -> None:
-        for name in ("narrow", "doors"):
-            value = getattr(self, name)
-            _require(isinstance(value, bool), f"wall search: {name} must be a bool, got {value!r}")
-        _finite_fields(
-            self,
-            "step",
-            "inset",
-            "incidence_deg",
-            "max_range",
-            "beyond",
-            "min_run",
-            "opening_width",
-            "opening_height",
-            "wall_thickness",
-            "approach",
-        )
-        _integer(self, "min_rays", 0)
-        for name in ("step", "max_range", "beyond", "min_run", "opening_width", "opening_height"):
-            _require(getattr(self, name) > 0, f"wall search: {name} must be > 0 metres, got {getattr(self, name)}")
-        _require(self.inset >= 0, f"wall search: inset must be >= 0 metres, got {self.inset}")
-        _require(self.approach >= 0, f"wall search: approach must be >= 0 metres, got {self.approach}")
-        _require(
-            self.wall_thickness >= 0, f"wall search: wall_thickness must be >= 0 metres, got {self.wall_thickness}"
-        )
-        _require(
-            0 < self.incidence_deg < 90, f"wall search: incidence_deg must be in (0, 90), got {self.incidence_deg}"
-        )
-        heights = tuple(self.heights)
-        _require(
-            len(heights) > 0 and all(isinstance(h, int | float) and np.isfinite(h) and h > 0 for h in heights),
-            f"wall search: heights must be positive numbers of metres, got {self.heights!r}",
-        )
-        object.__setattr__(self, "heights", tuple(float(h) for h in heights))
 
 
 @dataclass(frozen=True)

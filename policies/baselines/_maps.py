@@ -226,15 +226,26 @@ class MappingPolicy:
         ε of the stopping rule, in the method's unit; 0 never stops by the rule (the per-room scan
         cap then ends every room).
     controlled : bool
-        The controlled mode: the room ends by the greedy's rule (``completion="gain"``: its predicted
-        conversions below 1% of the room's structural voxels) and the method only chooses where to
-        scan, so that "where to scan" can be told from "when to stop".
+        The controlled mode: the room ends by the greedy's rule (``rooms.completion="gain"``: its predicted
+        conversions below ``rooms.completion_fraction`` of the room's structural voxels) and the method
+        only chooses where to scan, so that "where to scan" can be told from "when to stop".
+
+    Raises
+    ------
+    ValueError
+        ``stop_below`` is not a finite number >= 0.
     """
 
     name = "mapping"
-    #: The env settings the policy needs (``nbs compare`` and ``nbs scan`` apply them).
-    env_overrides: ClassVar[dict[str, Any]] = {"completion": "policy", "expose_belief": True}
-    robot_overrides: ClassVar[dict[str, Any]] = {"predict_gains": False}
+    #: What the policy runs with (:func:`policies.config_for` applies it): its own stopping rule
+    #: through "room done", its own maps from the belief view, and no greedy gains to pay for.
+    config_overrides: ClassVar[dict[str, Any]] = {
+        "rooms.completion": "policy",
+        "expose_belief": True,
+        "robot.predict_gains": False,
+    }
+    #: It runs on any robot.
+    requires: ClassVar[dict[str, Any]] = {}
     #: Structure-agnostic methods process every point (METHOD §9).
     structure_aware = False
     #: The calibrated ε (subclasses set theirs).
@@ -252,11 +263,11 @@ class MappingPolicy:
         self.controlled = bool(controlled)
         if self.controlled:
             # The greedy's room completion needs its predicted gains.
-            self.env_overrides = {"completion": "gain", "expose_belief": True}  # type: ignore[misc]
-            self.robot_overrides = {}  # type: ignore[misc]
+            self.config_overrides = {"rooms.completion": "gain", "expose_belief": True}  # type: ignore[misc]
         self.reset()
 
     def reset(self) -> None:
+        """Forget the maps, the dropped points and the trace of the previous episode."""
         self._room: int | None = None
         self._expected: tuple[np.ndarray, Any] | None = None
         #: World points of the room (voxel centres, or cell centres at floor height) that a scan
@@ -270,16 +281,48 @@ class MappingPolicy:
         if "belief" not in info:
             raise KeyError(
                 f"{type(self).__name__} keeps its own map and needs info['belief']: make the env with "
-                f"expose_belief=True and completion='policy' (see {type(self).__name__}.env_overrides)"
+                f"expose_belief=True and rooms.completion='policy' (see {type(self).__name__}.config_overrides)"
             )
         return info["belief"]
 
     @staticmethod
     def labels_of(belief: BeliefView) -> np.ndarray:
-        """The room's labels as the planner reads them (``belief.labels``), else V(t)'s own."""
+        """The room's labels as the planner reads them (``belief.labels``), else V(t)'s own.
+
+        Parameters
+        ----------
+        belief : BeliefView
+
+        Returns
+        -------
+        (nx, ny, nz) uint8
+            VoxelLabel values.
+        """
         return belief.labels if getattr(belief, "labels", None) is not None else belief.grid.labels
 
     def act(self, obs: dict[str, np.ndarray], info: dict[str, Any]) -> int:
+        """The valid candidate of the largest :meth:`utilities`, or "room done" by the stopping rule.
+
+        Parameters
+        ----------
+        obs : dict of str to numpy.ndarray
+            The env's observation (not read: the method keeps its own maps).
+        info : dict of str to Any
+            The env's ``info``; its ``"belief"`` (:class:`~nbs_env.observation.BeliefView`, from
+            ``expose_belief=True``) is read.
+
+        Returns
+        -------
+        int
+            A candidate slot, or K = ``len(belief.mask)`` ("room done") when the rule fires or no
+            candidate is valid; in the controlled mode the rule never fires and no valid candidate
+            gives 0.
+
+        Raises
+        ------
+        KeyError
+            ``info`` has no ``"belief"``.
+        """
         belief = self._belief(info)
         stop = len(belief.mask)  # the "room done" action (completion="policy")
         self._track_room(belief)
@@ -327,8 +370,19 @@ class MappingPolicy:
             self.dropped = np.concatenate([self.dropped, missed.reshape(-1, 3)])
 
     def dropped_mask(self, grid, plan: bool = False) -> np.ndarray:
-        """(nx, ny, nz) bool (or (nx, ny) with ``plan``) of the grid's voxels or columns holding a
-        dropped point."""
+        """The grid's voxels (or columns) that hold a dropped point (:meth:`expect`).
+
+        Parameters
+        ----------
+        grid : VoxelGrid
+            The room's grid.
+        plan : bool
+            Columns (2-D) instead of voxels.
+
+        Returns
+        -------
+        (nx, ny, nz) bool, or (nx, ny) bool with ``plan``
+        """
         shape = grid.shape[:2] if plan else grid.shape
         out = np.zeros(shape, dtype=bool)
         if len(self.dropped):
@@ -341,33 +395,112 @@ class MappingPolicy:
     def dense_range(belief: BeliefView) -> float:
         """Metres within which a scan's point spacing is finer than a voxel: a voxel there that a
         scan had in view and left unseen was not to be seen (the greedy's rule,
-        :func:`nbs_env.planning.planner.unobservable_after`)."""
+        :func:`nbs_env.planning.planner.unobservable_after`).
+
+        Parameters
+        ----------
+        belief : BeliefView
+            Read for its grid's voxel size and its scanner's angular step.
+
+        Returns
+        -------
+        float
+        """
         return float(belief.grid.voxel_size / np.radians(belief.scanner.angular_step))
 
     # ------------------------------------------------------------------ hooks
     def new_room(self, belief: BeliefView) -> None:
-        """Start the maps of a new room."""
+        """Start the maps of a new room (a hook: nothing by default).
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The robot's belief at the room's first decision.
+        """
 
     def observe(self, belief: BeliefView) -> None:
-        """Take in this step's measurements."""
+        """Take in this step's measurements (a hook: nothing by default).
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The belief of the decision.
+        """
 
     def utilities(self, belief: BeliefView, valid: np.ndarray) -> np.ndarray:
-        """(len(valid),) float: the utility of each valid candidate (the argmax is the next scan)."""
+        """The utility of each valid candidate (the argmax is the next scan); each method defines it.
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The belief of the decision.
+        valid : (m,) int64
+            The slots of the valid candidates (``np.flatnonzero(belief.mask)``).
+
+        Returns
+        -------
+        (m,) float
+        """
         raise NotImplementedError
 
     def stop_statistic(self, belief: BeliefView, valid: np.ndarray, utility: np.ndarray) -> float:
-        """The best gain in the method's unit, which the rule compares with ``stop_below``."""
+        """The best gain in the method's unit, which the rule compares with ``stop_below`` (after
+        dividing by the RoI's floor area to the power :attr:`stop_area_power`).
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The belief of the decision.
+        valid : (m,) int64
+            The slots of the valid candidates.
+        utility : (m,) float
+            Their :meth:`utilities`.
+
+        Returns
+        -------
+        float
+            By default the largest utility.
+        """
         return float(np.max(utility))
 
     def expect(self, belief: BeliefView, index: int) -> tuple[np.ndarray, Any] | None:
-        """What the method's gain says candidate ``index`` will observe: ((n, 3) world points, memo).
+        """What the method's gain says candidate ``index`` will observe.
 
         As the greedy does (:func:`nbs_env.planning.planner.unobservable_after`), what a chosen
         scan was predicted to observe within :meth:`dense_range` and did not is dropped from later
         gains (:meth:`still_unseen` tells which), so that a gain no scan can take does not hold a
-        room open to its cap. None: the method predicts nothing checkable."""
+        room open to its cap.
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The belief of the decision.
+        index : int
+            The chosen candidate's slot.
+
+        Returns
+        -------
+        tuple of ((n, 3) float, Any), or None
+            World points and a memo for :meth:`still_unseen`; None (the default): the method
+            predicts nothing checkable.
+        """
         return None
 
     def still_unseen(self, belief: BeliefView, points: np.ndarray, memo: Any) -> np.ndarray:
-        """(n,) bool: which of :meth:`expect`'s points the scans since have left unobserved."""
+        """Which of :meth:`expect`'s points the scans since have left unobserved.
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The belief after the scan.
+        points : (n, 3) float
+            The world points :meth:`expect` returned.
+        memo : Any
+            :meth:`expect`'s memo.
+
+        Returns
+        -------
+        (n,) bool
+            By default all False.
+        """
         return np.zeros(len(points), dtype=bool)

@@ -108,7 +108,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from nbs_env.config import ScannerConfig
+from nbs_env.config.robot import ScannerConfig
 from nbs_env.errors import ConfigError
 
 __all__ = ["SCANNERS", "ResolutionSetting", "ScannerModel", "scanner_config", "step_for_spacing"]
@@ -472,4 +472,5 @@ def scanner_config(spec: str, *, simulated_step: float | None = None, height: fl
         height=height,
         points_per_second=model.points_per_second,
         station_time=setting.station_time,
+        preset=f"{key}:{setting.name}",
     )

@@ -1,0 +1,202 @@
+"""What an episode is made of: the robot, the storey's room rules, the reward, the observation and
+the evaluation, put together in :class:`EnvConfig`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from nbs_env.config.checks import Config, _finite, _integer, _require
+from nbs_env.config.robot import RobotConfig
+from nbs_env.config.rooms import RoomRules
+from scenes.generator import GeneratorConfig
+
+__all__ = ["EnvConfig", "ObservationConfig", "QualityConfig", "RewardConfig"]
+
+
+@dataclass(frozen=True)
+class ObservationConfig(Config):
+    """The voxel window of the observation.
+
+    Attributes
+    ----------
+    shape : (int, int, int)
+        Cells along x, y and z.
+    cell : float
+        Edge of an observation cell in metres (a whole number of voxels is best: 0.2 m pools 4³
+        voxels of 5 cm or 2³ of 10 cm).
+    below_floor : float
+        How far below the robot's floor the window starts, metres (the floor slab must be inside).
+    """
+
+    shape: tuple[int, int, int] = (64, 64, 16)
+    cell: float = 0.2
+    below_floor: float = 0.2
+
+    def __post_init__(self) -> None:
+        _require(
+            len(self.shape) == 3 and all(isinstance(n, int) and n >= 1 for n in self.shape),
+            f"shape must be three positive integers, got {self.shape}",
+        )
+        _finite(cell=self.cell, below_floor=self.below_floor)
+        _require(self.cell > 0, f"cell must be > 0 metres, got {self.cell}")
+
+    @property
+    def extent(self) -> np.ndarray:
+        """(3,) float: the window's size in metres."""
+        return np.asarray(self.shape, dtype=float) * self.cell
+
+
+@dataclass(frozen=True)
+class QualityConfig(Config):
+    """The scan-quality thresholds of the evaluation (:meth:`CoverageMeter.quality`).
+
+    Coverage counts a structural sample as sensed once one point lies within 5 cm of it, whether
+    that point came head-on from 3 m or at a grazing 85° from 20 m. Scan-to-BIM work judges a scan
+    plan also by how densely and how squarely each surface was sampled; these thresholds say when a
+    sample counts as well sensed.
+
+    Attributes
+    ----------
+    min_density : float
+        Least point density around a sample, points per m² of surface, over all scans. Default
+        400 per m², one point per 5 cm × 5 cm: the scale at which the method works (its 5 cm
+        working copies and voxels, RegistrationConfig.voxel_size, RobotConfig.voxel_size), so a
+        surface below it is one the structural model rests on single points for. For context, the
+        US GSA's BIM Guide for 3D Imaging (Series 03, v1.0, 2009; figures as recalled, not checked
+        against a stored copy) asks for a 152 mm grid (about 43 per m²) at its level 1 and 25 mm
+        (1,600 per m²) at its level 2. The env's 0.5° pattern puts 400 per m² on a wall seen head-on
+        from at most 6.5 m; the fast preset's 1° pattern from 3.3 m.
+    max_incidence : float
+        Largest incidence angle, in degrees from the surface normal, at which a sample must have
+        been seen at least once. Default 70°: there the laser footprint is 2.9 times as long as
+        head-on, and the incidence angle's share of the range noise grows steeply (Soudarissanane
+        et al. 2011, "Scanning geometry: influencing factor on the quality of terrestrial laser
+        scanning points", ISPRS J. Photogramm. 66(4)), the range where scan planners set their limit.
+    density_radius : float
+        The density around a sample is the points attributed to the samples within this distance of
+        it, over their area (the samples' count times the sample spacing squared), metres. 0.1 m
+        holds about 12 samples at the default 5 cm spacing, so that one sample's share of a sparse
+        pattern does not decide it.
+    """
+
+    min_density: float = 400.0
+    max_incidence: float = 70.0
+    density_radius: float = 0.1
+
+    def __post_init__(self) -> None:
+        _finite(min_density=self.min_density, max_incidence=self.max_incidence, density_radius=self.density_radius)
+        _require(self.min_density >= 0, f"min_density must be >= 0 points per m², got {self.min_density}")
+        _require(0 < self.max_incidence <= 90, f"max_incidence must be in (0, 90] degrees, got {self.max_incidence}")
+        _require(self.density_radius > 0, f"density_radius must be > 0 m, got {self.density_radius}")
+
+
+@dataclass(frozen=True)
+class RewardConfig(Config):
+    """What a step is worth.
+
+    Attributes
+    ----------
+    kind : {"coverage", "conversions"}
+        ``"coverage"`` (default): the increase of the true structural surface sensed, in
+        percentage points of the storey's structural surface (evaluation-side ground truth).
+        ``"conversions"``: the robot's own realised Occluded-structure→Structure conversions, in
+        percent of the room's structural voxels; no ground truth is read.
+    scan_cost : float
+        Subtracted per scan taken in the step (a door crossing adds a scan).
+    metre_cost : float
+        Subtracted per metre driven in the step.
+    invalid_action_penalty : float
+        Subtracted for a masked action (no scan is taken).
+    """
+
+    kind: str = "coverage"
+    scan_cost: float = 0.5
+    metre_cost: float = 0.05
+    invalid_action_penalty: float = 1.0
+
+    def __post_init__(self) -> None:
+        _require(
+            self.kind in ("coverage", "conversions"),
+            f"reward kind must be 'coverage' or 'conversions', got {self.kind!r}",
+        )
+        _finite(
+            scan_cost=self.scan_cost, metre_cost=self.metre_cost, invalid_action_penalty=self.invalid_action_penalty
+        )
+
+
+@dataclass(frozen=True)
+class EnvConfig(Config):
+    """Everything an :class:`NBSEnv` is made of (JSON-safe, frozen).
+
+    Attributes
+    ----------
+    preset : str
+        The named preset this configuration started from (:data:`nbs_env.config.PRESETS`), as
+        :func:`~nbs_env.config.make_config` records it; ``"default"`` for ``EnvConfig()``.
+    scene : str
+        What ``reset`` loads when its options name no scene: anything :func:`scenes.load_scene`
+        takes (a bundled name, a file, ``generated:SEED``), or ``"generated"`` for a fresh storey
+        per reset drawn from the env's generator with ``generator``.
+    scene_options : dict
+        Options for :func:`scenes.load_scene` (e.g. ``{"storey": "Erdgeschoss"}`` for IFC).
+    generator : GeneratorConfig
+        The storeys ``"generated"`` draws.
+    robot : RobotConfig
+        The robot: hardware and the stages of a scan cycle.
+    rooms : RoomRules
+        The storey's rules for rooms: who ends a room and when, its scan cap, the door searches.
+    reward : RewardConfig
+    observation : ObservationConfig
+    max_scans : int
+        The scan budget of an episode; reaching it truncates.
+    expose_belief : bool
+        Put a :class:`BeliefView` of the robot's belief (its grid, RoI, candidates, this step's
+        registered scans) in ``info["belief"]``, for policies that keep their own maps. References,
+        not copies: use it in-process only (it does not pickle).
+    coverage_spacing, coverage_radius : float
+        Ground-truth sample spacing and sensing radius of the evaluation, metres.
+    quality : QualityConfig
+        The evaluation's scan-quality thresholds (point density, incidence angle).
+    keep_scans : bool
+        Keep every scan's measured points in the scanner frame with its estimated pose
+        (:attr:`Storey.scan_log`), for the E57 export of ``nbs scan``: 10 bytes a point, about
+        1.4 MB a scan at the default 0.5° pattern and 6 MB at 0.2°.
+    travel_speed : float
+        Driving speed for the travel time, m/s.
+    """
+
+    preset: str = "default"
+    scene: str = "generated"
+    scene_options: dict[str, Any] = field(default_factory=dict)
+    generator: GeneratorConfig = field(default_factory=GeneratorConfig)
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    rooms: RoomRules = field(default_factory=RoomRules)
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    observation: ObservationConfig = field(default_factory=ObservationConfig)
+    max_scans: int = 80
+    expose_belief: bool = False
+    coverage_spacing: float = 0.05
+    coverage_radius: float = 0.05
+    quality: QualityConfig = field(default_factory=QualityConfig)
+    keep_scans: bool = False
+    travel_speed: float = 0.5
+
+    def __post_init__(self) -> None:
+        _require(
+            isinstance(self.scene, str) and self.scene != "", f"scene must be a non-empty string, got {self.scene!r}"
+        )
+        _integer(self, "max_scans", 1)
+        _finite(
+            coverage_spacing=self.coverage_spacing, coverage_radius=self.coverage_radius, travel_speed=self.travel_speed
+        )
+        _require(self.coverage_spacing > 0 and self.coverage_radius > 0, "coverage spacing and radius must be > 0")
+        _require(self.travel_speed > 0, f"travel_speed must be > 0, got {self.travel_speed}")
+        _require(isinstance(self.preset, str), f"preset must be a preset's name, got {self.preset!r}")
+        _require(
+            self.robot.predict_gains or self.rooms.completion == "policy",
+            "rooms.completion='gain' needs robot.predict_gains (the room ends when the predicted gain is small)",
+        )

@@ -1,0 +1,136 @@
+"""The named presets and the one override path, :func:`make_config`.
+
+A preset is data: the dotted overrides it makes to ``EnvConfig()``. Every command and training
+build their configuration with :func:`make_config`, so that a name means the same everywhere::
+
+    make_config("fast", max_scans=20, **{"rooms.wall_search.scans": 3})
+    make_config("default", completion_fraction=0.05)   # a leaf's name, where it is unique
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from nbs_env.config.checks import Config
+from nbs_env.config.env import EnvConfig
+from nbs_env.errors import ConfigError
+
+__all__ = ["PRESETS", "config_paths", "make_config"]
+
+#: Named configurations, as dotted overrides of ``EnvConfig()``: ``"default"`` is the env's robot;
+#: ``"fast"`` the RL preset (a 1° scanner, 10 cm voxels, perfect localisation, 1-3 room storeys,
+#: 40 scans).
+PRESETS: dict[str, dict[str, Any]] = {
+    "default": {},
+    "fast": {
+        "robot.scanner.angular_step": 1.0,
+        "robot.odometry": {"sigma_xy_per_m": 0.0, "sigma_yaw_deg_per_m": 0.0, "sigma_tilt_deg": 0.0},
+        "robot.voxel_size": 0.1,
+        "robot.perfect_localisation": True,
+        "generator.rooms": (1, 3),
+        "max_scans": 40,
+        "coverage_spacing": 0.1,
+        "coverage_radius": 0.1,
+    },
+}
+
+
+def config_paths(cls: type = EnvConfig, prefix: str = "") -> list[str]:
+    """Every dotted name of a configuration class's tree, sections and leaves.
+
+    Parameters
+    ----------
+    cls : type
+        A configuration dataclass (default :class:`EnvConfig`).
+    prefix : str
+        Prepended to each name with a dot.
+
+    Returns
+    -------
+    list of str
+        E.g. ``["preset", "scene", ..., "robot", "robot.scanner", "robot.scanner.angular_step", ...]``.
+    """
+    import typing
+
+    out = []
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):  # type: ignore[arg-type]
+        name = f"{prefix}{f.name}"
+        out.append(name)
+        hint = hints[f.name]
+        if isinstance(hint, type) and dataclasses.is_dataclass(hint):
+            out += config_paths(hint, name + ".")
+    return out
+
+
+def _resolve(key: str, paths: list[str]) -> str:
+    """The dotted path a key names: itself, or the one path whose last part it is."""
+    if key in paths:
+        return key
+    if "." in key:
+        raise ConfigError(f"the configuration has no {key!r}; see nbs_env.config.config_paths() for its names")
+    matches = [p for p in paths if p.rpartition(".")[2] == key]
+    if not matches:
+        raise ConfigError(f"the configuration has no field {key!r}; see nbs_env.config.config_paths() for its names")
+    if len(matches) > 1:
+        raise ConfigError(f"{key!r} is ambiguous: name one of {', '.join(matches)}")
+    return matches[0]
+
+
+def make_config(preset: str | EnvConfig = "default", **overrides: Any) -> EnvConfig:
+    """A preset's configuration with fields replaced: the one override path.
+
+    Parameters
+    ----------
+    preset : str or EnvConfig
+        A name of :data:`PRESETS`, or a configuration to start from (its ``preset`` is kept).
+    **overrides
+        Field names to values. A name is a top-level field (``scene="five_rooms"``), a dotted path
+        (``**{"robot.scanner.angular_step": 1.0}``) or a field's own name where only one field of
+        the tree has it (``completion_fraction=0.05``). A value is what the field takes, or its
+        JSON form (a dict for a section merges into it; a list for a tuple); a configuration
+        instance replaces the section whole. Sections are applied before the fields inside them.
+
+    Returns
+    -------
+    EnvConfig
+        Checked, with ``preset`` recording the preset's name.
+
+    Raises
+    ------
+    ConfigError
+        An unknown preset or field name, an ambiguous name (the message lists the candidates), or a
+        value a configuration refuses.
+    """
+    if isinstance(preset, EnvConfig):
+        base, name, preset_overrides = preset.to_dict(), preset.preset, {}
+    elif isinstance(preset, str) and preset in PRESETS:
+        base, name, preset_overrides = EnvConfig().to_dict(), preset, PRESETS[preset]
+    else:
+        raise ConfigError(f"unknown preset {preset!r}; presets: {', '.join(PRESETS)}")
+    paths = config_paths()
+    resolved: dict[str, Any] = {}
+    for key, value in overrides.items():
+        path = _resolve(key, paths)
+        if path in resolved:
+            raise ConfigError(f"{key!r} and another name both set {path}")
+        resolved[path] = value
+    tree = base
+    for path, value in [*preset_overrides.items(), *sorted(resolved.items(), key=lambda kv: kv[0].count("."))]:
+        _set(tree, path, value)
+    tree["preset"] = name
+    return EnvConfig.from_dict(tree)
+
+
+def _set(tree: dict[str, Any], path: str, value: Any) -> None:
+    *parents, leaf = path.split(".")
+    node = tree
+    for part in parents:
+        node = node[part]
+    if isinstance(value, Config):
+        node[leaf] = value.to_dict()
+    elif isinstance(value, dict) and isinstance(node.get(leaf), dict) and leaf != "scene_options":
+        node[leaf] = {**node[leaf], **value}
+    else:
+        node[leaf] = value
