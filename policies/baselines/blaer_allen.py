@@ -58,7 +58,26 @@ STOP_BELOW = 0.03911
 
 
 class BlaerAllenPolicy(MappingPolicy):
-    """Two-phase view planning: 2-D set cover, then visible boundary-unseen voxels."""
+    """Two-phase view planning: 2-D set cover, then visible boundary-unseen voxels (see the module
+    docstring).
+
+    Parameters
+    ----------
+    max_grazing_deg : float
+        Phase 1: the largest angle, degrees, between a line of sight and a boundary cell's normal at
+        which the candidate covers the cell.
+    stop_below : float, optional
+        ε of phase 2's stopping rule, m² of visible boundary-unseen voxels per m² of the RoI's floor;
+        0 never stops by the rule. None (the default): :data:`STOP_BELOW`.
+    controlled : bool
+        The controlled mode: rooms end by the greedy's rule and the method only chooses where to
+        scan (:class:`~policies.baselines._maps.MappingPolicy`).
+
+    Raises
+    ------
+    ValueError
+        ``stop_below`` is not a finite number >= 0.
+    """
 
     name = "blaer_allen"
     default_stop_below = STOP_BELOW
@@ -71,6 +90,13 @@ class BlaerAllenPolicy(MappingPolicy):
         super().__init__(stop_below, controlled)
 
     def new_room(self, belief: BeliefView) -> None:
+        """Start the room in phase 1, its set cover to be planned at its first decision.
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The robot's belief at the room's first decision (not read).
+        """
         self.plan: list[np.ndarray] | None = None
         self.phase = 1
 
@@ -138,14 +164,46 @@ class BlaerAllenPolicy(MappingPolicy):
         return dataclasses.replace(belief.scanner, max_range=reach)
 
     def expect(self, belief: BeliefView, index: int):
-        """The boundary-unseen voxels the view sees within the dense range."""
+        """The boundary-unseen voxels the chosen view sees within the dense range
+        (:meth:`~policies.baselines._maps.MappingPolicy.dense_range`), by phase 2's last count.
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The belief of the decision.
+        index : int
+            The chosen candidate's slot.
+
+        Returns
+        -------
+        tuple of ((n, 3) float, None), or None
+            The voxels' world centres and no memo; None in phase 1, which predicts nothing
+            checkable.
+        """
         if self.phase == 1:
             return None
         sensor = sensor_positions(belief.candidates_xy[index : index + 1], belief.roi.floor_z, belief.scanner)[0]
         return self._model.targets[self._model.visible(sensor, self._sensing(belief))], None
 
     def still_unseen(self, belief: BeliefView, points: np.ndarray, memo) -> np.ndarray:
-        """Voxels still unknown (the scan measured neither a surface nor free space there)."""
+        """Which of :meth:`expect`'s voxels are still unknown (the scans since measured neither a
+        surface nor free space there).
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The belief after the scan.
+        points : (n, 3) float
+            World centres of the voxels :meth:`expect` returned.
+        memo : None
+            :meth:`expect`'s memo (not read).
+
+        Returns
+        -------
+        (n,) bool
+            True for a voxel still unknown in the room's labels (:func:`~policies.baselines._maps.collapse`);
+            False outside the grid.
+        """
         grid = belief.grid
         _, _, unknown = collapse(self.labels_of(belief))
         idx = grid.index_of(points)
@@ -155,6 +213,33 @@ class BlaerAllenPolicy(MappingPolicy):
         return out
 
     def act(self, obs, info) -> int:
+        """Phase 1's next planned view, then phase 2's best candidate, or "room done" by phase 2's
+        stopping rule.
+
+        Phase 1 plans the room's set cover at its first decision and visits the views nearest first,
+        each through the candidate nearest to it; once they are visited, phase 2 chooses the candidate
+        that sees the most boundary-unseen voxels.
+
+        Parameters
+        ----------
+        obs : dict of str to numpy.ndarray
+            The env's observation (not read: the method keeps its own map).
+        info : dict of str to Any
+            The env's ``info``; its ``"belief"`` (:class:`~nbs_env.observation.BeliefView`, from
+            ``expose_belief=True``) is read.
+
+        Returns
+        -------
+        int
+            A candidate slot, or K = ``len(belief.mask)`` ("room done") when the rule fires or no
+            candidate is valid; in the controlled mode the rule never fires and no valid candidate
+            gives 0.
+
+        Raises
+        ------
+        KeyError
+            ``info`` has no ``"belief"``.
+        """
         belief = self._belief(info)
         stop = len(belief.mask)
         self._track_room(belief)

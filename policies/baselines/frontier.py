@@ -27,7 +27,20 @@ __all__ = ["NearestFrontierPolicy"]
 
 
 class NearestFrontierPolicy(MappingPolicy):
-    """Go to the nearest frontier (see the module docstring)."""
+    """Go to the nearest frontier (see the module docstring).
+
+    Parameters
+    ----------
+    reach : float
+        Metres: only candidates within this distance of a frontier column are chosen (in the
+        controlled mode, any candidate when none is).
+    stop_share : float
+        The room ends when fewer than this share of the RoI's columns are frontier columns (and
+        always when none is).
+    controlled : bool
+        The controlled mode: rooms end by the greedy's rule and the method only chooses where to
+        scan (:class:`~policies.baselines._maps.MappingPolicy`).
+    """
 
     name = "nearest_frontier"
 
@@ -37,6 +50,31 @@ class NearestFrontierPolicy(MappingPolicy):
         super().__init__(controlled=controlled)
 
     def act(self, obs, info) -> int:
+        """The valid candidate within ``reach`` of a frontier column with the least path length plus
+        distance to the nearest frontier column, or "room done".
+
+        Parameters
+        ----------
+        obs : dict of str to numpy.ndarray
+            The env's observation (not read: the method reads the robot's voxel labels).
+        info : dict of str to Any
+            The env's ``info``; its ``"belief"`` (:class:`~nbs_env.observation.BeliefView`, from
+            ``expose_belief=True``) is read.
+
+        Returns
+        -------
+        int
+            A candidate slot, or K = ``len(belief.mask)`` ("room done") when too few frontier
+            columns are left (``stop_share``), no candidate is within ``reach`` or none is valid. In
+            the controlled mode it never declares the room done: with too few frontier columns it
+            takes the candidate with the shortest path, with none within ``reach`` it ranks all,
+            and with no valid candidate it returns 0.
+
+        Raises
+        ------
+        KeyError
+            ``info`` has no ``"belief"``.
+        """
         belief = self._belief(info)
         stop = len(belief.mask)
         valid = np.flatnonzero(belief.mask)

@@ -81,7 +81,30 @@ def _entropy(p: np.ndarray) -> np.ndarray:
 
 
 class InformationGainPolicy(MappingPolicy):
-    """Ray-based volumetric information gain with one of :data:`FORMULATIONS`."""
+    """Ray-based volumetric information gain with one of :data:`FORMULATIONS` (see the module
+    docstring).
+
+    Parameters
+    ----------
+    formulation : str
+        One of :data:`FORMULATIONS`: what a ray sample is worth when the ray reaches it.
+    ray_step_deg : float
+        Spacing of the azimuth-elevation grid of rays over the scanner's field, degrees.
+    max_range : float
+        How far the rays are sampled, metres (no further than the room grid's diagonal).
+    stop_below : float, optional
+        ε of the stopping rule, in the formulation's unit; 0 never stops by the rule. None (the
+        default): the formulation's :data:`STOP_BELOW` (Potthast & Sukhatme's for
+        :class:`PotthastSukhatmePolicy`).
+    controlled : bool
+        The controlled mode: rooms end by the greedy's rule and the method only chooses where to
+        scan (:class:`~policies.baselines._maps.MappingPolicy`).
+
+    Raises
+    ------
+    ValueError
+        An unknown ``formulation``, or ``stop_below`` not a finite number >= 0.
+    """
 
     name = "information_gain"
     formulations: ClassVar[tuple[str, ...]] = FORMULATIONS
@@ -104,10 +127,29 @@ class InformationGainPolicy(MappingPolicy):
         super().__init__(stop_below, controlled)
 
     def new_room(self, belief: BeliefView) -> None:
+        """Forget the occupancy map: the new room's log-odds start at 0 (p = 0.5) at its first
+        :meth:`observe`.
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The robot's belief at the room's first decision (not read).
+        """
         self.log_odds: np.ndarray | None = None
         self.origin: np.ndarray | None = None
 
     def observe(self, belief: BeliefView) -> None:
+        """Update the occupancy log-odds with this step's scans: for each scan, a miss for every free
+        voxel of the planner's view of the room and a hit for every occupied one (as
+        :func:`~policies.baselines._maps.collapse` reads them), clamped to [−2, 3.5]. When the grid
+        has grown, each voxel keeps its log-odds at its world place.
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The belief of the decision: its ``grid``, ``labels`` (the planner's view) and ``scans``
+            (the scans registered this step).
+        """
         grid = belief.grid
         shape, origin = grid.shape, grid.origin
         if self.log_odds is None:
@@ -127,6 +169,22 @@ class InformationGainPolicy(MappingPolicy):
         np.clip(self.log_odds, _LO, _HI, out=self.log_odds)
 
     def utilities(self, belief: BeliefView, valid: np.ndarray) -> np.ndarray:
+        """The formulation's gain of each valid candidate: over the rays from the candidate at scanner
+        height, the worth of each workspace sample weighted by the probability that the ray reaches
+        it. Keeps the maps it read for :meth:`expect`.
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The belief of the decision.
+        valid : (m,) int64
+            The slots of the valid candidates (``np.flatnonzero(belief.mask)``).
+
+        Returns
+        -------
+        (m,) float
+            The gains, in the formulation's unit (nats, or P(visible)-weighted voxels).
+        """
         grid = belief.grid
         p = (1.0 / (1.0 + np.exp(-self.log_odds))).astype(np.float32)
         unknown = np.abs(self.log_odds) < 0.2
@@ -161,7 +219,22 @@ class InformationGainPolicy(MappingPolicy):
         return float((visible * self._weight(probs, unk, counted, inside, flat, extra)).sum())
 
     def expect(self, belief: BeliefView, index: int):
-        """The unknown workspace voxels the view reaches with P(visible) >= 0.5 within the dense range."""
+        """The unknown workspace voxels the chosen view reaches with P(visible) >= 0.5 within the
+        dense range (:meth:`~policies.baselines._maps.MappingPolicy.dense_range`), on the maps of
+        the last :meth:`utilities`.
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The belief of the decision.
+        index : int
+            The chosen candidate's slot.
+
+        Returns
+        -------
+        tuple of ((n, 3) float, None)
+            The voxels' world centres, and no memo.
+        """
         grid, scanner = belief.grid, belief.scanner
         p, unknown, _, region, directions, reach = self._state
         sensor = np.array([*belief.candidates_xy[index], belief.roi.floor_z + scanner.height])
@@ -175,7 +248,22 @@ class InformationGainPolicy(MappingPolicy):
         return grid.centres(np.column_stack(np.unravel_index(voxels, grid.shape))), None
 
     def still_unseen(self, belief: BeliefView, points: np.ndarray, memo) -> np.ndarray:
-        """Voxels whose log-odds no scan since has moved (still unknown)."""
+        """Which of :meth:`expect`'s voxels the scans since have left unknown.
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The belief after the scan (read for its grid; the log-odds are the policy's).
+        points : (n, 3) float
+            World centres of the voxels :meth:`expect` returned.
+        memo : None
+            :meth:`expect`'s memo (not read).
+
+        Returns
+        -------
+        (n,) bool
+            True for a voxel whose log-odds stay within ±0.2 (still unknown); False outside the grid.
+        """
         idx = belief.grid.index_of(points)
         ok = belief.grid.inside(idx)
         out = np.zeros(len(points), dtype=bool)
@@ -204,7 +292,26 @@ def _visibility(blocking: np.ndarray) -> np.ndarray:
 
 
 class PotthastSukhatmePolicy(InformationGainPolicy):
-    """Potthast & Sukhatme 2014: visibility-weighted entropy of unknown voxels (module docstring)."""
+    """Potthast & Sukhatme 2014: visibility-weighted entropy of unknown voxels (module docstring).
+
+    Parameters
+    ----------
+    ray_step_deg : float
+        Spacing of the azimuth-elevation grid of rays over the scanner's field, degrees.
+    max_range : float
+        How far the rays are sampled, metres (no further than the room grid's diagonal).
+    stop_below : float, optional
+        ε of the stopping rule, nats per √m² of the RoI's floor; 0 never stops by the rule. None
+        (the default): ``STOP_BELOW["potthast_sukhatme"]``.
+    controlled : bool
+        The controlled mode: rooms end by the greedy's rule and the method only chooses where to
+        scan (:class:`~policies.baselines._maps.MappingPolicy`).
+
+    Raises
+    ------
+    ValueError
+        ``stop_below`` is not a finite number >= 0.
+    """
 
     name = "potthast_sukhatme"
     stop_area_power = 0.5

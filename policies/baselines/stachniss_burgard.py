@@ -68,7 +68,28 @@ def _entropy(occupied: np.ndarray, free: np.ndarray) -> np.ndarray:
 
 
 class StachnissBurgardPolicy(MappingPolicy):
-    """Coverage maps with expected entropy reduction minus path cost (see the module docstring)."""
+    """Coverage maps with expected entropy reduction minus path cost (see the module docstring).
+
+    Parameters
+    ----------
+    alpha : float
+        The path cost, nats per metre: a candidate's utility is its Σ ΔH minus ``alpha`` × its path
+        length.
+    gain_voxels : float
+        The observations a scan is expected to add to each cell it sees (no more than the cell's
+        unseen voxels in the band).
+    stop_below : float, optional
+        ε of the stopping rule, nat·m² of expected entropy reduction per m² of the RoI's floor; 0
+        never stops by the rule. None (the default): :data:`STOP_BELOW`.
+    controlled : bool
+        The controlled mode: rooms end by the greedy's rule and the method only chooses where to
+        scan (:class:`~policies.baselines._maps.MappingPolicy`).
+
+    Raises
+    ------
+    ValueError
+        ``stop_below`` is not a finite number >= 0.
+    """
 
     name = "stachniss_burgard"
     default_stop_below = STOP_BELOW
@@ -82,6 +103,15 @@ class StachnissBurgardPolicy(MappingPolicy):
         super().__init__(stop_below, controlled)
 
     def observe(self, belief: BeliefView) -> None:
+        """Rebuild the room's coverage map from the planner's view of the room: per column, the
+        occupied, free and unseen voxels of the band 0.3 to 2.0 m above the floor, the entropy of
+        the coverage belief and its mean.
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The belief of the decision: its ``grid``, ``roi`` and ``labels``.
+        """
         grid, roi = belief.grid, belief.roi
         band = band_columns(grid, roi.floor_z)
         free, occupied, unknown = collapse(self.labels_of(belief)[:, :, band])
@@ -95,6 +125,22 @@ class StachnissBurgardPolicy(MappingPolicy):
         self.floor_z = roi.floor_z
 
     def utilities(self, belief: BeliefView, valid: np.ndarray) -> np.ndarray:
+        """Each valid candidate's expected entropy reduction over the workspace cells it sees in 2-D,
+        minus ``alpha`` × its path length. Keeps the gains and the workspace for
+        :meth:`stop_statistic` and :meth:`expect`.
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The belief of the decision.
+        valid : (m,) int64
+            The slots of the valid candidates (``np.flatnonzero(belief.mask)``).
+
+        Returns
+        -------
+        (m,) float
+            Σ ΔH (nats) − ``alpha`` × path length (m).
+        """
         # After k more observations at the current mean coverage; a cell's observations are the
         # voxels of its column, so a column with nothing left unseen learns nothing more.
         k = np.minimum(self.gain_voxels, self.unseen)
@@ -120,8 +166,21 @@ class StachnissBurgardPolicy(MappingPolicy):
         return ij, ok
 
     def expect(self, belief: BeliefView, index: int):
-        """The workspace cells with unseen voxels in their band that the view sees within the
-        dense range; memo: their unseen counts now."""
+        """The workspace cells with unseen voxels in their band that the chosen view sees in 2-D
+        within the dense range (:meth:`~policies.baselines._maps.MappingPolicy.dense_range`).
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The belief of the decision.
+        index : int
+            The chosen candidate's slot.
+
+        Returns
+        -------
+        tuple of ((n, 3) float, (n,) float)
+            The cells' centres at floor height (world), and as memo their unseen voxel counts now.
+        """
         xy = belief.candidates_xy[index]
         blocked = self.mean > 0.5
         seen = visible_cells_2d(blocked, self.origin, self.cell, xy, belief.scanner.min_range, self.dense_range(belief))
@@ -132,12 +191,44 @@ class StachnissBurgardPolicy(MappingPolicy):
         return points, self.unseen.reshape(-1)[seen].copy()
 
     def still_unseen(self, belief: BeliefView, points: np.ndarray, memo) -> np.ndarray:
-        """Cells whose band has no fewer unseen voxels than before the scan."""
+        """Which of :meth:`expect`'s cells the scans since have not reduced.
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The belief after the scan (not read: the map is the one :meth:`observe` rebuilt).
+        points : (n, 3) float
+            The cells' world points :meth:`expect` returned.
+        memo : (n,) float
+            Their unseen voxel counts when :meth:`expect` was called.
+
+        Returns
+        -------
+        (n,) bool
+            True for a cell whose band has no fewer unseen voxels than ``memo``; False outside the
+            map.
+        """
         ij, ok = self._cells(points)
         out = np.zeros(len(points), dtype=bool)
         out[ok] = self.unseen[tuple(ij[ok].T)] >= memo[ok]
         return out
 
     def stop_statistic(self, belief: BeliefView, valid: np.ndarray, utility: np.ndarray) -> float:
-        """The best expected entropy reduction, nat·m² (the path cost ranks, it does not stop)."""
+        """The best expected entropy reduction of the last :meth:`utilities`, which the stopping rule
+        reads (the path cost ranks candidates; it does not stop rooms).
+
+        Parameters
+        ----------
+        belief : BeliefView
+            The belief of the decision (not read).
+        valid : (m,) int64
+            The slots of the valid candidates (not read).
+        utility : (m,) float
+            :meth:`utilities`' values (not read: they include the path cost).
+
+        Returns
+        -------
+        float
+            The largest Σ ΔH times a cell's area, nat·m².
+        """
         return float(np.max(self._gain)) * self.cell**2
