@@ -28,6 +28,7 @@ from nbs_env.belief import BeliefUpdate, RoomBelief, RoomModel
 from nbs_env.config import OdometryConfig
 from nbs_env.errors import UnreachableDoorError
 from nbs_env.labels import VoxelLabel
+from nbs_env.mapping.cloud import AccumulatedCloud
 from nbs_env.perception.doors import detect_doors
 from nbs_env.perception.roi import RoIError
 from nbs_env.planning.navigation import Candidates, Geodesic, Passage, TraversabilityMap, candidates, geodesic
@@ -44,7 +45,7 @@ from nbs_env.planning.visibility import VisibilityModel
 from nbs_env.planning.wall_search import approach_position, search_position, unviewed_wall
 from nbs_env.sensing.odometry import Odometry
 from nbs_env.sensing.pose import planar, pose_error, yaw_of
-from nbs_env.sensing.registration import AccumulatedCloud, RegistrationResult, level_from_floor, register
+from nbs_env.sensing.registration import RegistrationResult, level_from_floor, register
 from nbs_env.sensing.scanner import Scan, Scanner
 from nbs_env.settings import RobotConfig
 from scenes import Scene

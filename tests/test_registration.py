@@ -7,9 +7,10 @@ import pytest
 from shapely.geometry import Point, Polygon
 
 from nbs_env.config import OdometryConfig, RegistrationConfig, ScannerConfig
+from nbs_env.mapping.cloud import AccumulatedCloud
 from nbs_env.sensing.odometry import Odometry, path_length
 from nbs_env.sensing.pose import planar, pose_error, pose_from_xyz_rpy, yaw_of
-from nbs_env.sensing.registration import AccumulatedCloud, level_from_floor, register
+from nbs_env.sensing.registration import level_from_floor, register
 from nbs_env.sensing.scanner import Scanner
 from scenes import load_scene
 from scenes.geometry import STOREY_CLEARANCE, point_is_free
