@@ -81,6 +81,13 @@ def test_the_pipeline_imports_only_backwards():
             assert not offenders, f"{path.relative_to(ROOT)} imports {sorted(offenders)}, a later stage"
 
 
+def test_the_meter_knows_no_storey():
+    """The coverage meter is the storey's (storey -> evaluation): evaluation.py imports neither the
+    storey session nor the report that reads it, not even under ``if TYPE_CHECKING:``."""
+    modules = _full_modules(ROOT / "nbs_env" / "evaluation.py")
+    assert not modules & {"nbs_env.storey", "nbs_env.report", "nbs_env.export"}, sorted(modules)
+
+
 def test_the_oracle_is_imported_only_by_the_comparison():
     """No policy that competes may consult the oracle (it reads the true building)."""
     for path in (ROOT / "policies").rglob("*.py"):

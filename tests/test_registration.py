@@ -257,7 +257,7 @@ def test_a_refused_registration_is_reported_in_info_and_metrics():
     from dataclasses import replace
 
     from nbs_env.env import NBSEnv
-    from nbs_env.evaluation import metrics_dict
+    from nbs_env.report import metrics_dict
     from nbs_env.settings import make_config
 
     config = make_config("default", scene="l_room", max_scans=3)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from nbs_env.env import NBSEnv
-from nbs_env.evaluation import metrics_dict
+from nbs_env.report import metrics_dict
 from nbs_env.sensing.scanner import Scanner
 from nbs_env.settings import make_config
 from policies import GreedyPolicy

@@ -52,7 +52,7 @@ def log_episode(scene: str, method: str, seed: int, preset: str, max_scans: int)
     """Play ``method`` with ε = 0 on ``scene``: per decision its room, stop statistic and the storey
     coverage (%) before and after the scan it led to."""
     from nbs_env.env import NBSEnv
-    from nbs_env.evaluation import metrics_dict
+    from nbs_env.report import metrics_dict
     from nbs_env.settings import make_config
     from policies import make_policy
     from train.episode import config_for

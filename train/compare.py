@@ -122,7 +122,7 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
     started = time.perf_counter()
     try:
         from nbs_env.env import NBSEnv
-        from nbs_env.evaluation import metrics_dict
+        from nbs_env.report import metrics_dict
         from nbs_env.settings import make_config
         from policies import make_policy
         from train.episode import config_for, run_episode
