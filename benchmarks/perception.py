@@ -17,10 +17,10 @@ import numpy as np
 from _timing import median_seconds
 
 from nbs_env.config import ScannerConfig
+from nbs_env.mapping.cloud import AccumulatedCloud
 from nbs_env.perception.roi import RoIScan, compute_roi
 from nbs_env.perception.structure import SEClassifier, label_points
 from nbs_env.sensing.pose import pose_from_xyz_rpy
-from nbs_env.sensing.registration import AccumulatedCloud
 from nbs_env.sensing.scanner import Scanner
 from scenes import load_scene
 

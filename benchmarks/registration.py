@@ -48,8 +48,9 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from nbs_env.config import RegistrationConfig  # noqa: E402
+from nbs_env.mapping.cloud import AccumulatedCloud  # noqa: E402
 from nbs_env.sensing.pose import planar, pose_error, yaw_of  # noqa: E402
-from nbs_env.sensing.registration import AccumulatedCloud, register  # noqa: E402
+from nbs_env.sensing.registration import register  # noqa: E402
 
 #: The registration before issue 14, as RegistrationConfig fields: open3d point-to-plane, fitness
 #: and RMSE gates, refused scans left in the target, no heading check, no see-through gate.

@@ -1,11 +1,11 @@
 """Benchmark: where a registration's time goes, piece by piece, over one greedy episode.
 
-Each piece of ``nbs_env.sensing.registration`` is timed by wrapping it (the scan's downsampled copy,
-the merge of the previous scan into S(t), the target's cut, the target's k-d tree and covariances,
-the range image, the coarse copies, the ICP stages, the checks after them, the heading check), over
-one greedy episode of the default configuration; medians per call, against the median of
-``register`` as a whole and of the bare Embree cast of the episode's scans (the reference run in
-the same process).
+Each piece of ``nbs_env.sensing.registration`` (and of S(t), ``nbs_env.mapping.cloud``) is timed by
+wrapping it (the scan's downsampled copy, the merge of the previous scan into S(t), the target's
+cut, the target's k-d tree and covariances, the range image, the coarse copies, the ICP stages, the
+checks after them, the heading check), over one greedy episode of the default configuration;
+medians per call, against the median of ``register`` as a whole and of the bare Embree cast of the
+episode's scans (the reference run in the same process).
 
 Usage: PYTHONPATH=<checkout> python benchmarks/registration_pieces.py [--scene five_rooms] [--seed 0] [--cores 2]
 """
@@ -31,6 +31,7 @@ def main() -> None:
     import nbs_env.robot as robot_module
     from nbs_env.config import make_config
     from nbs_env.env import NBSEnv
+    from nbs_env.mapping import cloud
     from nbs_env.sensing import registration as reg
     from policies import GreedyPolicy
 
@@ -48,10 +49,12 @@ def main() -> None:
         setattr(owner, name, wrapper)
 
     # Methods first, then the classes that own them.
-    timed(reg.AccumulatedCloud, "_update", "merge of the previous scan into S(t)")
+    timed(cloud.AccumulatedCloud, "_update", "merge of the previous scan into S(t)")
     timed(reg._Source, "coarser", "a coarse copy of the scan")
     timed(reg._RangeImage, "see_through", "see-through test")
     timed(reg, "_ScanCopy", "the scan's copy (voxels, normals, covariances)")
+    # S(t) makes the copy of a scan registered at its voxels, with the class it imported.
+    timed(cloud, "_ScanCopy", "the scan's copy (voxels, normals, covariances)")
     timed(reg, "_select_target", "the target's cut (with the merge)")
     timed(reg, "_Target", "the target's k-d tree and covariances")
     timed(reg, "_RangeImage", "the range image")

@@ -18,8 +18,9 @@ import numpy as np
 from _timing import median_seconds
 
 from nbs_env.config import ScannerConfig
+from nbs_env.mapping.cloud import AccumulatedCloud
 from nbs_env.sensing.pose import planar, pose_from_xyz_rpy
-from nbs_env.sensing.registration import AccumulatedCloud, register
+from nbs_env.sensing.registration import register
 from nbs_env.sensing.scanner import Scanner
 from scenes import load_scene
 

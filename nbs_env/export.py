@@ -3,7 +3,7 @@
 :func:`write_report` writes, from an :class:`~nbs_env.env.NBSEnv` after an episode:
 
 ================  ====================================================================================
-``metrics.json``  :func:`nbs_env.evaluation.metrics_dict` (its schema is documented there)
+``metrics.json``  :func:`nbs_env.report.metrics_dict` (its schema is documented there)
 ``scans.e57``     every scan as measured, one E57 data3D record per station (:func:`write_e57`):
                   points in the scanner frame, the robot's estimated pose as the record's pose;
                   written when the env kept its scans (``EnvConfig.keep_scans``, as ``nbs scan`` does)
@@ -39,7 +39,7 @@ import trimesh
 from shapely.geometry import MultiPolygon, Polygon
 
 from nbs_env.belief import RoomModel
-from nbs_env.evaluation import metrics_dict, quaternion_wxyz
+from nbs_env.report import metrics_dict, quaternion_wxyz
 
 if TYPE_CHECKING:
     from nbs_env.env import NBSEnv
@@ -488,7 +488,7 @@ def write_report(
     out_dir : str or Path
         Created if missing; existing report files are overwritten.
     scene_name, policy, seed, policy_times
-        As for :func:`nbs_env.evaluation.metrics_dict`.
+        As for :func:`nbs_env.report.metrics_dict`.
     run_started : float, optional
         Unix time the episode started, the origin of the E57 records' acquisition times (default:
         now).

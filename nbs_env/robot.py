@@ -25,11 +25,12 @@ import numpy as np
 from nbs_env.belief import BeliefUpdate, RoomBelief
 from nbs_env.config import OdometryConfig, RobotConfig
 from nbs_env.labels import VoxelLabel
+from nbs_env.mapping.cloud import AccumulatedCloud
 from nbs_env.planning.navigation import Passage
 from nbs_env.planning.planner import Plan, check_gain_model, plan, unobservable_after
 from nbs_env.sensing.odometry import Odometry
 from nbs_env.sensing.pose import planar, pose_error, yaw_of
-from nbs_env.sensing.registration import AccumulatedCloud, RegistrationResult, level_from_floor, register
+from nbs_env.sensing.registration import RegistrationResult, level_from_floor, register
 from nbs_env.sensing.scanner import Scan, Scanner
 from scenes import Scene
 

@@ -67,6 +67,27 @@ def test_perception_and_policies_never_import_ground_truth():
             assert not offenders, f"{path} imports {offenders} (ground truth)"
 
 
+#: The robot's pipeline, in order: each subpackage of nbs_env may import only those before it.
+PIPELINE = ["sensing", "perception", "mapping", "planning"]
+
+
+def test_the_pipeline_imports_only_backwards():
+    """sensing -> perception -> mapping -> planning: no import of a later stage, not in a function
+    body, not under ``if TYPE_CHECKING:`` (registration reads S(t) through a Protocol of its own)."""
+    for k, stage in enumerate(PIPELINE):
+        later = {f"nbs_env.{name}" for name in PIPELINE[k + 1 :]}
+        for path in (ROOT / "nbs_env" / stage).rglob("*.py"):
+            offenders = {m for m in _full_modules(path) if any(m == p or m.startswith(p + ".") for p in later)}
+            assert not offenders, f"{path.relative_to(ROOT)} imports {sorted(offenders)}, a later stage"
+
+
+def test_the_meter_knows_no_storey():
+    """The coverage meter is the storey's (storey -> evaluation): evaluation.py imports neither the
+    storey session nor the report that reads it, not even under ``if TYPE_CHECKING:``."""
+    modules = _full_modules(ROOT / "nbs_env" / "evaluation.py")
+    assert not modules & {"nbs_env.storey", "nbs_env.report", "nbs_env.export"}, sorted(modules)
+
+
 def test_the_oracle_is_imported_only_by_the_comparison():
     """No policy that competes may consult the oracle (it reads the true building)."""
     for path in (ROOT / "policies").rglob("*.py"):

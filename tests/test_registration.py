@@ -7,9 +7,10 @@ import pytest
 from shapely.geometry import Point, Polygon
 
 from nbs_env.config import OdometryConfig, RegistrationConfig, ScannerConfig
+from nbs_env.mapping.cloud import AccumulatedCloud
 from nbs_env.sensing.odometry import Odometry, path_length
 from nbs_env.sensing.pose import planar, pose_error, pose_from_xyz_rpy, yaw_of
-from nbs_env.sensing.registration import AccumulatedCloud, level_from_floor, register
+from nbs_env.sensing.registration import level_from_floor, register
 from nbs_env.sensing.scanner import Scanner
 from scenes import load_scene
 from scenes.geometry import STOREY_CLEARANCE, point_is_free
@@ -257,7 +258,7 @@ def test_a_refused_registration_is_reported_in_info_and_metrics():
 
     from nbs_env.config import make_config
     from nbs_env.env import NBSEnv
-    from nbs_env.evaluation import metrics_dict
+    from nbs_env.report import metrics_dict
 
     config = make_config("default", scene="l_room", max_scans=3)
     # No pose can have every point of its overlap on S(t)'s planes within 1 mm: every ICP is refused.

@@ -16,9 +16,10 @@ import pytest
 import trimesh
 
 from nbs_env.belief import RoomModel
-from nbs_env.evaluation import SCHEMA, QualityConfig, QualityReport, metrics_dict
+from nbs_env.evaluation import QualityConfig, QualityReport
 from nbs_env.export import FACE_KINDS, structural_model, write_model_obj, write_points_ply
 from nbs_env.perception.faces import WallFace
+from nbs_env.report import SCHEMA, metrics_dict
 from scenes import Room, load_scene
 from train.cli import EXIT_SCENE_ERROR, EXIT_USAGE, main
 

@@ -7,7 +7,7 @@ import numpy as np
 
 from nbs_env.config import make_config
 from nbs_env.env import NBSEnv
-from nbs_env.evaluation import metrics_dict
+from nbs_env.report import metrics_dict
 from nbs_env.sensing.scanner import Scanner
 from policies import GreedyPolicy
 from train.episode import run_episode

@@ -153,8 +153,9 @@ def test_s_of_t_merged_beside_is_the_s_of_t_merged_when_asked(monkeypatch):
     copies are those of one thread, bit for bit."""
     import pickle
 
+    from nbs_env.mapping.cloud import AccumulatedCloud
     from nbs_env.sensing.pose import pose_from_xyz_rpy
-    from nbs_env.sensing.registration import AccumulatedCloud, register
+    from nbs_env.sensing.registration import register
     from nbs_env.sensing.scanner import Scanner
     from scenes import load_scene
 

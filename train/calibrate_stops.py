@@ -53,7 +53,7 @@ def log_episode(scene: str, method: str, seed: int, preset: str, max_scans: int)
     coverage (%) before and after the scan it led to."""
     from nbs_env.config import make_config
     from nbs_env.env import NBSEnv
-    from nbs_env.evaluation import metrics_dict
+    from nbs_env.report import metrics_dict
     from policies import make_policy
     from train.episode import config_for
 

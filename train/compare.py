@@ -140,7 +140,7 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
     started = time.perf_counter()
     try:
         from nbs_env.env import NBSEnv
-        from nbs_env.evaluation import metrics_dict
+        from nbs_env.report import metrics_dict
         from policies import config_for, make_policy
         from train.episode import run_episode
 

@@ -26,7 +26,7 @@ def run_episode(
     -------
     dict of int to float
         The policy's decision time by the index of the scan the decision led to (for
-        :func:`nbs_env.evaluation.metrics_dict`).
+        :func:`nbs_env.report.metrics_dict`).
 
     Raises
     ------

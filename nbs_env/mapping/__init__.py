@@ -1,1 +1,1 @@
-"""Mapping: the labelled voxel space V(t)."""
+"""Mapping: the accumulated cloud S(t) and the labelled voxel space V(t)."""

@@ -1,12 +1,25 @@
-"""Working copies of accumulated scans: points (and normals) averaged in world-anchored voxels,
-updated scan by scan (the room's copy for perception, S(t)'s for registration)."""
+"""The accumulated cloud S(t), and its working copies: points (and normals) averaged in
+world-anchored voxels, updated scan by scan (the room's copy for perception, S(t)'s for registration).
+
+S(t) keeps every registered scan at full resolution (for output and the coverage metric) and a
+voxel-downsampled working copy with normals (ICP's target), for the storey and per room: each scan
+is downsampled once (10 cm voxel means), its normals estimated in the scan itself, and merged into
+world-anchored voxels. Registration (:mod:`nbs_env.sensing.registration`) reads it through
+:class:`~nbs_env.sensing.registration.TargetCloud` and makes the scans' downsampled copies.
+"""
 
 from __future__ import annotations
+
+from concurrent.futures import Future
 
 import numba
 import numpy as np
 
-__all__ = ["VoxelMeans"]
+from nbs_env import threads
+from nbs_env.sensing.pose import check_pose
+from nbs_env.sensing.registration import _cloud, _ScanCopy
+
+__all__ = ["AccumulatedCloud", "VoxelMeans"]
 
 # Cells are packed 21 bits an axis into one int64 key: +-2^20 cells, 52 km at 5 cm.
 _BITS = 21
@@ -223,3 +236,244 @@ def _merge(held_keys, held_sums, held_counts, keys, order, values):
         at += 1
         k += 1
     return out_keys, out_sums, out_counts
+
+
+class AccumulatedCloud:
+    """S(t): the registered scans of the storey and of each room.
+
+    Parameters
+    ----------
+    voxel_size : float
+        Voxel size of the working copies in metres.
+    normal_radius : float
+        Neighbourhood radius for the normals, metres (:class:`~nbs_env.sensing.registration._ScanCopy`).
+    normals : bool
+        Estimate normals (ICP's target needs them).
+    rooms : bool
+        Keep a working copy per room as well as the storey's.
+    normal_reach : float or None
+        Points with fewer than six neighbours within ``normal_radius`` (far returns) take their
+        normal from within this radius instead. None: ``normal_radius`` for all.
+
+    The working copies are world-anchored voxel means (:class:`VoxelMeans`)
+    of every scan's downsampled copy: adding a scan touches only its own voxels, not the storey's.
+    With normals, the storey's copy and ICP's target also keep GICP's covariances, each scan's own
+    (from its 20 nearest points in the scan, where at least six lie within ``normal_radius``)
+    placed with its pose and averaged per voxel.
+    A voxel's normal is the mean of its points' normals made unit length; voxels whose normals
+    disagree (mean length below 0.5: a corner, both faces of a thin board) are left out.
+
+    Besides the working copies of every scan, the cloud keeps ICP's target: the working copy of the
+    scans whose registration was accepted. A scan whose ICP was refused lies in S(t) at its odometry
+    pose, centimetres to decimetres off; as a target it doubles every surface it shares with the
+    registered scans, and the next scans can lock onto the wrong copy.
+    The two copies are one object until the first refused scan.
+    """
+
+    def __init__(
+        self,
+        voxel_size: float = 0.1,
+        normal_radius: float = 0.15,
+        *,
+        normals: bool = True,
+        rooms: bool = True,
+        normal_reach: float | None = 0.6,
+    ) -> None:
+        self.voxel_size = voxel_size
+        self.normal_radius = normal_radius
+        self.normal_reach = normal_reach
+        self.normals = normals
+        self.rooms = rooms
+        self._full: list[np.ndarray] = []
+        self._rooms_of_scans: list[int] = []
+        self._origins: list[np.ndarray] = []
+        self._registered: list[bool] = []
+        self._storey: VoxelMeans | None = None
+        self._target: VoxelMeans | None = None
+        self._room_copies: dict[int, VoxelMeans] = {}
+        self._pending: list[int] = []
+        self._views: dict = {}
+        # The verdict of the last ``register`` on this cloud, for the scan added next.
+        self._verdict: bool | None = None
+        # The downsampled copy of the scan the last ``register`` aligned (sensor frame), and the
+        # scans' copies waiting to be merged: each scan is downsampled, and its normals estimated, once.
+        self._prepared: _ScanCopy | None = None
+        self._copies: dict[int, _ScanCopy] = {}
+        # The merge of the scans added last, running beside the robot's next work (see ``add``).
+        self._merging: Future | None = None
+
+    def __len__(self) -> int:
+        return len(self._full)
+
+    @property
+    def n_points(self) -> int:
+        """Points at full resolution over all scans."""
+        return int(sum(len(p) for p in self._full))
+
+    @property
+    def registered(self) -> list[bool]:
+        """Per scan, whether it is in ICP's target (its registration was accepted)."""
+        return list(self._registered)
+
+    def add(
+        self,
+        points_world: np.ndarray,
+        origin: np.ndarray,
+        room: int = 0,
+        registered: bool | None = None,
+        pose: np.ndarray | None = None,
+    ) -> None:
+        """Add a registered scan.
+
+        Parameters
+        ----------
+        points_world : (n, 3) float
+            The scan placed with the robot's pose estimate.
+        origin : (3,) float
+            The estimated scanner position (normals are oriented towards it).
+        room : int
+            The room the robot believes it is scanning.
+        registered : bool, optional
+            Whether the pose came from an accepted registration (only such scans become ICP's
+            target). Default: the verdict of the last
+            :func:`~nbs_env.sensing.registration.register` into this cloud, or True when there was
+            none since the last ``add`` (a scan placed without ICP).
+        pose : (4, 4) float, optional
+            The pose that placed the scan (its position is ``origin``). Given, the working copy is
+            the downsampled copy the last :func:`~nbs_env.sensing.registration.register` into this
+            cloud made of the same scan, placed with it, instead of a new downsampling of
+            ``points_world``: the scan is then downsampled, and its normals estimated, once. The
+            registration's voxels must be the cloud's.
+        """
+        points_world = np.asarray(points_world, dtype=np.float64)
+        if points_world.ndim != 2 or points_world.shape[1] != 3 or not np.all(np.isfinite(points_world)):
+            raise ValueError(f"points_world must be a finite (n, 3) array, got shape {points_world.shape}")
+        self._settle()
+        if registered is None:
+            registered = True if self._verdict is None else self._verdict
+        self._verdict = None
+        prepared, self._prepared = self._prepared, None
+        if pose is not None and prepared is not None:
+            pose = check_pose(pose, "pose")
+            if prepared.size != len(points_world):
+                raise ValueError(
+                    f"the last registered scan had {prepared.size} points and this one {len(points_world)}: "
+                    "pose= adds only the scan register() aligned"
+                )
+            prepared.pose = pose
+            self._copies[len(self._full)] = prepared
+        self._full.append(points_world)
+        self._rooms_of_scans.append(int(room))
+        self._origins.append(np.asarray(origin, dtype=float))
+        self._registered.append(bool(registered))
+        # The working copies are merged when first asked for: a robot without ICP never asks. With
+        # ICP, and a second core, the merge starts now beside the robot's perception of the scan
+        # (numpy and the compiled merge release the GIL), off the next registration's path.
+        self._pending.append(len(self._full) - 1)
+        if self.normals and threads.cores() > 1:
+            self._merging = threads.beside(self._update)
+
+    def _settle(self) -> None:
+        """Wait for a merge running beside (and raise what it raised)."""
+        merging, self._merging = self._merging, None
+        if merging is not None:
+            merging.result()
+
+    def __getstate__(self) -> dict:
+        self._settle()
+        return self.__dict__.copy()
+
+    def _update(self) -> None:
+        if not self._pending:
+            return
+        for k in self._pending:
+            copy = self._copies.pop(k, None)
+            if copy is None or (self.normals and copy.covariances is None):
+                copy = self._scan_copy(self._full[k], self._origins[k], covariances=self.normals)
+                copy.pose = None
+            points, normals, covariances = copy.world()
+            if not len(points):
+                continue
+            normals = normals if self.normals else None
+            # The covariances ride with the normals: both are ICP's, and S(t) without ICP keeps neither.
+            covariances = covariances if self.normals else None
+            if self._storey is None:
+                self._storey = self._target = VoxelMeans(self.voxel_size, self.normals, self.normals)
+            if not self._registered[k] and self._target is self._storey:
+                # The first refused scan: from here on the target holds the registered scans only.
+                self._target = self._storey.copy()
+            self._storey.add(points, normals, covariances)
+            if self._registered[k] and self._target is not self._storey:
+                self._target.add(points, normals, covariances)
+            if self.rooms:
+                room = self._rooms_of_scans[k]
+                self._room_copies.setdefault(room, VoxelMeans(self.voxel_size, self.normals)).add(points, normals)
+        self._pending = []
+        self._views = {}
+
+    def _scan_copy(self, points: np.ndarray, origin=None, neighbours: int = 20, covariances: bool = True) -> _ScanCopy:
+        """A scan's downsampled copy with this cloud's normals (and GICP's covariances)."""
+        radius = self.normal_radius if self.normals else None
+        return _ScanCopy(points, self.voxel_size, neighbours, origin, radius, self.normal_reach, covariances)
+
+    def _copy(self, key) -> VoxelMeans | None:
+        """The storey's copy (``None``), a room's (its index) or the target's (``"target"``), updated."""
+        self._settle()
+        self._update()
+        return self._target if key == "target" else self._storey if key is None else self._room_copies.get(key)
+
+    def _arrays(self, copy: VoxelMeans | None, subset: np.ndarray | None = None):
+        """(points, unit normals or None) of a working copy (of its voxels ``subset``), voxels with
+        disagreeing normals left out."""
+        if copy is None:
+            return np.zeros((0, 3)), (np.zeros((0, 3)) if self.normals else None)
+        points = copy.points if subset is None else copy.points[subset]
+        if not copy.has_normals:
+            return points, None
+        sums, counts = copy.normal_sums, copy.counts
+        if subset is not None:
+            sums, counts = sums[subset], counts[subset]
+        mean = sums / counts[:, None]
+        length = np.sqrt(np.einsum("ij,ij->i", mean, mean))
+        keep = length >= 0.5
+        return points[keep], mean[keep] / length[keep, None]
+
+    def _view(self, key):
+        """The arrays of the storey's copy (``None``), a room's (its index) or the target's (``"target"``)."""
+        copy = self._copy(key)
+        if key not in self._views:
+            self._views[key] = self._arrays(copy)
+        return self._views[key]
+
+    # ------------------------------------------------------------------ views
+    def storey_points(self) -> np.ndarray:
+        """(n, 3) float: all registered points at full resolution."""
+        return np.concatenate(self._full) if self._full else np.zeros((0, 3))
+
+    def room_points(self, room: int) -> np.ndarray:
+        """(n, 3) float: the full-resolution points of the scans taken in ``room``."""
+        parts = [p for p, r in zip(self._full, self._rooms_of_scans, strict=True) if r == room]
+        return np.concatenate(parts) if parts else np.zeros((0, 3))
+
+    def working_points(self, room: int | None = None) -> np.ndarray:
+        """(n, 3) float: the downsampled working copy of the storey, or of one room."""
+        return self._view(room)[0]
+
+    def working_normals(self, room: int | None = None) -> np.ndarray | None:
+        """(n, 3) float unit normals of :meth:`working_points` (None without normals)."""
+        return self._view(room)[1]
+
+    def working_cloud(self, room: int | None = None):
+        """The downsampled working copy (an open3d PointCloud with normals), or None when empty."""
+        points, normals = self._view(room)
+        return _cloud(points, normals) if len(points) else None
+
+    def target_arrays(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """ICP's target, the working copy of the scans whose registration was accepted: (points,
+        unit normals or None), (n, 3) float each."""
+        return self._view("target")
+
+    def target_cloud(self):
+        """ICP's target as an open3d PointCloud with normals, or None when empty."""
+        points, normals = self.target_arrays()
+        return _cloud(points, normals) if len(points) else None
