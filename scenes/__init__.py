@@ -14,11 +14,11 @@ Everything a :class:`Scene` holds is ground truth: only the simulator and evalua
 
 from __future__ import annotations
 
-import json
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from scenes.corpus import PREFIX as CORPUS_PREFIX
+from scenes.corpus import load_corpus_scene
 from scenes.errors import (
     FloorPlanError,
     IfcError,
@@ -34,6 +34,9 @@ from scenes.errors import (
 )
 from scenes.floorplan import ClutterPlan, DoorPlan, FloorPlan, RoomPlan, WindowPlan, extrude, load_plan
 from scenes.generator import GeneratorConfig, generate_plan, generate_storey
+from scenes.loader import MESH_EXTENSIONS as MESH_EXTENSIONS
+from scenes.loader import SUPPORTED_EXTENSIONS as SUPPORTED_EXTENSIONS
+from scenes.loader import bundled_plan, list_scenes, load_source
 from scenes.model import STRUCTURAL_CLASSES, Door, Room, Scene, StructureSamples, SurfaceClass
 
 __all__ = [
@@ -68,31 +71,6 @@ __all__ = [
     "load_plan",
     "load_scene",
 ]
-
-MESH_EXTENSIONS = (".obj", ".glb", ".gltf", ".ply")
-SUPPORTED_EXTENSIONS = (".json", *MESH_EXTENSIONS, ".ifc")
-_GENERATED = "generated:"
-_CORPUS = "corpus:"
-
-
-def list_scenes() -> list[str]:
-    """Names of the bundled scenes, sorted."""
-    data = resources.files("scenes") / "data"
-    return sorted(p.name[: -len(".json")] for p in data.iterdir() if p.name.endswith(".json"))
-
-
-def bundled_plan(name: str) -> FloorPlan:
-    """The floor plan of a bundled scene.
-
-    Raises
-    ------
-    UnknownSceneError
-        ``name`` is not bundled; the message lists the bundled names.
-    """
-    if name not in list_scenes():
-        raise UnknownSceneError(name, f"no bundled scene of that name; bundled: {', '.join(list_scenes())}")
-    text = (resources.files("scenes") / "data" / f"{name}.json").read_text()
-    return FloorPlan.from_dict(json.loads(text), source=f"{name} (bundled)")
 
 
 def load_scene(spec: str | Path | FloorPlan, **options: Any) -> Scene:
@@ -132,60 +110,8 @@ def load_scene(spec: str | Path | FloorPlan, **options: Any) -> Scene:
     return scene
 
 
-def _take(options: dict[str, Any], allowed: tuple[str, ...], kind: str) -> dict[str, Any]:
-    unknown = sorted(set(options) - set(allowed))
-    if unknown:
-        raise TypeError(f"load_scene got options {unknown} that a {kind} does not take; it takes {list(allowed)}")
-    return options
-
-
 def _load(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene:
-    if isinstance(spec, FloorPlan):
-        return extrude(spec, **_take(options, ("validate",), "floor plan"))
-    if not isinstance(spec, (str, Path)):
-        raise TypeError(f"scene spec must be a str, Path or FloorPlan, got {type(spec).__name__}")
-    text = str(spec)
-    if text.startswith(_CORPUS):
-        from scenes.corpus import load_corpus_scene
-
-        return load_corpus_scene(text[len(_CORPUS) :], **options)
-    if text.startswith(_GENERATED):
-        seed_text = text[len(_GENERATED) :]
-        try:
-            seed = int(seed_text)
-        except ValueError:
-            raise UnknownSceneError(text, f"the seed {seed_text!r} is not an integer (use generated:SEED)") from None
-        fields = tuple(GeneratorConfig.__dataclass_fields__)
-        opts = _take(options, (*fields, "validate"), "generated storey")
-        opts.pop("validate", None)  # generated storeys are always validated
-        try:
-            _, scene = generate_storey(seed, GeneratorConfig(**opts))
-        except ValueError as exc:
-            if isinstance(exc, SceneError):
-                raise
-            raise UnknownSceneError(text, f"bad generator option: {exc}") from None
-        scene.name = text  # as the user spelled it ("generated:05")
-        return scene
-    path = Path(text)
-    suffix = path.suffix.lower()
-    if not suffix and "/" not in text and "\\" not in text:
-        if text in list_scenes():
-            return extrude(bundled_plan(text), source=text, **_take(options, ("validate",), "bundled scene"))
-        raise UnknownSceneError(
-            text, f"no bundled scene of that name and no such file; bundled: {', '.join(list_scenes())}"
-        )
-    if suffix not in SUPPORTED_EXTENSIONS:
-        raise UnsupportedFormatError(
-            text, f"unsupported file type {suffix or '(none)'!r}; supported: {', '.join(SUPPORTED_EXTENSIONS)}"
-        )
-    if not path.is_file():
-        raise SceneFileError(text, "no such file" if not path.exists() else "not a regular file")
-    if suffix == ".json":
-        return extrude(load_plan(path), source=text, **_take(options, ("validate",), "floor-plan file"))
-    if suffix in MESH_EXTENSIONS:
-        from scenes.importers import load_mesh_scene
-
-        return load_mesh_scene(path, **_take(options, ("y_up", "name"), "mesh file"))
-    from scenes.ifc import load_ifc_scene
-
-    return load_ifc_scene(path, **_take(options, ("storey", "class_map", "name", "doors"), "IFC file"))
+    # Corpus entries are loaded through scenes.loader, so the corpus spec is told apart here, above both.
+    if isinstance(spec, (str, Path)) and str(spec).startswith(CORPUS_PREFIX):
+        return load_corpus_scene(str(spec)[len(CORPUS_PREFIX) :], **options)
+    return load_source(spec, options)

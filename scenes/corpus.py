@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from scenes.errors import SceneFileError, UnknownSceneError
+from scenes.loader import load_source
 
 __all__ = [
     "PREFIX",
@@ -133,13 +134,11 @@ def load_corpus_scene(name: str, **options: Any):
     SceneFileError
         A local-only entry whose file is absent (the message says where it was looked for).
     """
-    from scenes import load_scene
-
     entry = corpus_entry(name)
     merged = {**entry.options, **options}
     start = merged.pop("start", None)
     if entry.generated is not None:
-        scene = load_scene(f"generated:{entry.generated}", **merged)
+        scene = load_source(f"generated:{entry.generated}", merged)
     else:
         path = entry.path()
         if path is None:
@@ -147,7 +146,7 @@ def load_corpus_scene(name: str, **options: Any):
             raise SceneFileError(
                 entry.spec, f"local-only file {entry.file!r} not found under {where} (set {SHARED_DATA_VARIABLE})"
             )
-        scene = load_scene(path, **merged)
+        scene = load_source(path, merged)
     scene.name = entry.spec
     if start is not None:
         scene.start = start

@@ -62,6 +62,7 @@ from shapely.geometry.polygon import orient
 from scenes.errors import FloorPlanError, PlanGeometryError, SceneFileError
 from scenes.geometry import STOREY_CLEARANCE
 from scenes.model import Door, Room, Scene, SurfaceClass
+from scenes.validation import validate_plan_scene
 
 __all__ = [
     "CLUTTER_KINDS",
@@ -704,8 +705,6 @@ def extrude(plan: FloorPlan, *, source: str | None = None, validate: bool = True
         metadata={"source": "floorplan", "format_version": FORMAT_VERSION, "plan": plan.name},
     )
     if validate:
-        from scenes.validation import validate_plan_scene
-
         validate_plan_scene(plan, scene)
     return scene
 

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import shapely
@@ -13,7 +14,7 @@ from scenes.errors import StoreyValidationError
 from scenes.labels import SurfaceClass
 
 if TYPE_CHECKING:
-    from scenes.model import Scene
+    import trimesh
 
 __all__ = [
     "STOREY_CLEARANCE",
@@ -35,14 +36,50 @@ STOREY_CLEARANCE = 0.45
 _BODY_Z = (0.05, 1.8)
 
 
+class RoomLike(Protocol):
+    """What :func:`auto_start` reads of a room; :class:`scenes.model.Room` is one."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def polygon(self) -> np.ndarray: ...
+
+    @property
+    def floor_z(self) -> float: ...
+
+    @property
+    def area(self) -> float: ...
+
+
+class SceneLike(Protocol):
+    """What the functions here read of a building; :class:`scenes.model.Scene` is one.
+
+    A shape rather than the class itself: scenes.model imports this module for ``Scene.start``, so
+    naming Scene here would make the two modules import each other.
+    """
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def mesh(self) -> trimesh.Trimesh: ...
+
+    @property
+    def face_labels(self) -> np.ndarray: ...
+
+    @property
+    def rooms(self) -> Sequence[RoomLike]: ...
+
+
 def obstacle_footprint(
-    scene: Scene, floor_z: float, region: Polygon | None = None, margin: float = 0.0
+    scene: SceneLike, floor_z: float, region: Polygon | None = None, margin: float = 0.0
 ) -> Polygon | MultiPolygon:
     """Plan-view footprint of everything the robot would bump into on the floor at ``floor_z``.
 
     Parameters
     ----------
-    scene : Scene
+    scene : SceneLike
         The building (ground truth: only loaders and validation call this).
     floor_z : float
         Height of the floor the robot stands on.
@@ -109,7 +146,7 @@ def _clipped_hulls(tri: np.ndarray, lo: float, hi: float) -> np.ndarray:
     return shapely.convex_hull(groups)
 
 
-def free_region(scene: Scene, region: Polygon, floor_z: float, clearance: float) -> Polygon | MultiPolygon:
+def free_region(scene: SceneLike, region: Polygon, floor_z: float, clearance: float) -> Polygon | MultiPolygon:
     """Where a disc of radius ``clearance`` (m) may stand inside ``region`` without touching an obstacle."""
     obstacles = obstacle_footprint(scene, floor_z, region, margin=clearance)
     free = region.buffer(-clearance)
@@ -123,7 +160,7 @@ def _largest(geom: Polygon | MultiPolygon) -> Polygon:
     return max(parts, key=lambda g: g.area) if parts else Polygon()
 
 
-def auto_start(scene: Scene, clearance: float = STOREY_CLEARANCE) -> np.ndarray:
+def auto_start(scene: SceneLike, clearance: float = STOREY_CLEARANCE) -> np.ndarray:
     """A free point well inside the largest room: the pole of inaccessibility of its free space.
 
     Uses the ground-truth rooms when the scene has them, else the largest connected floor area.
@@ -163,7 +200,7 @@ def auto_start(scene: Scene, clearance: float = STOREY_CLEARANCE) -> np.ndarray:
     return np.array([p.x, p.y, floor_z])
 
 
-def point_is_free(scene: Scene, xy: np.ndarray, floor_z: float, clearance: float) -> bool:
+def point_is_free(scene: SceneLike, xy: np.ndarray, floor_z: float, clearance: float) -> bool:
     """Whether a disc of radius ``clearance`` (m) centred at ``xy`` touches no obstacle."""
     probe = Point(float(xy[0]), float(xy[1])).buffer(clearance)
     return not obstacle_footprint(scene, floor_z, probe).intersects(probe)

@@ -13,6 +13,7 @@ import numpy as np
 import trimesh
 
 from scenes.errors import InvalidMeshError, MissingStructureError
+from scenes.geometry import auto_start
 from scenes.labels import STRUCTURAL_CLASSES, SurfaceClass
 
 __all__ = [
@@ -191,8 +192,6 @@ class Scene:
     def start(self) -> np.ndarray:
         """(3,) float: the start position on the floor, chosen by :meth:`auto_start` if not given."""
         if self._start is None:
-            from scenes.geometry import auto_start
-
             self._start = self._as_floor_point(auto_start(self))
         return self._start
 

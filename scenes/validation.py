@@ -12,7 +12,8 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
 import shapely
@@ -23,13 +24,30 @@ from scenes.errors import StoreyValidationError
 from scenes.geometry import STOREY_CLEARANCE
 from scenes.model import Scene
 
-if TYPE_CHECKING:
-    from scenes.floorplan import FloorPlan
-
 __all__ = ["MIN_DOOR_WIDTH", "count_escaping_rays", "fibonacci_sphere", "room_free_space", "validate_plan_scene"]
 
 #: The narrowest door a valid storey may have, metres.
 MIN_DOOR_WIDTH = 0.60
+
+
+class ClutterLike(Protocol):
+    """What validation reads of a piece of clutter; :class:`scenes.floorplan.ClutterPlan` is one."""
+
+    def footprint(self) -> Polygon: ...
+
+
+class PlanLike(Protocol):
+    """What validation reads of a plan; :class:`scenes.floorplan.FloorPlan` is one.
+
+    A shape rather than the class itself: scenes.floorplan imports this module to validate what it
+    extrudes, so naming FloorPlan here would make the two modules import each other.
+    """
+
+    @property
+    def wall_thickness(self) -> float: ...
+
+    @property
+    def clutter(self) -> Sequence[ClutterLike]: ...
 
 
 def fibonacci_sphere(n: int) -> np.ndarray:
@@ -68,7 +86,7 @@ def count_escaping_rays(scene: Scene, origins: np.ndarray, n_directions: int = 4
     return (~np.isfinite(t_hit)).reshape(len(origins), len(dirs)).sum(axis=1)
 
 
-def room_free_space(plan: FloorPlan, scene: Scene, room: int, clearance: float = STOREY_CLEARANCE) -> Polygon:
+def room_free_space(plan: PlanLike, scene: Scene, room: int, clearance: float = STOREY_CLEARANCE) -> Polygon:
     """Where the robot's centre may stand in ``room`` (shapely Polygon or MultiPolygon)."""
     clear = Polygon(scene.rooms[room].polygon)
     free = clear.buffer(-clearance, join_style="mitre")
@@ -78,7 +96,7 @@ def room_free_space(plan: FloorPlan, scene: Scene, room: int, clearance: float =
     return free
 
 
-def validate_plan_scene(plan: FloorPlan, scene: Scene) -> None:
+def validate_plan_scene(plan: PlanLike, scene: Scene) -> None:
     """Raise :class:`StoreyValidationError` unless the storey is reachable, starts free and is closed."""
     name = scene.name
     parts: list[list[Polygon]] = []

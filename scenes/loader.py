@@ -1,0 +1,120 @@
+"""Loading a building from a bundled name, a floor plan, a file or ``generated:SEED``.
+
+This is everything :func:`scenes.load_scene` reads except ``"corpus:NAME"``: a corpus entry is itself
+one of these sources, and :func:`scenes.corpus.load_corpus_scene` loads it through here, so this
+module must not know the corpus.
+"""
+
+from __future__ import annotations
+
+import json
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from scenes.errors import SceneError, SceneFileError, UnknownSceneError, UnsupportedFormatError
+from scenes.floorplan import FloorPlan, extrude, load_plan
+from scenes.generator import GeneratorConfig, generate_storey
+from scenes.model import Scene
+
+__all__ = ["MESH_EXTENSIONS", "SUPPORTED_EXTENSIONS", "bundled_plan", "list_scenes", "load_source"]
+
+MESH_EXTENSIONS = (".obj", ".glb", ".gltf", ".ply")
+SUPPORTED_EXTENSIONS = (".json", *MESH_EXTENSIONS, ".ifc")
+_GENERATED = "generated:"
+
+
+def list_scenes() -> list[str]:
+    """Names of the bundled scenes, sorted."""
+    data = resources.files("scenes") / "data"
+    return sorted(p.name[: -len(".json")] for p in data.iterdir() if p.name.endswith(".json"))
+
+
+def bundled_plan(name: str) -> FloorPlan:
+    """The floor plan of a bundled scene.
+
+    Raises
+    ------
+    UnknownSceneError
+        ``name`` is not bundled; the message lists the bundled names.
+    """
+    if name not in list_scenes():
+        raise UnknownSceneError(name, f"no bundled scene of that name; bundled: {', '.join(list_scenes())}")
+    text = (resources.files("scenes") / "data" / f"{name}.json").read_text()
+    return FloorPlan.from_dict(json.loads(text), source=f"{name} (bundled)")
+
+
+def load_source(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene:
+    """Load a building from any source but a corpus entry: what :func:`scenes.load_scene` does for
+    every other spec, with the ``start`` option already taken out.
+
+    Parameters
+    ----------
+    spec : str, Path or FloorPlan
+        A bundled name, a file path, ``"generated:SEED"`` or a :class:`FloorPlan`.
+    options : dict
+        The options of :func:`scenes.load_scene` that the kind of source takes; the dict may be changed.
+
+    Returns
+    -------
+    Scene
+
+    Raises
+    ------
+    SceneError
+        As :func:`scenes.load_scene`.
+    TypeError
+        An option that the chosen kind of source does not take.
+    """
+    if isinstance(spec, FloorPlan):
+        return extrude(spec, **_take(options, ("validate",), "floor plan"))
+    if not isinstance(spec, (str, Path)):
+        raise TypeError(f"scene spec must be a str, Path or FloorPlan, got {type(spec).__name__}")
+    text = str(spec)
+    if text.startswith(_GENERATED):
+        seed_text = text[len(_GENERATED) :]
+        try:
+            seed = int(seed_text)
+        except ValueError:
+            raise UnknownSceneError(text, f"the seed {seed_text!r} is not an integer (use generated:SEED)") from None
+        fields = tuple(GeneratorConfig.__dataclass_fields__)
+        opts = _take(options, (*fields, "validate"), "generated storey")
+        opts.pop("validate", None)  # generated storeys are always validated
+        try:
+            _, scene = generate_storey(seed, GeneratorConfig(**opts))
+        except ValueError as exc:
+            if isinstance(exc, SceneError):
+                raise
+            raise UnknownSceneError(text, f"bad generator option: {exc}") from None
+        scene.name = text  # as the user spelled it ("generated:05")
+        return scene
+    path = Path(text)
+    suffix = path.suffix.lower()
+    if not suffix and "/" not in text and "\\" not in text:
+        if text in list_scenes():
+            return extrude(bundled_plan(text), source=text, **_take(options, ("validate",), "bundled scene"))
+        raise UnknownSceneError(
+            text, f"no bundled scene of that name and no such file; bundled: {', '.join(list_scenes())}"
+        )
+    if suffix not in SUPPORTED_EXTENSIONS:
+        raise UnsupportedFormatError(
+            text, f"unsupported file type {suffix or '(none)'!r}; supported: {', '.join(SUPPORTED_EXTENSIONS)}"
+        )
+    if not path.is_file():
+        raise SceneFileError(text, "no such file" if not path.exists() else "not a regular file")
+    if suffix == ".json":
+        return extrude(load_plan(path), source=text, **_take(options, ("validate",), "floor-plan file"))
+    if suffix in MESH_EXTENSIONS:
+        from scenes.importers import load_mesh_scene
+
+        return load_mesh_scene(path, **_take(options, ("y_up", "name"), "mesh file"))
+    from scenes.ifc import load_ifc_scene
+
+    return load_ifc_scene(path, **_take(options, ("storey", "class_map", "name", "doors"), "IFC file"))
+
+
+def _take(options: dict[str, Any], allowed: tuple[str, ...], kind: str) -> dict[str, Any]:
+    unknown = sorted(set(options) - set(allowed))
+    if unknown:
+        raise TypeError(f"load_scene got options {unknown} that a {kind} does not take; it takes {list(allowed)}")
+    return options
