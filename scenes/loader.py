@@ -58,13 +58,12 @@ def load_source(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene:
     Returns
     -------
     Scene
+        The building with its labelled mesh, rooms, doors and start.
 
     Raises
     ------
-    SceneError
-        As :func:`scenes.load_scene`.
-    TypeError
-        An option that the chosen kind of source does not take.
+    SceneError, TypeError
+        As :func:`scenes.load_scene`: a source that cannot be loaded, an option it does not take.
     """
     if isinstance(spec, FloorPlan):
         return extrude(spec, **_take(options, ("validate",), "floor plan"))

@@ -10,8 +10,7 @@ import ifcopenshell.api
 import numpy as np
 import pytest
 import shapely
-from ifcopenshell.api import aggregate, context, geometry, root, spatial, unit
-from ifcopenshell.api import project as api_project
+from ifcopenshell.api import aggregate, geometry, root, spatial
 from shapely.geometry import Polygon
 
 from scenes.corpus import corpus_entry
@@ -19,6 +18,7 @@ from scenes.errors import IfcError, MissingDependencyError, MissingStructureErro
 from scenes.ifc import DEFAULT_CLASS_MAP, load_ifc_scene
 from scenes.interior import interior_area, interior_samples
 from scenes.model import Scene, SurfaceClass
+from tests.data.make_two_rooms_ifc import matrix, new_building
 
 DATA = Path(__file__).parent / "data"
 FZK = corpus_entry("fzk_haus_eg").path()
@@ -218,14 +218,6 @@ def test_licence_note_travels_with_the_model():
 
 
 # ------------------------------------------------------------------------------- tiny models
-def _matrix(x: float, y: float, z: float, angle: float = 0.0) -> np.ndarray:
-    m = np.eye(4)
-    a = np.radians(angle)
-    m[:2, :2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
-    m[:3, 3] = (x, y, z)
-    return m
-
-
 def tiny_ifc(
     path: Path,
     storeys: tuple[tuple[str, float], ...] = (("EG", 0.0),),
@@ -239,23 +231,13 @@ def tiny_ifc(
     The elements go on storey ``host`` (index into ``storeys``) at that storey's elevation, or on the
     building when there is no storey.
     """
-    f = api_project.create_file(version="IFC4")
-    proj = root.create_entity(f, ifc_class="IfcProject", name="tiny")
-    unit.assign_unit(f)  # millimetres, so the loader must convert
-    model = context.add_context(f, context_type="Model")
-    body = context.add_context(
-        f, context_type="Model", context_identifier="Body", target_view="MODEL_VIEW", parent=model
-    )
-    site = root.create_entity(f, ifc_class="IfcSite", name="site")
-    building = root.create_entity(f, ifc_class="IfcBuilding", name="house")
-    aggregate.assign_object(f, products=[site], relating_object=proj)
-    aggregate.assign_object(f, products=[building], relating_object=site)
+    f, body, building = new_building("tiny", millimetres=True)  # so the loader must convert
     created = []
     for i, (name, z) in enumerate(storeys):
         st = root.create_entity(f, ifc_class="IfcBuildingStorey", name=name)
         st.LongName = f"Level {i}"
         st.Elevation = z * 1000.0
-        geometry.edit_object_placement(f, product=st, matrix=_matrix(0, 0, z))
+        geometry.edit_object_placement(f, product=st, matrix=matrix(0, 0, z))
         aggregate.assign_object(f, products=[st], relating_object=building)
         created.append(st)
     container = created[host] if created else building
@@ -265,13 +247,13 @@ def tiny_ifc(
             wall = root.create_entity(f, ifc_class="IfcWall", name=f"wall-{angle}")
             rep = geometry.add_wall_representation(f, context=body, length=length, height=3.0, thickness=0.2)
             geometry.assign_representation(f, product=wall, representation=rep)
-            geometry.edit_object_placement(f, product=wall, matrix=_matrix(x, y, z0, angle))
+            geometry.edit_object_placement(f, product=wall, matrix=matrix(x, y, z0, angle))
             spatial.assign_container(f, products=[wall], relating_structure=container)
     if slab:
         plate = root.create_entity(f, ifc_class="IfcSlab", name="slab")
         rep = geometry.add_slab_representation(f, context=body, depth=0.2, polyline=[(0, 0), (4, 0), (4, 3), (0, 3)])
         geometry.assign_representation(f, product=plate, representation=rep)
-        geometry.edit_object_placement(f, product=plate, matrix=_matrix(0, 0, z0 - 0.2))
+        geometry.edit_object_placement(f, product=plate, matrix=matrix(0, 0, z0 - 0.2))
         spatial.assign_container(f, products=[plate], relating_structure=container)
     f.write(str(path))
     return path
@@ -323,7 +305,7 @@ def test_slab_of_the_storey_below_closes_from_above(tmp_path):
     roof = root.create_entity(f, ifc_class="IfcSlab", name="roof")
     rep = geometry.add_slab_representation(f, context=body, depth=0.2, polyline=[(0, 0), (4, 0), (4, 3), (0, 3)])
     geometry.assign_representation(f, product=roof, representation=rep)
-    geometry.edit_object_placement(f, product=roof, matrix=_matrix(0, 0, 3.0))
+    geometry.edit_object_placement(f, product=roof, matrix=matrix(0, 0, 3.0))
     spatial.assign_container(f, products=[roof], relating_structure=upper)
     f.write(str(p))
     scene = load_ifc_scene(p, storey="Ground")

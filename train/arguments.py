@@ -15,6 +15,7 @@ __all__ = [
     "add_scene_arguments",
     "adopt_requirements",
     "config_from_arguments",
+    "integer_from",
     "output_folder_problem",
     "parse_range",
     "scene_option_error",
@@ -92,14 +93,16 @@ def _number(text: str) -> float:
     return value  # its range, finiteness included, is the configuration's to check, by the field's name
 
 
-def _count(least: int):
+def integer_from(least: int, what: str = "expected an integer"):
+    """An argparse type: an integer of at least ``least``; ``what`` begins the message."""
+
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
         if value < least:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {least}, got {text!r}")
+            raise argparse.ArgumentTypeError(f"{what} >= {least}, got {text!r}")
         return value
 
     return parse
@@ -153,8 +156,8 @@ def add_robot_arguments(parser: argparse.ArgumentParser, presets: Sequence[str] 
         "--resolution", type=_number, default=None, help="simulated angular step in degrees (default 0.5, fast 1)"
     )
     group.add_argument("--voxel", type=_number, default=None, help="voxel size of V(t) in metres (default 0.05)")
-    group.add_argument("--wall-search", type=_count(0), default=None, metavar="N", help=WALL_SEARCH_HELP)
-    group.add_argument("--max-scans", type=_count(1), default=None, help="scan budget of an episode")
+    group.add_argument("--wall-search", type=integer_from(0), default=None, metavar="N", help=WALL_SEARCH_HELP)
+    group.add_argument("--max-scans", type=integer_from(1), default=None, help="scan budget of an episode")
     group.add_argument("--min-density", type=_number, default=None, help="quality: least points per m² (default 400)")
     group.add_argument(
         "--max-incidence", type=_number, default=None, help="quality: largest incidence angle in degrees (default 70)"

@@ -16,7 +16,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from train.arguments import add_robot_arguments, add_scene_arguments, scene_option_error
+from train.arguments import add_robot_arguments, add_scene_arguments, integer_from, scene_option_error
 
 EXIT_SCENE_ERROR = 1
 EXIT_USAGE = 2
@@ -49,23 +49,8 @@ def _clutter_density(text: str) -> float:
     return value
 
 
-def _integer_from(least: int, what: str = "expected an integer"):
-    """An argparse type: an integer of at least ``least``; ``what`` begins the message."""
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if value < least:
-            raise argparse.ArgumentTypeError(f"{what} >= {least}, got {text!r}")
-        return value
-
-    return parse
-
-
-_seed = _integer_from(0, "a seed is an integer")
-_positive_int = _integer_from(1)
+_seed = integer_from(0, "a seed is an integer")
+_positive_int = integer_from(1)
 
 #: What matplotlib's savefig writes, by file suffix.
 PICTURE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".eps", ".ps", ".tif", ".tiff", ".webp")

@@ -18,60 +18,30 @@ the one override path.
 """
 
 from nbs_env import lazy_getattr
-from nbs_env.config.checks import Config, _finite, _finite_fields, _integer, _require
+from nbs_env.config import checks, robot, rooms, scanners
+from nbs_env.config.checks import *  # noqa: F403 - each module's __all__ is the one list of its names
+from nbs_env.config.checks import _finite, _finite_fields, _integer, _require
+from nbs_env.config.robot import *  # noqa: F403
+from nbs_env.config.rooms import *  # noqa: F403
+from nbs_env.config.scanners import *  # noqa: F403
 
-#: Each name is imported from its module on first use: the command line reads the scanners' table
-#: without loading the buildings' generator that EnvConfig's defaults need.
-_EXPORTS = {
+#: Imported on first use: EnvConfig's defaults load the buildings' generator (about 0.5 s), which
+#: the command line's ``--help`` and the scanners' table do not need.
+_LAZY = {
     **dict.fromkeys(("EnvConfig", "ObservationConfig", "QualityConfig", "RewardConfig"), "nbs_env.config.env"),
     **dict.fromkeys(("PRESETS", "config_paths", "make_config"), "nbs_env.config.presets"),
-    **dict.fromkeys(
-        (
-            "MAX_RAYS",
-            "DoorConfig",
-            "GainConfig",
-            "NavigationConfig",
-            "OdometryConfig",
-            "PlanningConfig",
-            "RegistrationConfig",
-            "RobotConfig",
-            "RoIConfig",
-            "ScannerConfig",
-        ),
-        "nbs_env.config.robot",
-    ),
-    **dict.fromkeys(("COMPLETIONS", "RoomRules", "WallSearchConfig"), "nbs_env.config.rooms"),
-    **dict.fromkeys(("SCANNERS", "scanner_config"), "nbs_env.config.scanners"),
 }
 
 __all__ = [
-    "COMPLETIONS",
-    "MAX_RAYS",
-    "PRESETS",
-    "SCANNERS",
-    "Config",
-    "DoorConfig",
-    "EnvConfig",
-    "GainConfig",
-    "NavigationConfig",
-    "ObservationConfig",
-    "OdometryConfig",
-    "PlanningConfig",
-    "QualityConfig",
-    "RegistrationConfig",
-    "RewardConfig",
-    "RoIConfig",
-    "RobotConfig",
-    "RoomRules",
-    "ScannerConfig",
-    "WallSearchConfig",
+    *checks.__all__,
+    *robot.__all__,
+    *rooms.__all__,
+    *scanners.__all__,
+    *_LAZY,
     "_finite",
     "_finite_fields",
     "_integer",
     "_require",
-    "config_paths",
-    "make_config",
-    "scanner_config",
 ]
 
-__getattr__ = lazy_getattr(__name__, _EXPORTS)
+__getattr__ = lazy_getattr(__name__, _LAZY)

@@ -44,7 +44,34 @@ DOOR_W, DOOR_H, DOOR_Y = 0.9, 2.1, 2.0  # door width, height, centre along the i
 _NAMESPACE = uuid.UUID("6f1c1b1e-2d0a-4c55-9a51-7e0f3b7a2c10")
 
 
-def _matrix(x: float, y: float, z: float, angle: float = 0.0) -> np.ndarray:
+def new_building(name: str, *, millimetres: bool) -> tuple[ifcopenshell.file, object, object]:
+    """An IFC4 file with a project, a model's body context, a site and a building called ``name``.
+
+    Returns
+    -------
+    file, body, building
+        The file, the body context representations go in, and the ``IfcBuilding``.
+    """
+    f = api_project.create_file(version="IFC4")
+    project = root.create_entity(f, ifc_class="IfcProject", name=name)
+    # Millimetres (ifcopenshell's default unit) make the loader convert; metres do not.
+    if millimetres:
+        unit.assign_unit(f)
+    else:
+        unit.assign_unit(f, units=[unit.add_si_unit(f, unit_type="LENGTHUNIT")])
+    model = context.add_context(f, context_type="Model")
+    body = context.add_context(
+        f, context_type="Model", context_identifier="Body", target_view="MODEL_VIEW", parent=model
+    )
+    site = root.create_entity(f, ifc_class="IfcSite", name="site")
+    building = root.create_entity(f, ifc_class="IfcBuilding", name=name)
+    aggregate.assign_object(f, products=[site], relating_object=project)
+    aggregate.assign_object(f, products=[building], relating_object=site)
+    return f, body, building
+
+
+def matrix(x: float, y: float, z: float, angle: float = 0.0) -> np.ndarray:
+    """A placement: ``angle`` degrees about z, then a move to (x, y, z)."""
     m = np.eye(4)
     a = np.radians(angle)
     m[:2, :2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
@@ -53,22 +80,12 @@ def _matrix(x: float, y: float, z: float, angle: float = 0.0) -> np.ndarray:
 
 
 def build() -> ifcopenshell.file:
-    f = api_project.create_file(version="IFC4")
-    project = root.create_entity(f, ifc_class="IfcProject", name="two rooms")
-    unit.assign_unit(f, units=[unit.add_si_unit(f, unit_type="LENGTHUNIT")])  # metres
-    model = context.add_context(f, context_type="Model")
-    body = context.add_context(
-        f, context_type="Model", context_identifier="Body", target_view="MODEL_VIEW", parent=model
-    )
-    site = root.create_entity(f, ifc_class="IfcSite", name="site")
-    building = root.create_entity(f, ifc_class="IfcBuilding", name="two rooms")
-    aggregate.assign_object(f, products=[site], relating_object=project)
-    aggregate.assign_object(f, products=[building], relating_object=site)
+    f, body, building = new_building("two rooms", millimetres=False)
     storeys = {}
     for name, z in (("EG", 0.0), ("OG", OG_ELEVATION)):
         storey = root.create_entity(f, ifc_class="IfcBuildingStorey", name=name)
         storey.Elevation = z
-        geometry.edit_object_placement(f, product=storey, matrix=_matrix(0, 0, z))
+        geometry.edit_object_placement(f, product=storey, matrix=matrix(0, 0, z))
         aggregate.assign_object(f, products=[storey], relating_object=building)
         storeys[name] = storey
     eg, og = storeys["EG"], storeys["OG"]
@@ -89,18 +106,18 @@ def build() -> ifcopenshell.file:
     ]:
         wall = root.create_entity(f, ifc_class="IfcWall", name=name)
         rep = geometry.add_wall_representation(f, context=body, length=length, height=WALL_H, thickness=T)
-        place(wall, rep, _matrix(x, y, 0, angle), eg)
+        place(wall, rep, matrix(x, y, 0, angle), eg)
     # The interior wall runs north between the exterior walls; at 90 degrees its thickness lies to -x.
     x_mid = L / 2 + T / 2
     inner = root.create_entity(f, ifc_class="IfcWall", name="wall interior")
     rep = geometry.add_wall_representation(f, context=body, length=D - 2 * T, height=WALL_H, thickness=T)
-    place(inner, rep, _matrix(x_mid, T, 0, 90), eg)
+    place(inner, rep, matrix(x_mid, T, 0, 90), eg)
 
     # The opening is 0.1 m deeper than the wall on each side, so that the void cuts cleanly through it.
     y0 = DOOR_Y - DOOR_W / 2
     opening = root.create_entity(f, ifc_class="IfcOpeningElement", name="door opening")
     rep = geometry.add_wall_representation(f, context=body, length=DOOR_W, height=DOOR_H, thickness=T + 0.2)
-    place(opening, rep, _matrix(x_mid + 0.1, y0, 0, 90), None)
+    place(opening, rep, matrix(x_mid + 0.1, y0, 0, 90), None)
     feature.add_feature(f, feature=opening, element=inner)
     door = root.create_entity(f, ifc_class="IfcDoor", name="door")
     door.OverallWidth, door.OverallHeight = DOOR_W, DOOR_H
@@ -109,21 +126,21 @@ def build() -> ifcopenshell.file:
     rep = geometry.add_door_representation(
         f, context=body, overall_width=DOOR_W, overall_height=DOOR_H, lining_properties=lining
     )
-    place(door, rep, _matrix(x_mid, y0, 0, 90), eg)
+    place(door, rep, matrix(x_mid, y0, 0, 90), eg)
     feature.add_filling(f, opening=opening, element=door)
 
     outline = [(0, 0), (L, 0), (L, D), (0, D)]
     for name, z, container in (("floor slab", -SLAB_T, eg), ("ceiling slab", WALL_H, og)):
         slab = root.create_entity(f, ifc_class="IfcSlab", name=name)
         rep = geometry.add_slab_representation(f, context=body, depth=SLAB_T, polyline=outline)
-        place(slab, rep, _matrix(0, 0, z), container)
+        place(slab, rep, matrix(0, 0, z), container)
 
     for name, x0, x1 in (("Room A", T, L / 2 - T / 2), ("Room B", L / 2 + T / 2, L - T)):
         space = root.create_entity(f, ifc_class="IfcSpace", name=name[-1], predefined_type="INTERNAL")
         space.LongName = name
         polygon = [(x0, T), (x1, T), (x1, D - T), (x0, D - T)]
         rep = geometry.add_slab_representation(f, context=body, depth=WALL_H, polyline=polygon)
-        place(space, rep, _matrix(0, 0, 0), None)
+        place(space, rep, matrix(0, 0, 0), None)
         aggregate.assign_object(f, products=[space], relating_object=eg)
 
     # Deterministic ids and header.
