@@ -140,7 +140,8 @@ def record_episode(label: str, spec: str, options: dict, seed: int, start=None) 
     from nbs_env.config import make_config
     from nbs_env.env import NBSEnv
     from nbs_env.sensing import scanner as scanner_mod
-    from train.episode import config_for, run_episode
+    from policies import config_for
+    from train.episode import run_episode
 
     calls: list[dict] = []
     last: dict[str, Any] = {}

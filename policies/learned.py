@@ -70,7 +70,7 @@ def trained_rules(document: dict[str, Any]) -> dict[str, Any]:
         ``{"rooms.FIELD": value}`` for every room rule of the training configuration it records
         (``training.config.rooms``; who ends rooms aside, which the network's head decides), or
         ``{"rooms.wall_search.scans": N}`` from a checkpoint that recorded only ``--wall-search``;
-        empty when it records neither (checkpoints written during a run, older runs).
+        empty when it records neither (checkpoints of older versions written during a run).
     """
     training = document.get("training") if isinstance(document.get("training"), dict) else {}
     rooms = (training.get("config") or {}).get("rooms") if isinstance(training.get("config"), dict) else None

@@ -54,8 +54,7 @@ def log_episode(scene: str, method: str, seed: int, preset: str, max_scans: int)
     from nbs_env.config import make_config
     from nbs_env.env import NBSEnv
     from nbs_env.report import metrics_dict
-    from policies import make_policy
-    from train.episode import config_for
+    from policies import config_for, make_policy
 
     policy = make_policy(method, seed)
     policy.stop_below = 0.0

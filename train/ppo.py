@@ -369,6 +369,9 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
         model.policy.features_extractor.encoder.load_state_dict(initial[0].state_dict())
         model.policy.action_net.load_state_dict(initial[1].state_dict())
     held_out = [VALIDATION_BASE + k for k in range(config.eval_storeys)]
+    # Every checkpoint records the run and the full configuration its envs ran with: what a user of
+    # it reproduces, and the room rules the policy then requires (policies.learned.trained_rules).
+    recorded = {**config.to_dict(), "config": config.env_config().to_dict()}
     log = out / "learning_curve.jsonl"
     log.write_text("")
     greedy = GreedyPolicy()
@@ -396,7 +399,9 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
             n = self.num_timesteps
             if config.checkpoint_every and n - self.last_checkpoint >= config.checkpoint_every:
                 self.last_checkpoint = n
-                save_checkpoint(out / f"checkpoint_{n}", network, _state_dict(self.model), _layout(self.model))
+                save_checkpoint(
+                    out / f"checkpoint_{n}", network, _state_dict(self.model), _layout(self.model), recorded
+                )
             if config.eval_every and n - self.last_eval >= config.eval_every:
                 self.last_eval = n
                 self._evaluate(n)
@@ -425,7 +430,7 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
     if warm is not None:
         (out / "behaviour_cloning.json").write_text(json.dumps(warm, indent=1))
         if config.checkpoint_every:  # the behaviour-cloned start, a policy of its own to compare
-            save_checkpoint(out / "checkpoint_0", network, _state_dict(model), _layout(model))
+            save_checkpoint(out / "checkpoint_0", network, _state_dict(model), _layout(model), recorded)
     model.learn(total_timesteps=config.timesteps, callback=Progress())
     venv.close()
     final = save_checkpoint(
@@ -434,10 +439,7 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
         _state_dict(model),
         _layout(model),
         training={
-            **config.to_dict(),
-            # The full configuration the envs ran with: what a user of the checkpoint reproduces,
-            # and the room rules the policy then requires (policies.learned.trained_rules).
-            "config": config.env_config().to_dict(),
+            **recorded,
             "seconds": time.time() - started,
             "device": device,
             "algo": "maskable_ppo",
