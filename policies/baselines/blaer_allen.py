@@ -67,16 +67,15 @@ class BlaerAllenPolicy(MappingPolicy):
         Phase 1: the largest angle, degrees, between a line of sight and a boundary cell's normal at
         which the candidate covers the cell.
     stop_below : float, optional
-        ε of phase 2's stopping rule, m² of visible boundary-unseen voxels per m² of the RoI's floor;
-        0 never stops by the rule. None (the default): :data:`STOP_BELOW`.
+        ε of phase 2's stopping rule, in m² of visible boundary-unseen voxels per m² of the RoI's
+        floor. None (the default): :data:`STOP_BELOW`.
     controlled : bool
-        The controlled mode: rooms end by the greedy's rule and the method only chooses where to
-        scan (:class:`~policies.baselines._maps.MappingPolicy`).
+        As for :class:`MappingPolicy`, which also says what ε = 0 means.
 
     Raises
     ------
     ValueError
-        ``stop_below`` is not a finite number >= 0.
+        A ``stop_below`` that is negative or not finite.
     """
 
     name = "blaer_allen"
@@ -95,7 +94,7 @@ class BlaerAllenPolicy(MappingPolicy):
         Parameters
         ----------
         belief : BeliefView
-            The robot's belief at the room's first decision (not read).
+            Not read (:meth:`MappingPolicy.new_room`).
         """
         self.plan: list[np.ndarray] | None = None
         self.phase = 1
@@ -169,10 +168,8 @@ class BlaerAllenPolicy(MappingPolicy):
 
         Parameters
         ----------
-        belief : BeliefView
-            The belief of the decision.
-        index : int
-            The chosen candidate's slot.
+        belief, index
+            As :meth:`MappingPolicy.expect`; the voxels are those of phase 2's last count.
 
         Returns
         -------
@@ -191,12 +188,10 @@ class BlaerAllenPolicy(MappingPolicy):
 
         Parameters
         ----------
-        belief : BeliefView
-            The belief after the scan.
-        points : (n, 3) float
-            World centres of the voxels :meth:`expect` returned.
+        belief, points
+            As :meth:`MappingPolicy.still_unseen`: here the voxels' world centres.
         memo : None
-            :meth:`expect`'s memo (not read).
+            Not read.
 
         Returns
         -------
@@ -222,23 +217,20 @@ class BlaerAllenPolicy(MappingPolicy):
 
         Parameters
         ----------
-        obs : dict of str to numpy.ndarray
-            The env's observation (not read: the method keeps its own map).
-        info : dict of str to Any
-            The env's ``info``; its ``"belief"`` (:class:`~nbs_env.observation.BeliefView`, from
-            ``expose_belief=True``) is read.
+        obs, info
+            As :meth:`MappingPolicy.act` (``obs`` not read: the method keeps its own map).
 
         Returns
         -------
         int
-            A candidate slot, or K = ``len(belief.mask)`` ("room done") when the rule fires or no
-            candidate is valid; in the controlled mode the rule never fires and no valid candidate
-            gives 0.
+            A candidate slot, or "room done" (K), as :meth:`MappingPolicy.act` says: while phase 1's
+            plan lasts, the candidate nearest its next view; after it, phase 2's best candidate, or
+            "room done" by phase 2's stopping rule.
 
         Raises
         ------
         KeyError
-            ``info`` has no ``"belief"``.
+            As :meth:`MappingPolicy.act`.
         """
         belief = self._belief(info)
         stop = len(belief.mask)

@@ -38,8 +38,7 @@ class NearestFrontierPolicy(MappingPolicy):
         The room ends when fewer than this share of the RoI's columns are frontier columns (and
         always when none is).
     controlled : bool
-        The controlled mode: rooms end by the greedy's rule and the method only chooses where to
-        scan (:class:`~policies.baselines._maps.MappingPolicy`).
+        As for :class:`MappingPolicy` (the frontier rule then never ends a room: see :meth:`act`).
     """
 
     name = "nearest_frontier"
@@ -55,11 +54,8 @@ class NearestFrontierPolicy(MappingPolicy):
 
         Parameters
         ----------
-        obs : dict of str to numpy.ndarray
-            The env's observation (not read: the method reads the robot's voxel labels).
-        info : dict of str to Any
-            The env's ``info``; its ``"belief"`` (:class:`~nbs_env.observation.BeliefView`, from
-            ``expose_belief=True``) is read.
+        obs, info
+            As :meth:`MappingPolicy.act` (the method reads the robot's voxel labels, not ``obs``).
 
         Returns
         -------

@@ -97,8 +97,7 @@ class InformationGainPolicy(MappingPolicy):
         default): the formulation's :data:`STOP_BELOW` (Potthast & Sukhatme's for
         :class:`PotthastSukhatmePolicy`).
     controlled : bool
-        The controlled mode: rooms end by the greedy's rule and the method only chooses where to
-        scan (:class:`~policies.baselines._maps.MappingPolicy`).
+        As for :class:`MappingPolicy`.
 
     Raises
     ------
@@ -133,7 +132,7 @@ class InformationGainPolicy(MappingPolicy):
         Parameters
         ----------
         belief : BeliefView
-            The robot's belief at the room's first decision (not read).
+            Not read; as for :meth:`MappingPolicy.new_room`.
         """
         self.log_odds: np.ndarray | None = None
         self.origin: np.ndarray | None = None
@@ -147,8 +146,8 @@ class InformationGainPolicy(MappingPolicy):
         Parameters
         ----------
         belief : BeliefView
-            The belief of the decision: its ``grid``, ``labels`` (the planner's view) and ``scans``
-            (the scans registered this step).
+            As :meth:`MappingPolicy.observe`; its ``grid``, ``labels`` (the planner's view) and
+            ``scans`` (the scans registered this step) are read.
         """
         grid = belief.grid
         shape, origin = grid.shape, grid.origin
@@ -175,10 +174,8 @@ class InformationGainPolicy(MappingPolicy):
 
         Parameters
         ----------
-        belief : BeliefView
-            The belief of the decision.
-        valid : (m,) int64
-            The slots of the valid candidates (``np.flatnonzero(belief.mask)``).
+        belief, valid
+            As :meth:`MappingPolicy.utilities`.
 
         Returns
         -------
@@ -225,15 +222,13 @@ class InformationGainPolicy(MappingPolicy):
 
         Parameters
         ----------
-        belief : BeliefView
-            The belief of the decision.
-        index : int
-            The chosen candidate's slot.
+        belief, index
+            As :meth:`MappingPolicy.expect` (the maps are those the last :meth:`utilities` read).
 
         Returns
         -------
         tuple of ((n, 3) float, None)
-            The voxels' world centres, and no memo.
+            The voxels' world centres, and no memo: :meth:`still_unseen` reads the log-odds.
         """
         grid, scanner = belief.grid, belief.scanner
         p, unknown, _, region, directions, reach = self._state
@@ -252,12 +247,10 @@ class InformationGainPolicy(MappingPolicy):
 
         Parameters
         ----------
-        belief : BeliefView
-            The belief after the scan (read for its grid; the log-odds are the policy's).
-        points : (n, 3) float
-            World centres of the voxels :meth:`expect` returned.
-        memo : None
-            :meth:`expect`'s memo (not read).
+        belief
+            Read for its grid only: the log-odds are the policy's own.
+        points, memo
+            As :meth:`MappingPolicy.still_unseen` (the voxels' world centres, and None, not read).
 
         Returns
         -------
@@ -296,21 +289,18 @@ class PotthastSukhatmePolicy(InformationGainPolicy):
 
     Parameters
     ----------
-    ray_step_deg : float
-        Spacing of the azimuth-elevation grid of rays over the scanner's field, degrees.
-    max_range : float
-        How far the rays are sampled, metres (no further than the room grid's diagonal).
+    ray_step_deg, max_range
+        As for :class:`InformationGainPolicy`, whose ``occlusion_aware`` rays this method casts.
     stop_below : float, optional
-        ε of the stopping rule, nats per √m² of the RoI's floor; 0 never stops by the rule. None
-        (the default): ``STOP_BELOW["potthast_sukhatme"]``.
+        ε of the stopping rule, in nats per √m² of the RoI's floor. None (the default):
+        ``STOP_BELOW["potthast_sukhatme"]``.
     controlled : bool
-        The controlled mode: rooms end by the greedy's rule and the method only chooses where to
-        scan (:class:`~policies.baselines._maps.MappingPolicy`).
+        As for :class:`MappingPolicy`, which also says what ε = 0 means.
 
     Raises
     ------
     ValueError
-        ``stop_below`` is not a finite number >= 0.
+        ``stop_below`` negative or not finite.
     """
 
     name = "potthast_sukhatme"

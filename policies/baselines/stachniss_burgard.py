@@ -79,11 +79,11 @@ class StachnissBurgardPolicy(MappingPolicy):
         The observations a scan is expected to add to each cell it sees (no more than the cell's
         unseen voxels in the band).
     stop_below : float, optional
-        ε of the stopping rule, nat·m² of expected entropy reduction per m² of the RoI's floor; 0
-        never stops by the rule. None (the default): :data:`STOP_BELOW`.
+        ε of the stopping rule, in nat·m² of expected entropy reduction per m² of the RoI's floor.
+        None (the default): :data:`STOP_BELOW`.
     controlled : bool
-        The controlled mode: rooms end by the greedy's rule and the method only chooses where to
-        scan (:class:`~policies.baselines._maps.MappingPolicy`).
+        As for :class:`MappingPolicy`, which also says what ε = 0 means; the path cost still ranks
+        the candidates.
 
     Raises
     ------
@@ -110,7 +110,7 @@ class StachnissBurgardPolicy(MappingPolicy):
         Parameters
         ----------
         belief : BeliefView
-            The belief of the decision: its ``grid``, ``roi`` and ``labels``.
+            Read for its ``grid``, ``roi`` and ``labels`` (:meth:`MappingPolicy.observe`).
         """
         grid, roi = belief.grid, belief.roi
         band = band_columns(grid, roi.floor_z)
@@ -131,10 +131,8 @@ class StachnissBurgardPolicy(MappingPolicy):
 
         Parameters
         ----------
-        belief : BeliefView
-            The belief of the decision.
-        valid : (m,) int64
-            The slots of the valid candidates (``np.flatnonzero(belief.mask)``).
+        belief, valid
+            As :meth:`MappingPolicy.utilities`; ``belief.path_length`` gives the path costs.
 
         Returns
         -------
@@ -171,10 +169,8 @@ class StachnissBurgardPolicy(MappingPolicy):
 
         Parameters
         ----------
-        belief : BeliefView
-            The belief of the decision.
-        index : int
-            The chosen candidate's slot.
+        belief, index
+            As :meth:`MappingPolicy.expect`; the coverage map is the last :meth:`observe`'s.
 
         Returns
         -------
@@ -195,12 +191,12 @@ class StachnissBurgardPolicy(MappingPolicy):
 
         Parameters
         ----------
-        belief : BeliefView
-            The belief after the scan (not read: the map is the one :meth:`observe` rebuilt).
-        points : (n, 3) float
-            The cells' world points :meth:`expect` returned.
+        belief
+            Not read: the map is the one :meth:`observe` rebuilt.
+        points
+            As :meth:`MappingPolicy.still_unseen`: here the cells' points at floor height.
         memo : (n,) float
-            Their unseen voxel counts when :meth:`expect` was called.
+            The cells' unseen voxel counts when :meth:`expect` was called.
 
         Returns
         -------
@@ -219,12 +215,9 @@ class StachnissBurgardPolicy(MappingPolicy):
 
         Parameters
         ----------
-        belief : BeliefView
-            The belief of the decision (not read).
-        valid : (m,) int64
-            The slots of the valid candidates (not read).
-        utility : (m,) float
-            :meth:`utilities`' values (not read: they include the path cost).
+        belief, valid, utility
+            As :meth:`MappingPolicy.stop_statistic`, none of them read (the utilities include the
+            path cost).
 
         Returns
         -------
