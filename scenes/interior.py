@@ -19,7 +19,9 @@ on one of its two sides, the probe ``q = p ± INTERIOR_PROBE · n``
   angle).
 
 Both sides are tried because files do not agree on normals: a single-quad wall has one normal for
-two visible sides, and a solid's faces point out of the solid.
+two visible sides, and a solid's faces point out of the solid. A side counts only when the straight
+way from ``p`` to its probe crosses no structural face: the top of a suspended ceiling (an
+``IfcCovering`` a few centimetres thick) does not count by the room under it.
 
 *Derived rooms.* The indoor floor (FLOOR faces within :data:`FLOOR_BAND` of the storey's floor level,
 the height holding most upward-facing floor area, under a CEILING face when the storey has any) minus the plan
@@ -71,6 +73,8 @@ MIN_ROOM_AREA = 1.0
 FLOOR_BAND = 0.35
 #: How far (m) a probe looks down for its floor.
 MAX_DROP = 8.0
+#: Rays leave a surface this far (m) off it, so as not to hit the face they start on.
+_SURFACE_EPS = 1e-3
 
 _HORIZONTAL = np.array([[np.cos(a), np.sin(a), 0.0] for a in np.deg2rad([0.0, 45.0, 90.0, 135.0])])
 
@@ -173,10 +177,20 @@ def interior_mask(scene: Scene, points: np.ndarray, normals: np.ndarray) -> np.n
     if not len(points):
         return np.zeros(0, dtype=bool)
     caster = _Caster(scene)
-    inside = _probe_is_inside(caster, points + INTERIOR_PROBE * normals)
-    rest = np.flatnonzero(~inside)
-    if len(rest):
-        inside[rest] = _probe_is_inside(caster, points[rest] - INTERIOR_PROBE * normals[rest])
+    inside = np.zeros(len(points), dtype=bool)
+    for side in (1.0, -1.0):
+        rest = np.flatnonzero(~inside)
+        if not len(rest):
+            break
+        # A probe stands in the space the point faces only if nothing lies between them: a covering
+        # or a wall leaf thinner than the probe would put the far side's probe through it (the top
+        # of a suspended ceiling would then count by the room under it).
+        away = side * normals[rest]
+        t, _, _ = caster.cast(points[rest] + _SURFACE_EPS * away, away)
+        open_side = rest[t >= INTERIOR_PROBE - _SURFACE_EPS]
+        if len(open_side):
+            probes = points[open_side] + side * INTERIOR_PROBE * normals[open_side]
+            inside[open_side] = _probe_is_inside(caster, probes)
     return inside
 
 

@@ -112,3 +112,34 @@ def test_the_probe_test_casts_backward_rays_only_where_they_can_tell_a_wall():
     want = plain(caster, q)
     assert 0 < want.sum() < plain(caster, q, horizontal=False).sum()  # the horizontal rays reject some
     assert np.array_equal(interior._probe_is_inside(caster, q), want)
+
+
+def _with_suspended_ceiling(scene, height: float, thickness: float):
+    """``scene`` with a covering of ``thickness`` metres hung at ``height`` over its whole floor."""
+    import trimesh
+
+    from scenes import Scene
+
+    lo, hi = scene.bounds
+    plate = trimesh.creation.box(extents=(hi[0] - lo[0] - 0.4, hi[1] - lo[1] - 0.4, thickness))
+    plate.apply_translation([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, height + thickness / 2])
+    mesh = trimesh.util.concatenate([scene.mesh, plate])
+    labels = np.concatenate([scene.face_labels, np.full(len(plate.faces), SurfaceClass.CEILING.value)])
+    return Scene(mesh, labels, start=tuple(scene.start[:2]), name="suspended")
+
+
+@pytest.mark.parametrize("thickness", [0.012, 0.05])
+def test_the_top_of_a_suspended_ceiling_and_the_plenum_do_not_count(thickness):
+    """A covering hung 0.4 m under the slab (as Revit's IfcCovering): what a scan inside can see is
+    the covering's underside, not its top, the plenum's walls or the slab's underside above it, even
+    where the covering is thinner than the interior probe."""
+    outline = [((0, 0), (5, 0)), ((5, 0), (5, 4)), ((5, 4), (0, 4)), ((0, 4), (0, 0))]
+    box = (-0.1, -0.1, 5.1, 4.1)
+    bare = boxed_storey([(a, b, []) for a, b in outline], [box], [box], start=(2.5, 2.0))
+    scene = _with_suspended_ceiling(bare, 2.2, thickness)
+    samples = interior_samples(scene, 0.05)
+    p = samples.points
+    assert p[:, 2].max() < 2.2 + 1e-6, "something above the covering's underside counts"
+    # The floor, the covering's underside and the walls up to it: 4.8 x 3.8 m clear inside.
+    inner_area = 2 * 4.8 * 3.8 + 2.2 * 2 * (4.8 + 3.8)
+    assert len(samples) * 0.05**2 == pytest.approx(inner_area, rel=0.01)

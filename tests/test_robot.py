@@ -189,3 +189,17 @@ def test_a_refused_registration_leaves_its_leg_to_the_next_scans_gates(monkeypat
     # Refused, refused, accepted, accepted: the legs add up until a scan is registered.
     assert seen == [2.0, 5.0, 6.5, 4.0]
     assert robot.unregistered_m == 0.0
+
+
+def test_one_cloud_gives_one_coverage_at_every_preset():
+    """The evaluation is not the robot's: the presets change the scanner and the voxels, never the
+    samples or the radius coverage is counted with."""
+    from nbs_env.config import PRESETS, make_config
+
+    scene = load_scene("office")
+    rng = np.random.default_rng(0)
+    meters = [CoverageMeter(scene, c.coverage_spacing, c.coverage_radius) for c in map(make_config, PRESETS)]
+    samples = meters[0].samples.points
+    cloud = samples[rng.choice(len(samples), 3000)] + rng.normal(scale=0.04, size=(3000, 3))
+    figures = [meter.add(cloud) and meter.percent() for meter in meters]
+    assert 5.0 < figures[0] < 95.0 and max(figures) - min(figures) < 1.0, figures
