@@ -39,3 +39,9 @@ def test_the_wheel_holds_every_package_and_its_data(tmp_path):
         "policies/data/ppo_reference/learning_curve.png",
     ):
         assert data in names, data
+    # Every corpus file the project ships (local-only entries are read from elsewhere).
+    import json
+
+    entries = json.loads((ROOT / "scenes" / "data" / "corpus" / "corpus.json").read_text())["entries"]
+    shipped = {f"scenes/data/corpus/{e['file']}" for e in entries if e.get("file") and not e.get("local")}
+    assert shipped and not shipped - names, sorted(shipped - names)
