@@ -251,13 +251,15 @@ def test_methods_table_tells_the_rule_from_the_cap_and_from_no_nvp_left():
     def run(reasons):
         m = {"scans": 3, "structure_sensed_pct": 90.0, "processed_points": 10, "path_length_m": 5.0,
              "processing_time_s": 1.0, "acquisition_time_s": 1.0, "travel_time_s": 1.0, "rooms": [],
-             "room_ends": [{"room": k, "scans": 1, "reason": r} for k, r in enumerate(reasons)]}  # fmt: skip
+             "room_ends": [{"room": k, "scans": 2 if k == 4 else 1, "reason": r}
+                           for k, r in enumerate(reasons)]}  # fmt: skip
         return {"spec": {"policy": "p", "scene": "s"}, "ok": True, "metrics": m}
 
-    text = _methods_markdown([run(["declared", "cap", "no NVP", "gain"])], {})
+    text = _methods_markdown([run(["declared", "cap", "no NVP", "gain", "no NVP"])], {})
     row = next(line for line in text.splitlines() if line.startswith("| p |"))
-    # 4 rooms: 2 by the rule (50%), 1 by the cap, 1 with no NVP left.
-    assert row.split(" | ")[2:6] == ["4", "50.0", "1", "1"], row
+    # 5 rooms: 2 by the rule (40%), 1 by the cap, 2 with no NVP left, of which 1 after one scan
+    # (room 2; room 4 had two).
+    assert row.split(" | ")[2:7] == ["5", "40.0", "1", "2", "1"], row
 
 
 @pytest.mark.parametrize("name", ["ppo:../../outside", "ppo:/abs/run", "ppo:a/b", "..", "scenes/x.obj"])

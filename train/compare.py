@@ -13,11 +13,12 @@ Each run plays one policy on one scene with one seed (:func:`run_one`) and retur
 - ``storeys.md``: per scene and policy, what a storey is judged by: scans, coverage, its share of the
   oracle's and the oracle's scans to it, the rooms the oracle covers (at least
   :data:`COVERABLE_ROOM_PCT` % of their surface) that the robot never scanned, the rooms ended by the
-  per-room cap and the share ended by the room-completion rule (not by the cap or no NVP left), the doors
-  abandoned (and why) and found exterior, path, registration error;
+  per-room cap, those ended for want of an NVP after their first scan, and the share ended by the
+  room-completion rule (not by the cap or no NVP left), the doors abandoned (and why) and found
+  exterior, path, registration error;
 - ``methods.md``: per policy over every scene and seed, how its rooms ended (its own rule, the
-  per-room cap, or no NVP left: the storey session's end, neither the rule's nor the cap's), the
-  rooms it left unscanned, its mean scans, coverage and path;
+  per-room cap, or no NVP left: the storey session's end, neither the rule's nor the cap's; and of
+  those, after one scan), the rooms it left unscanned, its mean scans, coverage and path;
 - ``quality.md``: per scene and policy, the scan-quality figures (``metrics.json``'s ``quality`` and
   ``registrability``): the share of the structural surface sensed densely enough, squarely enough
   and both, and each scan's overlap with the cloud before it and ICP's fitness;
@@ -301,7 +302,8 @@ def _total_time(m: dict[str, Any]) -> float:
 
 
 TOTAL_KEYS = ("scans", "time_s", "structure_sensed_pct", "processed_points", "path_length_m",
-              "of_oracle_pct", "vs_oracle_scans", "unscanned_rooms", "cap_ended", "rule_ended_pct", "abandoned",
+              "of_oracle_pct", "vs_oracle_scans", "unscanned_rooms", "cap_ended", "no_nvp_first", "rule_ended_pct",
+              "abandoned",
               "exterior_doors", "reg_mean_cm", "reg_max_cm", "dense_pct", "incidence_pct", "quality_pct",
               "mean_overlap", "min_overlap", "min_fitness", "refused")  # fmt: skip
 #: The room ends (:attr:`nbs_env.storey.Storey.room_ends` reasons) that are a completion rule's: the
@@ -322,6 +324,8 @@ def _run_quantities(m: dict[str, Any], oracle: dict[str, Any]) -> dict[str, floa
         "processed_points": float(m["processed_points"]),
         "path_length_m": float(m["path_length_m"]),
         "cap_ended": float(sum(1 for e in ends if e["reason"] == "cap")),
+        # A room its first scan ended for want of a place to scan from: the candidates vanished.
+        "no_nvp_first": float(sum(1 for e in ends if e["reason"] == "no NVP" and e["scans"] <= 1)),
         "abandoned": float(sum(1 for e in events if e["event"] == "abandoned")),
         "exterior_doors": float(sum(1 for e in events if e["event"] == "detected" and e.get("exterior"))),
     }
@@ -459,7 +463,8 @@ def _markdown(rows: list[dict[str, Any]]) -> str:
 def _storeys_markdown(rows: list[dict[str, Any]]) -> str:
     """One line per scene and policy: the figures the corpus is judged by (mean ± std over seeds)."""
     head = ["scene", "policy", "scans", "SE sensed (%)", "% of oracle max", "scans ÷ oracle's",
-            "rooms unscanned", "rooms ended by cap", "rooms ended by rule (%)", "doors abandoned", "exterior doors",
+            "rooms unscanned", "rooms ended by cap", "no NVP after one scan", "rooms ended by rule (%)",
+            "doors abandoned", "exterior doors",
             "path (m)",
             "reg. error mean / max (cm)", "notes"]  # fmt: skip
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -479,7 +484,7 @@ def _storeys_markdown(rows: list[dict[str, Any]]) -> str:
             _cell(r.get("structure_sensed_pct"), "{:.1f}"),
         ]
         cells += [_cell(r.get("of_oracle_pct"), "{:.1f}"), _cell(r.get("vs_oracle_scans"), "{:.2f}")]
-        cells += [_cell(r.get(k), "{:.1f}") for k in ("unscanned_rooms", "cap_ended", "rule_ended_pct")]
+        cells += [_cell(r.get(k), "{:.1f}") for k in ("unscanned_rooms", "cap_ended", "no_nvp_first", "rule_ended_pct")]
         cells += [_cell(r.get(k), "{:.1f}") for k in ("abandoned", "exterior_doors")]
         cells.append(_cell(r.get("path_length_m"), "{:.1f}"))
         cells.append(" / ".join(_cell(v, "{:.1f}") for v in reg))
@@ -520,8 +525,9 @@ def _quality_markdown(rows: list[dict[str, Any]], thresholds: dict[str, float] |
 def _methods_markdown(results: Sequence[dict[str, Any]], oracles: dict[str, dict[str, Any]]) -> str:
     """One line per policy over every scene and seed: how its rooms ended (its own rule, the
     per-room cap, no NVP left) and what it left, the figures a fair comparison is judged by."""
-    head = ["policy", "runs", "rooms ended", "by its rule (%)", "by the cap", "no NVP left", "rooms unscanned",
-            "scans / storey", "SE sensed (%)", "% of oracle max", "path (m) / storey"]  # fmt: skip
+    head = ["policy", "runs", "rooms ended", "by its rule (%)", "by the cap", "no NVP left",
+            "no NVP after one scan", "rooms unscanned", "scans / storey", "SE sensed (%)", "% of oracle max",
+            "path (m) / storey"]  # fmt: skip
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for policy in dict.fromkeys(r["spec"]["policy"] for r in results):
         runs = [r for r in results if r["spec"]["policy"] == policy and r["ok"]]
@@ -531,13 +537,15 @@ def _methods_markdown(results: Sequence[dict[str, Any]], oracles: dict[str, dict
         qs = [_run_quantities(r["metrics"], oracles.get(r["spec"]["scene"], {})) for r in runs]
         rule = sum(1 for e in ends if e["reason"] in RULE_ENDS)
         cap = sum(1 for e in ends if e["reason"] == "cap")
+        first = sum(1 for e in ends if e["reason"] == "no NVP" and e["scans"] <= 1)
 
         def mean(key: str, qs=qs) -> str:
             v = [q[key] for q in qs if key in q]
             return f"{np.mean(v):.1f}" if v else "–"
 
         cells = [policy, str(len(runs)), str(len(ends)), f"{100.0 * rule / max(1, len(ends)):.1f}",
-                 str(cap), str(len(ends) - rule - cap), str(int(sum(q.get("unscanned_rooms", 0) for q in qs))),
+                 str(cap), str(len(ends) - rule - cap), str(first),
+                 str(int(sum(q.get("unscanned_rooms", 0) for q in qs))),
                  mean("scans"), mean("structure_sensed_pct"), mean("of_oracle_pct"), mean("path_length_m")]  # fmt: skip
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
