@@ -3,6 +3,7 @@ declares about the configuration it runs with."""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterable, Mapping
 from typing import Any, Protocol, runtime_checkable
 
@@ -90,7 +91,7 @@ def agreed_requirements(policies: Iterable[Policy]) -> dict[str, tuple[Any, str]
     agreed: dict[str, tuple[Any, str]] = {}
     for policy in policies:
         for path, value in policy.requires.items():
-            if path in agreed and agreed[path][0] != value:
+            if path in agreed and _json_form(agreed[path][0]) != _json_form(value):
                 other_value, other = agreed[path]
                 raise ConfigError(
                     f"{other} requires {path}={other_value!r} and {policy.name} requires {path}={value!r}: "
@@ -120,14 +121,20 @@ def config_for(config: EnvConfig, policy: Policy) -> EnvConfig:
         The configuration differs from :attr:`Policy.requires`; the message names the field.
     """
     out = make_config(config, **dict(policy.config_overrides)) if policy.config_overrides else config
-    tree = out.to_dict()
+    tree = _json_form(out.to_dict())
     for path, value in policy.requires.items():
         node: Any = tree
         for part in path.split("."):
             node = node[part]
-        if node != value:
+        if node != _json_form(value):
             raise ConfigError(f"{policy.name} requires {path}={value!r} (it was trained so); this run has {node!r}")
     return out
+
+
+def _json_form(value: Any) -> Any:
+    """``value`` as JSON reads it back (tuples become lists): a requirement read from a checkpoint
+    and a configuration's field compare equal when they are the same value."""
+    return json.loads(json.dumps(value))
 
 
 def mask_of(obs: dict[str, np.ndarray], info: dict[str, Any]) -> np.ndarray:

@@ -392,3 +392,25 @@ def test_behaviour_cloning_copies_the_named_teacher():
         assert warm["teacher"] == teacher and warm["samples"] == 12
         declared[teacher] = warm["rooms_declared"]
     assert declared["greedy:stop=0.5"] >= 2 * max(1, declared["greedy"])
+
+
+def test_a_checkpoint_that_records_its_configuration_requires_all_its_room_rules(tmp_path):
+    """A checkpoint of `nbs train` records its envs' configuration (JSON: tuples as lists); the
+    policy requires every room rule of it, and a run on the same rules is accepted as it is, the
+    grid adopting the rules a command line leaves out."""
+    from nbs_env.errors import ConfigError
+    from policies import config_for
+    from train.compare import grid
+
+    trained = make_config("fast", completion="policy", **{"rooms.wall_search.scans": 2})
+    document = json.loads((BUNDLED["reference"] / "policy.json").read_text())
+    document["training"] = {**document["training"], "config": json.loads(json.dumps(trained.to_dict()))}
+    (tmp_path / "policy.json").write_text(json.dumps(document))
+    (tmp_path / "policy.pt").write_bytes((BUNDLED["reference"] / "policy.pt").read_bytes())
+    policy = make_policy(f"ppo:{tmp_path}")
+    assert policy.requires["rooms.wall_search.heights"] == [1.0, 1.8] and "rooms.completion" not in policy.requires
+    assert config_for(trained, policy).rooms == trained.rooms  # the same rules, tuples and all
+    (spec,) = grid("l_room", f"ppo:{tmp_path}", "0", "fast", {})
+    assert spec.overrides["rooms.wall_search.scans"] == 2 and config_for(spec.config(), policy)
+    with pytest.raises(ConfigError, match=r"rooms\.completion_fraction"):
+        config_for(make_config("fast", completion_fraction=0.05, **{"rooms.wall_search.scans": 2}), policy)

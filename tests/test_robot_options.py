@@ -99,3 +99,6 @@ def test_train_takes_the_same_robot_options_and_its_checkpoint_records_them(tmp_
         == 2
     )
     assert "requires rooms.wall_search.scans=1" in capsys.readouterr().err
+    # On the robot it was trained on (the same options), it runs.
+    args = ["compare", "--scenes", "l_room", "--policies", f"ppo:{out}", *ROBOT, "--max-scans", "2"]
+    assert main([*args, "--quiet", "--out", str(tmp_path / "same")]) == 0, capsys.readouterr().err

@@ -272,7 +272,7 @@ def adopt_requirements(overrides: dict[str, Any], requirements: dict[str, tuple[
 
     out = dict(overrides)
     for path, (value, who) in requirements.items():
-        if path in out and out[path] != value:
+        if path in out and json.loads(json.dumps(out[path])) != json.loads(json.dumps(value)):
             flag = FLAGS.get(path, f"--set {path}")
             raise ConfigError(
                 f"{who} requires {path}={json.dumps(value)} (it was trained so), but this run sets "
