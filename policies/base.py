@@ -3,13 +3,12 @@ declares about the configuration it runs with."""
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterable, Mapping
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from nbs_env.config import EnvConfig, make_config
+from nbs_env.config import EnvConfig, json_form, make_config
 from nbs_env.errors import ConfigError
 from nbs_env.observation import CandidateColumn, candidate_table_of
 
@@ -91,7 +90,7 @@ def agreed_requirements(policies: Iterable[Policy]) -> dict[str, tuple[Any, str]
     agreed: dict[str, tuple[Any, str]] = {}
     for policy in policies:
         for path, value in policy.requires.items():
-            if path in agreed and _json_form(agreed[path][0]) != _json_form(value):
+            if path in agreed and json_form(agreed[path][0]) != json_form(value):
                 other_value, other = agreed[path]
                 raise ConfigError(
                     f"{other} requires {path}={other_value!r} and {policy.name} requires {path}={value!r}: "
@@ -121,20 +120,14 @@ def config_for(config: EnvConfig, policy: Policy) -> EnvConfig:
         The configuration differs from :attr:`Policy.requires`; the message names the field.
     """
     out = make_config(config, **dict(policy.config_overrides)) if policy.config_overrides else config
-    tree = _json_form(out.to_dict())
+    tree = json_form(out.to_dict())
     for path, value in policy.requires.items():
         node: Any = tree
         for part in path.split("."):
             node = node[part]
-        if node != _json_form(value):
+        if node != json_form(value):
             raise ConfigError(f"{policy.name} requires {path}={value!r} (it was trained so); this run has {node!r}")
     return out
-
-
-def _json_form(value: Any) -> Any:
-    """``value`` as JSON reads it back (tuples become lists): a requirement read from a checkpoint
-    and a configuration's field compare equal when they are the same value."""
-    return json.loads(json.dumps(value))
 
 
 def mask_of(obs: dict[str, np.ndarray], info: dict[str, Any]) -> np.ndarray:

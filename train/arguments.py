@@ -268,11 +268,12 @@ def adopt_requirements(overrides: dict[str, Any], requirements: dict[str, tuple[
         The command line set a required field to another value; the message names the policy, the
         value it requires and the option that sets it.
     """
+    from nbs_env.config import json_form
     from nbs_env.errors import ConfigError
 
     out = dict(overrides)
     for path, (value, who) in requirements.items():
-        if path in out and json.loads(json.dumps(out[path])) != json.loads(json.dumps(value)):
+        if path in out and json_form(out[path]) != json_form(value):
             flag = FLAGS.get(path, f"--set {path}")
             raise ConfigError(
                 f"{who} requires {path}={json.dumps(value)} (it was trained so), but this run sets "

@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from nbs_env.config import json_form
 from train.arguments import output_folder_problem, parse_range
 
 __all__ = ["RunSpec", "expand_scenes", "run_grid", "run_one", "summarise", "write_outputs"]
@@ -96,11 +97,6 @@ class RunSpec:
         from nbs_env.config import make_config
 
         return make_config(self.preset, scene=self.scene, **self.overrides)
-
-
-def _json_form(value: Any) -> Any:
-    """``value`` as it reads back from JSON (tuples become lists), for comparing a record with a spec."""
-    return json.loads(json.dumps(value))
 
 
 def expand_scenes(text: str, skipped: list[str] | None = None) -> list[str]:
@@ -163,7 +159,7 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
 
 def _oracle(scene: str, preset: str = "default", overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     """The oracle's plan of ``scene`` with the grid's scanner and evaluation (never raises)."""
-    setting = {"preset": preset, "overrides": _json_form(overrides or {})}
+    setting = {"preset": preset, "overrides": json_form(overrides or {})}
     try:
         from policies.oracle import oracle_plan
         from scenes import load_scene
@@ -776,12 +772,12 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
         folder = _run_folder(out, asdict(spec))
         try:
             record = json.loads((folder / "run.json").read_text())
-            if record.get("ok") and record.get("spec") == _json_form(asdict(spec)):
+            if record.get("ok") and record.get("spec") == json_form(asdict(spec)):
                 runs[spec.key] = {**record, "metrics": json.loads((folder / "metrics.json").read_text())}
         except (OSError, ValueError, TypeError, AttributeError):
             continue  # not there, unreadable or malformed: run it again
     oracles: dict[str, Any] = {}
-    settings = [{"preset": s.preset, "overrides": _json_form(s.overrides)} for s in specs]
+    settings = [{"preset": s.preset, "overrides": json_form(s.overrides)} for s in specs]
     try:
         stored = json.loads((out / "oracle.json").read_text())
     except (OSError, ValueError):

@@ -9,6 +9,7 @@ string-keyed dicts or other configurations. ``to_dict()`` gives the JSON-safe tr
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import types
 import typing
@@ -17,7 +18,7 @@ from typing import Any, TypeVar
 
 from nbs_env.errors import ConfigError
 
-__all__ = ["Config"]
+__all__ = ["Config", "json_form"]
 
 C = TypeVar("C", bound="Config")
 
@@ -46,6 +47,23 @@ def _integer(config: Any, name: str, least: int) -> None:
         isinstance(value, int) and not isinstance(value, bool) and value >= least,
         f"{name} must be an integer >= {least}, got {value!r}",
     )
+
+
+def json_form(value: Any) -> Any:
+    """``value`` as JSON reads it back (tuples become lists): how a recorded configuration value and
+    a live one are compared.
+
+    Parameters
+    ----------
+    value : Any
+        A JSON-safe value (numbers, strings, booleans, None, lists, tuples, string-keyed dicts).
+
+    Returns
+    -------
+    Any
+        The same value with every tuple a list.
+    """
+    return json.loads(json.dumps(value))
 
 
 class Config:
