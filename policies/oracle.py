@@ -2,7 +2,9 @@
 
 It is not a competitor. With the true building it lists the scan positions a robot could stand at
 (a lattice over the indoor free floor, found by geometry as :mod:`scenes.interior` finds it,
-keeping the 0.45 m clearance from walls and furniture, and the pole of any free patch it misses),
+keeping the 0.45 m clearance from walls and furniture, and the pole of any free patch it misses)
+and could drive to from the scene's start (a disc of the robot's radius connects them: the
+other dwelling of a storey, or a level up a stair, is no place a plan of this robot scans from),
 takes a noise-free
 scan of the true building from each with the same scanner as the robot, finds which samples of the
 true structural surface each scan senses by the evaluation's own rule (a point within the
@@ -24,16 +26,22 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
-from shapely.geometry import Polygon
+from shapely.geometry import LineString, Point, Polygon
 from shapely.ops import polylabel
 
 from nbs_env.config import ScannerConfig
 from nbs_env.planning.navigation import NavigationConfig
 from scenes import Scene
 from scenes.geometry import free_region
-from scenes.interior import indoor_floor, interior_samples
+from scenes.interior import indoor_floor, interior_samples, separating_footprint
 
-__all__ = ["OraclePlan", "oracle_plan"]
+__all__ = ["DOORWAY_DEPTH", "REACH_TOLERANCE", "OraclePlan", "oracle_plan", "reach"]
+
+#: Metres: the thickest wall whose doorway the oracle's :func:`reach` passes where the file draws
+#: no floor under the door or no ceiling over it.
+DOORWAY_DEPTH = 0.5
+#: Metres taken off the robot's radius for :func:`reach` (one voxel of the default map).
+REACH_TOLERANCE = 0.05
 
 
 @dataclass(frozen=True)
@@ -80,15 +88,60 @@ class OraclePlan:
         }
 
 
-def _positions(scene: Scene, lattice: float, clearance: float) -> np.ndarray:
-    """Lattice points of the indoor free floor (by geometry: the same with or without room
-    annotations) that keep ``clearance`` from every obstacle."""
+def reach(scene: Scene, radius: float) -> Polygon:
+    """The indoor free floor a disc of ``radius`` metres drives over from the scene's start.
+
+    Parameters
+    ----------
+    scene : Scene
+        The true building; its ``start`` (the file's, the caller's or :func:`scenes.geometry.auto_start`'s).
+    radius : float
+        The robot's radius (it passes doors with no safety distance, as the storey's crossings do).
+
+    Returns
+    -------
+    shapely Polygon
+        The part of the indoor free floor, shrunk by ``radius`` and cut at the scene's doors to the
+        outside (``Door.rooms`` holding -1), that holds the start (the nearest
+        part when the start lies in none, which a start within ``radius`` of a wall may); empty
+        when the storey has no floor.
+    """
     floor, floor_z = indoor_floor(scene)
+    # The indoor floor stops at walls, and so at a doorway whose floor lies under no ceiling (a wall's
+    # thickness): closing it over gaps up to DOORWAY_DEPTH and taking the walls out again joins rooms
+    # at their doorways only.
+    walls = separating_footprint(scene, floor_z)
+    floor = floor.buffer(DOORWAY_DEPTH / 2).buffer(-DOORWAY_DEPTH / 2)
+    floor = floor.difference(walls) if not walls.is_empty else floor
+    # Nor is the outside a place to scan from: a door the file gives to the outside is closed here
+    # (a roofed porch or balcony is indoor floor by the ceiling test).
+    for door in scene.doors:
+        if -1 in door.rooms and np.linalg.norm(door.normal) > 0.5:
+            along = np.array([-door.normal[1], door.normal[0]]) * (door.width / 2 + DOORWAY_DEPTH)
+            centre = np.asarray(door.position[:2], dtype=float)
+            floor = floor.difference(LineString([centre - along, centre + along]).buffer(0.01))
+    parts = []
+    for part in getattr(floor, "geoms", [floor]):
+        if isinstance(part, Polygon) and not part.is_empty:
+            free = free_region(scene, part, floor_z, radius)
+            parts += [g for g in getattr(free, "geoms", [free]) if isinstance(g, Polygon) and not g.is_empty]
+    if not parts:
+        return Polygon()
+    start = Point(float(scene.start[0]), float(scene.start[1]))
+    return min(parts, key=lambda g: g.distance(start))
+
+
+def _positions(scene: Scene, lattice: float, clearance: float, radius: float) -> np.ndarray:
+    """Lattice points of the indoor free floor (by geometry: the same with or without room
+    annotations) that keep ``clearance`` from every obstacle and lie in the :func:`reach` of a
+    disc of ``radius``."""
+    floor, floor_z = indoor_floor(scene)
+    reachable = reach(scene, radius)
     out = []
     for part in getattr(floor, "geoms", [floor]):
         if not isinstance(part, Polygon) or part.is_empty:
             continue
-        free = free_region(scene, part, floor_z, clearance)
+        free = free_region(scene, part, floor_z, clearance).intersection(reachable)
         if free.is_empty:
             continue
         lo, hi = np.floor(np.asarray(free.bounds[:2]) / lattice), np.ceil(np.asarray(free.bounds[2:]) / lattice)
@@ -145,7 +198,9 @@ def oracle_plan(
     samples = structure.points
     if clearance is None:
         clearance = NavigationConfig().required_clearance
-    positions = _positions(scene, lattice, clearance)
+    # The robot's map places an obstacle to within a voxel (5 cm by default), and a robot has passed
+    # a gap a voxel narrower than its diameter: the yardstick grants the same, never less.
+    positions = _positions(scene, lattice, clearance, NavigationConfig().robot_radius - REACH_TOLERANCE)
     caster = Scanner(scene, scanner)
     sees = np.zeros((len(positions), len(samples)), dtype=bool)
     for k, (x, y, z) in enumerate(positions):

@@ -44,6 +44,15 @@ plan -/+ 0.6 m along the normal (-1 = outside), listed room before outside, else
 with the normal pointing from the first to the second; ``position`` is that centre at the door's
 lowest z.
 
+An ``IfcSpace`` the file marks external (``PredefinedType`` ``EXTERNAL``, or ``Pset_SpaceCommon``'s
+``IsExternal``: the zone of a balcony, a terrace or a porch) is no room: its floor is outside, and a
+door onto it is a door to the outside.
+
+*Start.* A file may place the robot's start: a ``Pset_NbsStart`` on the storey with ``StartX`` and
+``StartY`` (lengths in the storey's placement), or an ``IfcAnnotation`` on the storey that carries a
+``Pset_NbsStart`` (its placement's origin). Without one, the scene's start is
+:func:`scenes.geometry.auto_start`'s.
+
 *Doors.* Models draw doors closed, and a ray (or robot) cannot pass a closed leaf, so by default
 (``doors="open"``) a door keeps only its frame: the triangles of the ``IfcDoor`` element that lie
 within :data:`DOOR_FRAME` of the element's sides or top (along its width and height); the leaf, the
@@ -262,7 +271,7 @@ def load_ifc_scene(
         for e in model.by_type("IfcElement")
         if e.id() not in on_storey and _is_bounding_kind(e) and _element_class(e, mapping, model) in horizontal
     ]
-    spaces = [e for e in on_storey.values() if e.is_a("IfcSpace")]
+    spaces = [e for e in on_storey.values() if e.is_a("IfcSpace") and not _is_external(e)]
     door_elements = [e for e in on_storey.values() if e.is_a("IfcDoor")]
     # Doors are meshed even when left out of the scene: their geometry gives the Door ground truth.
     wanted = {e.id(): e for e in [*(on_storey[i] for i in classes), *others, *spaces, *door_elements]}
@@ -313,6 +322,7 @@ def load_ifc_scene(
         face_rooms,
         rooms=rooms,
         doors=door_list,
+        start=_file_start(chosen.entity, on_storey.values(), scale),
         name=name if name is not None else f"{source}#{chosen.name}",
         metadata={
             "source": source,
@@ -524,6 +534,36 @@ def _overlaps_in_plan(verts: np.ndarray, plan: shapely.Geometry) -> bool:
 
 
 # ------------------------------------------------------------------------------- ground truth
+def _is_external(space: Any) -> bool:
+    """Whether the file marks an ``IfcSpace`` as outside (module docstring)."""
+    import ifcopenshell.util.element
+
+    if str(getattr(space, "PredefinedType", None) or "").upper() == "EXTERNAL":
+        return True
+    common = ifcopenshell.util.element.get_psets(space).get("Pset_SpaceCommon", {})
+    return common.get("IsExternal") is True
+
+
+def _file_start(storey: Any, elements: Iterable[Any], scale: float) -> np.ndarray | None:
+    """The robot's start the file places on the storey (module docstring), world metres, or None."""
+    import ifcopenshell.util.element
+    import ifcopenshell.util.placement
+
+    def placement(entity: Any) -> np.ndarray:
+        if entity.ObjectPlacement is None:
+            return np.eye(4)
+        return np.asarray(ifcopenshell.util.placement.get_local_placement(entity.ObjectPlacement), dtype=float)
+
+    props = ifcopenshell.util.element.get_psets(storey).get("Pset_NbsStart", {})
+    if isinstance(props.get("StartX"), (int, float)) and isinstance(props.get("StartY"), (int, float)):
+        local = np.array([props["StartX"], props["StartY"], 0.0, 1.0], dtype=float)
+        return (placement(storey) @ local)[:2] * scale
+    for element in elements:
+        if element.is_a("IfcAnnotation") and "Pset_NbsStart" in ifcopenshell.util.element.get_psets(element):
+            return placement(element)[:2, 3] * scale
+    return None
+
+
 def _rooms(spaces: list[Any], shapes: Mapping[int, tuple[np.ndarray, np.ndarray]]) -> list[Room]:
     rooms: list[Room] = []
     for space in sorted(spaces, key=lambda s: s.id()):

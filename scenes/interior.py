@@ -57,6 +57,7 @@ __all__ = [
     "interior_mask",
     "interior_samples",
     "rooms_by_probe",
+    "separating_footprint",
     "with_derived_rooms",
 ]
 
@@ -235,7 +236,7 @@ def _parts(geom) -> list[Polygon]:
     return [g for g in getattr(geom, "geoms", [geom]) if isinstance(g, Polygon) and not g.is_empty]
 
 
-def _separating_footprint(scene: Scene, floor_z: float):
+def separating_footprint(scene: Scene, floor_z: float):
     """Plan footprint of the walls, doors and windows the robot's body meets on this floor."""
     keep = np.isin(scene.face_labels, [SurfaceClass.WALL, SurfaceClass.DOOR, SurfaceClass.WINDOW])
     tri = scene.mesh.vertices[scene.mesh.faces[keep]]
@@ -290,7 +291,7 @@ def indoor_floor(scene: Scene) -> tuple[Polygon | MultiPolygon, float]:
     ceiling_tri = vertices[faces[labels == SurfaceClass.CEILING]]
     if len(ceiling_tri):
         floor = floor.intersection(_union_xy(ceiling_tri))
-    walls = _separating_footprint(scene, floor_z)
+    walls = separating_footprint(scene, floor_z)
     return (floor.difference(walls) if not walls.is_empty else floor), floor_z
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import shapely
 
 from nbs_env.env import NBSEnv, make_config
 from policies import POLICIES, UnknownPolicyError, config_for, make_policy
@@ -95,6 +96,27 @@ def test_oracle_sees_an_empty_box_almost_whole_and_is_monotone():
     assert plan.scans_to_reach(plan.coverage_pct[0]) == 1 and plan.scans_to_reach(100.1) is None
     # One scan misses the floor of its blind zone (1.5 m minimum range); a second one covers it.
     assert 1 < len(plan.positions) <= 4
+
+
+@pytest.mark.parametrize(("opening", "outside", "reached"), [(True, False, 2), (False, False, 1), (True, True, 1)])
+def test_the_oracle_scans_only_from_floor_the_robot_drives_to(opening, outside, reached):
+    """Two rooms side by side: through a doorway both are the oracle's to scan from; with a wall
+    between them (two dwellings), or with the doorway given as a door to the outside (a porch),
+    only the start's."""
+    from policies.oracle import reach
+    from scenes import Door
+    from tests.helpers import boxed_storey
+
+    door = [(1.5, 2.5, 2.0)] if opening else []
+    walls = [((0, 0), (8, 0), []), ((8, 0), (8, 4), []), ((8, 4), (0, 4), []), ((0, 4), (0, 0), []),
+             ((4, 0), (4, 4), door)]  # fmt: skip
+    scene = boxed_storey(walls, [(-0.1, -0.1, 8.1, 4.1)], [(-0.1, -0.1, 8.1, 4.1)], start=(2.0, 2.0))
+    if outside:
+        scene.doors = (Door((0, -1), np.array([4.0, 2.0, 0.0]), 1.0, 2.0, np.array([1.0, 0.0])),)
+    area = reach(scene, 0.2)
+    rooms = [shapely.box(0.1, 0.1, 3.9, 3.9), shapely.box(4.1, 0.1, 7.9, 3.9)]
+    assert sum(area.intersection(r).area > 1.0 for r in rooms) == reached
+    assert area.intersection(rooms[0]).area > 5.0  # the start's room always
 
 
 # ---------------------------------------------------------------------- a fair comparison (issue 15)

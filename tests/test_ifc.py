@@ -384,3 +384,58 @@ def test_a_truncated_file_is_refused(tmp_path):
     whole = tmp_path / "whole.ifc"
     whole.write_bytes(data + b"\r\n\r\n")
     assert len(load_ifc_scene(whole, storey="Erdgeschoss").rooms) == 6
+
+
+# ---------------------------------------------------------------------- what the file says
+def _tiny_with(tmp_path: Path, edit) -> Scene:
+    """The tiny model with ``edit(f, storey, body)`` applied before it is written and loaded."""
+    path = tiny_ifc(tmp_path / "tiny.ifc")
+    f = ifcopenshell.open(str(path))
+    edit(f, f.by_type("IfcBuildingStorey")[0], f.by_type("IfcGeometricRepresentationSubContext")[0])
+    f.write(str(path))
+    return load_ifc_scene(path)
+
+
+def test_the_file_places_the_start_by_a_storey_property_set_in_its_units(tmp_path):
+    from ifcopenshell.api import pset
+
+    def edit(f, storey, body):
+        ps = pset.add_pset(f, product=storey, name="Pset_NbsStart")
+        pset.edit_pset(f, pset=ps, properties={"StartX": 1500.0, "StartY": 1000.0})  # millimetres
+
+    scene = _tiny_with(tmp_path, edit)
+    assert scene.has_explicit_start and np.allclose(scene.start[:2], [1.5, 1.0])
+    assert not load_ifc_scene(tiny_ifc(tmp_path / "plain.ifc")).has_explicit_start  # none: auto_start's
+
+
+def test_the_file_places_the_start_by_an_annotation(tmp_path):
+    from ifcopenshell.api import pset
+
+    def edit(f, storey, body):
+        mark = root.create_entity(f, ifc_class="IfcAnnotation", name="start")
+        geometry.edit_object_placement(f, product=mark, matrix=matrix(2.5, 1.2, 0.0))
+        spatial.assign_container(f, products=[mark], relating_structure=storey)
+        pset.add_pset(f, product=mark, name="Pset_NbsStart")
+
+    assert np.allclose(_tiny_with(tmp_path, edit).start[:2], [2.5, 1.2])
+
+
+@pytest.mark.parametrize("how", ["predefined_type", "pset"])
+def test_a_space_the_file_marks_external_is_no_room(tmp_path, how):
+    from ifcopenshell.api import pset
+
+    def edit(f, storey, body):
+        balcony = "INTERNAL" if how == "pset" else "EXTERNAL"
+        for name, x0, kind in [("inside", 0.0, "INTERNAL"), ("balcony", 2000.0, balcony)]:
+            space = root.create_entity(f, ifc_class="IfcSpace", name=name, predefined_type=kind)
+            outline = [(x0, 0.0), (x0 + 2000.0, 0.0), (x0 + 2000.0, 3000.0), (x0, 3000.0)]  # millimetres
+            rep = geometry.add_slab_representation(f, context=body, depth=2800.0, polyline=outline)
+            geometry.assign_representation(f, product=space, representation=rep)
+            geometry.edit_object_placement(f, product=space, matrix=matrix(0, 0, 0))
+            aggregate.assign_object(f, products=[space], relating_object=storey)
+            if how == "pset" and name == "balcony":
+                ps = pset.add_pset(f, product=space, name="Pset_SpaceCommon")
+                pset.edit_pset(f, pset=ps, properties={"IsExternal": True})
+
+    scene = _tiny_with(tmp_path, edit)
+    assert [r.name for r in scene.rooms] == ["inside"]

@@ -272,8 +272,9 @@ def test_a_policy_requires_the_room_rules_it_was_trained_with(tmp_path):
     assert grid("l_room", "greedy,ppo:reference", "0", "fast", {"rooms.wall_search.scans": 3})
     with pytest.raises(ConfigError, match=r"ppo:reference requires rooms\.wall_search\.scans=3.*--wall-search 3"):
         grid("l_room", "greedy,ppo:reference", "0", "fast", {"rooms.wall_search.scans": 0})
+    assert config_for(make_config("fast"), policy).rooms.wall_search.scans == 3  # the default robot's
     with pytest.raises(ConfigError, match=r"requires rooms\.wall_search\.scans=3 \(it was trained so\)"):
-        config_for(make_config("fast"), policy)
+        config_for(make_config("paper"), policy)
     # Another checkpoint of the same network, trained without searches.
     other = tmp_path / "other"
     other.mkdir()

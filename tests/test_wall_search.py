@@ -136,8 +136,10 @@ def test_bad_wall_search_config_raises(field, value):
         WallSearchConfig(**{field: value})
 
 
-def test_the_search_count_is_checked_and_off_by_default():
-    assert RoomRules().wall_search.scans == 0 and make_config("fast").rooms.wall_search.scans == 0
+def test_the_search_is_on_by_default_and_off_at_the_paper_preset():
+    assert RoomRules().wall_search.scans == 3 and make_config("fast").rooms.wall_search.scans == 3
+    assert make_config("paper").rooms.wall_search.scans == 0
+    assert make_config("paper").robot == make_config("default").robot  # the same hardware and stages
     with pytest.raises(ConfigError, match="scans"):
         WallSearchConfig(scans=-1)
 

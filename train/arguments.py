@@ -66,11 +66,11 @@ def output_folder_problem(path: str | Path) -> str | None:
 # ---------------------------------------------------------------------- the robot's options
 #: :data:`nbs_env.config.PRESETS`' names, written out so that ``--help`` loads no configuration
 #: (tests/test_cli.py checks them against the presets).
-PRESET_NAMES = ("default", "fast")
+PRESET_NAMES = ("default", "paper", "fast")
 WALL_SEARCH_HELP = (
     "search scans per room (rooms.wall_search.scans): before a room ends, scan from where most of its "
-    "wall that no scan faced is seen, so that doors there can be found (default: the preset's, 0: the paper's "
-    "method)"
+    "wall that no scan faced is seen, so that doors there can be found (default: the preset's, 3; 0: the paper's "
+    "method, as --preset paper)"
 )
 IFC_DOORS_HELP = "IFC doors open (frames only, the default) or closed (as drawn); IFC files only"
 #: The flag that sets a configuration path, for messages that name what a user typed.
