@@ -162,6 +162,17 @@ class RoomBelief:
             return []
         return [f for f, s in zip(self.roi.wall_faces, self.se, strict=True) if s]
 
+    def earlier_share(self) -> float:
+        """The share of this room's RoI, as its scans outline it, that lies in rooms scanned before
+        (``exclude``): 1.0 when what the robot took for a new room was all seen as an earlier one's
+        (a door detected inside a room whose first RoI reached through a wide opening)."""
+        if not self.exclude or not self.scans or self.roi is None:
+            return 0.0
+        from shapely.geometry import Polygon
+
+        whole = Polygon(compute_roi(self.scans, self.roi_config).polygon).area
+        return 0.0 if whole <= 0 else max(0.0, 1.0 - Polygon(self.roi.polygon).area / whole)
+
     def add_scan(
         self, scan: Scan, pose: np.ndarray, keep_direction: np.ndarray | None = None, world: np.ndarray | None = None
     ) -> BeliefUpdate:

@@ -81,7 +81,9 @@ scene's ground truth (true positions, true rooms), which the robot never sees.
     door_events             list of the env's door events: detected (with exterior, covered),
                             crossed, abandoned (with reason)
     room_ends               list, one per room the robot completed: {room (the robot's number),
-                            scans, reason: "gain" | "declared" | "cap" | "no NVP"}
+                            scans, roi_m2 (its RoI's area), reason: "gain" | "declared" | "cap" |
+                            "no NVP" | "earlier room" (no NVP, its RoI mostly in rooms scanned
+                            before)}
     wall_searches           list, one per wall-search scan (RoomRules.wall_search.scans > 0):
                             {scan (its index in steps), room (the robot's number)}
     config                  the env's EnvConfig as a dict (tuples as lists)

@@ -49,6 +49,9 @@ __all__ = ["STAGES", "ScanPoints", "ScanRecord", "StageTimes", "StepOutcome", "S
 
 #: Stage names of a scan's ``times``, in the order a step runs them.
 STAGES = ("scan", "registration", "roi", "classification", "voxels", "planning")
+#: A room with no NVP ended as an ``"earlier room"`` when at least this share of its RoI lies in the
+#: rooms scanned before: the space beyond its door was scanned as part of one of them.
+EARLIER_ROOM_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -235,8 +238,11 @@ class Storey:
         ``detected`` (with ``exterior``: it opens onto the outside, and is not crossed by default),
         ``crossed`` and ``abandoned`` (with its ``reason``) events, in order.
     room_ends : list of dict
-        One per room completed, in order: the robot's ``room`` number, its ``scans`` and the
-        ``reason`` it ended (``"gain"``, ``"declared"``, ``"cap"`` or ``"no NVP"``).
+        One per room completed, in order: the robot's ``room`` number, its ``scans``, the area of
+        its RoI (``roi_m2``) and the ``reason`` it ended: ``"gain"``, ``"declared"``, ``"cap"``, ``"no
+        NVP"`` or ``"earlier room"`` (no NVP, and at least :data:`EARLIER_ROOM_SHARE` of the RoI its
+        scans outline lies in rooms scanned before: the door was found inside a room whose RoI had
+        already reached beyond it).
     wall_searches : list of dict
         One per search scan (``config.rooms.wall_search.scans`` > 0), in order: the index of
         its ``scan``, the robot's ``room`` number and the ``kind`` of stop
@@ -417,7 +423,13 @@ class Storey:
                 # agent's declaration stands, so that completion="policy" scans as "gain" does.
                 done = reason == "declared" and robot.plan().gain_below(self.rules.completion_fraction)
                 continue
-            self.room_ends.append({"room": self.rooms.current, "scans": robot.scans_in_room, "reason": reason})
+            if reason == "no NVP" and robot.belief.earlier_share() >= EARLIER_ROOM_SHARE:
+                reason = "earlier room"
+            roi = robot.belief.roi
+            area = 0.0 if roi is None else float(Polygon(roi.polygon).area)
+            self.room_ends.append(
+                {"room": self.rooms.current, "scans": robot.scans_in_room, "reason": reason, "roi_m2": round(area, 2)}
+            )
             before = len(self.rooms.doors)
             self.rooms.finish_room(robot)
             for door in self.rooms.doors[before:]:

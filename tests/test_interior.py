@@ -143,3 +143,68 @@ def test_the_top_of_a_suspended_ceiling_and_the_plenum_do_not_count(thickness):
     # The floor, the covering's underside and the walls up to it: 4.8 x 3.8 m clear inside.
     inner_area = 2 * 4.8 * 3.8 + 2.2 * 2 * (4.8 + 3.8)
     assert len(samples) * 0.05**2 == pytest.approx(inner_area, rel=0.01)
+
+
+def test_structure_no_free_place_sees_does_not_count():
+    """A wardrobe flush against a wall and a low chest on the floor: the floor under both and the
+    wall behind the wardrobe are seen from nowhere in the room and leave the denominator; the wall
+    above the chest and the floor beside it stay."""
+    outline = [((0, 0), (5, 0)), ((5, 0), (5, 4)), ((5, 4), (0, 4)), ((0, 4), (0, 0))]
+    box = (-0.1, -0.1, 5.1, 4.1)
+    wardrobe = (0.1, 1.0, 0.7, 2.5, 2.2)  # against the west wall's inner face (x = 0.1)
+    chest = (3.0, 1.5, 4.0, 2.5, 0.6)
+    scene = boxed_storey([(a, b, []) for a, b in outline], [box], [box], clutter=[wardrobe, chest], start=(2.0, 3.2))
+    p = interior_samples(scene, 0.05).points
+
+    def under(x0, y0, x1, y1):
+        return (p[:, 0] > x0 + 0.02) & (p[:, 0] < x1 - 0.02) & (p[:, 1] > y0 + 0.02) & (p[:, 1] < y1 - 0.02)
+
+    floor = np.abs(p[:, 2]) < 0.01
+    assert not np.any(floor & under(0.1, 1.0, 0.7, 2.5)) and not np.any(floor & under(3.0, 1.5, 4.0, 2.5))
+    behind = (np.abs(p[:, 0] - 0.1) < 0.01) & (p[:, 1] > 1.05) & (p[:, 1] < 2.45) & (p[:, 2] < 2.15)
+    assert not np.any(behind)
+    above_wardrobe = (np.abs(p[:, 0] - 0.1) < 0.01) & (p[:, 1] > 1.05) & (p[:, 1] < 2.45) & (p[:, 2] > 2.25)
+    assert above_wardrobe.sum() * 0.05**2 == pytest.approx(1.5 * 0.35, rel=0.15)  # 2.25-2.6 m stays
+    assert np.sum(floor & under(3.0, 0.3, 4.0, 1.4)) * 0.05**2 == pytest.approx(1.1, rel=0.1)  # beside the chest
+
+
+def test_the_same_cloud_gives_the_same_coverage_at_every_preset():
+    """Coverage is a property of the evaluation: the meters of the fast and the default preset give
+    one cloud the same figure."""
+    from nbs_env.evaluation import CoverageMeter
+
+    scene = load_scene("l_room")
+    env = NBSEnv(make_config("fast", scene="l_room"))
+    env.reset(seed=0)
+    cloud = np.concatenate([points for points, _ in env.storey.step_scans])
+    figures = []
+    for preset in ("fast", "default", "paper"):
+        config = make_config(preset)
+        meter = CoverageMeter(scene, config.coverage_spacing, config.coverage_radius)
+        meter.add(cloud)
+        figures.append(meter.percent())
+    assert 20.0 < figures[0] < 100.0 and max(figures) - min(figures) < 1.0
+
+
+def test_the_project_and_an_independent_count_agree_on_a_run():
+    """A storey with a suspended ceiling and furniture: the coverage the project prints and the
+    count of :mod:`tests.independent_coverage` (its own samples, free positions and visibility, none
+    of the project's code) agree within 2 points after a short greedy run."""
+    from tests.independent_coverage import count
+
+    outline = [((0, 0), (6, 0)), ((6, 0), (6, 4)), ((6, 4), (0, 4)), ((0, 4), (0, 0))]
+    box = (-0.1, -0.1, 6.1, 4.1)
+    bare = boxed_storey(
+        [(a, b, []) for a, b in outline], [box], [box], clutter=[(0.1, 1.0, 0.7, 2.5, 2.0), (3.0, 1.5, 4.0, 2.5, 0.6)]
+    )
+    scene = _with_suspended_ceiling(bare, 2.3, 0.02)
+    env = NBSEnv(make_config("fast", max_scans=3))
+    env.reset(seed=0, options={"scene": scene})
+    clouds = [points for points, _ in env.storey.step_scans]
+    while env.storey.open:
+        env.step(env.storey.plan.best())
+        clouds += [points for points, _ in env.storey.step_scans]
+    ours = env.storey.meter.percent()
+    theirs = count(scene.mesh.vertices, scene.mesh.faces, scene.face_labels, np.concatenate(clouds))
+    assert theirs.visible < 0.8 * theirs.samples  # the slab above and the plenum are not visible
+    assert 50.0 < ours < 100.0 and abs(ours - theirs.percent) < 2.0, (ours, theirs.percent)

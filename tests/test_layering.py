@@ -320,3 +320,12 @@ def test_one_home_for_each_setting_and_what_policies_need_is_declared():
             assert "wall_search_scans" not in text, path
             for attribute in ("robot_overrides", "env_overrides", "config_overrides", "requires"):
                 assert f'getattr(policy, "{attribute}"' not in text, (path, attribute)
+
+
+def test_the_independent_coverage_count_imports_nothing_of_the_project():
+    """tests/independent_coverage.py checks the project's figure: it must not share its code."""
+    tree = ast.parse((Path(__file__).parent / "independent_coverage.py").read_text())
+    names = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    names |= {n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    ours = {"nbs_env", "scenes", "policies", "train", "tests"}
+    assert names and not {n for n in names if n.split(".")[0] in ours}, names

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nbs_env.config import EnvConfig, RobotConfig, ScannerConfig
+from nbs_env.config import EnvConfig, RobotConfig, ScannerConfig, make_config
 from nbs_env.evaluation import CoverageMeter, QualityConfig
 from nbs_env.robot import Robot
 from nbs_env.storey import Storey
@@ -99,9 +99,11 @@ def test_quality_measures_density_incidence_and_range_of_each_sample():
 
 
 def greedy_run(scene_name: str, seed: int, config: RobotConfig | None = None, max_scans: int = 10):
-    """Scan the first room of a scene greedily in a storey session; returns its robot and meter."""
+    """Scan the first room of a scene greedily in a storey session (the paper's robot: every scan is
+    the plan's, none a search's); returns its robot and meter."""
     scene = load_scene(scene_name)
-    storey = Storey(scene, EnvConfig(robot=config or RobotConfig(), max_scans=max_scans), np.random.default_rng(seed))
+    env_config = make_config("paper", robot=config or RobotConfig(), max_scans=max_scans)
+    storey = Storey(scene, env_config, np.random.default_rng(seed))
     while storey.open and storey.rooms_done == 0:
         planned = storey.plan
         best = planned.best()

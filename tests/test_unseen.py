@@ -51,3 +51,22 @@ def test_registration_holds_on_a_corpus_storey_and_nothing_outside_is_scanned():
     rooms = [Polygon(r.polygon).buffer(0.3) for r in env.storey.scene.rooms]
     for s in env.storey.scans:
         assert any(shapely.contains_xy(r, *s.true_position[:2]) for r in rooms), s.true_position
+
+
+@pytest.mark.expensive
+def test_a_u_room_whose_arms_hide_from_its_door_is_covered_at_the_default():
+    """corpus:u_office: a U-shaped office whose arms neither the door nor the start sees. The default
+    robot (its searches for walls no scan faced on; the fast preset's fidelity) senses at least 95% of
+    what the oracle's plans reach."""
+    from policies.oracle import oracle_plan
+
+    env = _episode("corpus:u_office", "fast")
+    config = env.config
+    plan = oracle_plan(
+        env.storey.scene, config.robot.scanner, spacing=config.coverage_spacing, radius=config.coverage_radius
+    )
+    assert config.rooms.wall_search.scans == 3
+    assert env.storey.meter.percent() >= 0.95 * plan.max_coverage_pct, (
+        env.storey.meter.percent(),
+        plan.max_coverage_pct,
+    )

@@ -158,7 +158,10 @@ def test_room_done_takes_one_search_scan_which_can_reopen_the_room():
     assert storey.room_ends == [] and info["action_mask"][env.stop_action]
     _, _, terminated, _, info = env.step(env.stop_action)
     assert terminated and info["scans"] == 2
-    assert storey.room_ends == [{"room": 0, "scans": 2, "reason": "declared"}]
+    assert [{k: e[k] for k in ("room", "scans", "reason")} for e in storey.room_ends] == [
+        {"room": 0, "scans": 2, "reason": "declared"}
+    ]
+    assert storey.room_ends[0]["roi_m2"] > 30.0  # the L's floor
 
 
 def l_room_with_safety(safety: float, narrow: bool) -> NBSEnv:

@@ -298,7 +298,8 @@ def _total_time(m: dict[str, Any]) -> float:
 
 
 TOTAL_KEYS = ("scans", "time_s", "structure_sensed_pct", "processed_points", "path_length_m",
-              "of_oracle_pct", "vs_oracle_scans", "unscanned_rooms", "cap_ended", "no_nvp_first", "rule_ended_pct",
+              "of_oracle_pct", "vs_oracle_scans", "unscanned_rooms", "cap_ended", "no_nvp_first", "earlier_room",
+              "rule_ended_pct",
               "abandoned",
               "exterior_doors", "reg_mean_cm", "reg_max_cm", "dense_pct", "incidence_pct", "quality_pct",
               "mean_overlap", "min_overlap", "min_fitness", "refused")  # fmt: skip
@@ -322,6 +323,8 @@ def _run_quantities(m: dict[str, Any], oracle: dict[str, Any]) -> dict[str, floa
         "cap_ended": float(sum(1 for e in ends if e["reason"] == "cap")),
         # A room its first scan ended for want of a place to scan from: the candidates vanished.
         "no_nvp_first": float(sum(1 for e in ends if e["reason"] == "no NVP" and e["scans"] <= 1)),
+        # A "room" beyond a door found inside a room whose RoI already held it: scanned there.
+        "earlier_room": float(sum(1 for e in ends if e["reason"] == "earlier room")),
         "abandoned": float(sum(1 for e in events if e["event"] == "abandoned")),
         "exterior_doors": float(sum(1 for e in events if e["event"] == "detected" and e.get("exterior"))),
     }
@@ -459,7 +462,8 @@ def _markdown(rows: list[dict[str, Any]]) -> str:
 def _storeys_markdown(rows: list[dict[str, Any]]) -> str:
     """One line per scene and policy: the figures the corpus is judged by (mean ± std over seeds)."""
     head = ["scene", "policy", "scans", "SE sensed (%)", "% of oracle max", "scans ÷ oracle's",
-            "rooms unscanned", "rooms ended by cap", "no NVP after one scan", "rooms ended by rule (%)",
+            "rooms unscanned", "rooms ended by cap", "no NVP after one scan", "in an earlier room",
+            "rooms ended by rule (%)",
             "doors abandoned", "exterior doors",
             "path (m)",
             "reg. error mean / max (cm)", "notes"]  # fmt: skip
@@ -480,7 +484,8 @@ def _storeys_markdown(rows: list[dict[str, Any]]) -> str:
             _cell(r.get("structure_sensed_pct"), "{:.1f}"),
         ]
         cells += [_cell(r.get("of_oracle_pct"), "{:.1f}"), _cell(r.get("vs_oracle_scans"), "{:.2f}")]
-        cells += [_cell(r.get(k), "{:.1f}") for k in ("unscanned_rooms", "cap_ended", "no_nvp_first", "rule_ended_pct")]
+        ends = ("unscanned_rooms", "cap_ended", "no_nvp_first", "earlier_room", "rule_ended_pct")
+        cells += [_cell(r.get(k), "{:.1f}") for k in ends]
         cells += [_cell(r.get(k), "{:.1f}") for k in ("abandoned", "exterior_doors")]
         cells.append(_cell(r.get("path_length_m"), "{:.1f}"))
         cells.append(" / ".join(_cell(v, "{:.1f}") for v in reg))
