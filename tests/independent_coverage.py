@@ -8,12 +8,16 @@ project prints can be checked against it:
 
 1. **Samples.** Structural faces (floor, ceiling, wall) are sampled uniformly by area, one random
    point per ``spacing``² on average (not the project's per-face lattice).
-2. **Visible.** A sample counts when a straight line from some free position reaches it unblocked:
+2. **Inside.** A sample counts only when a point ``PROBE`` off its face, on one side, is enclosed
+   (something above; of eight horizontal rays at most one escapes) and it lies no higher than the
+   ceilings over the free positions (their 95th percentile): not a porch's floor or a facade, not the
+   storey above seen through a stair opening.
+3. **Visible.** A sample counts when a straight line from some free position reaches it unblocked:
    positions are a lattice over the upward floor faces at three heights, kept where a vertical ray
-   meets a ceiling above and the floor below, and faces lie at least ``MIN_SPAN`` apart along x
-   and along y (inside the storey, not in a wall). The top of a
+   meets a ceiling above and the floor below, faces lie at least ``MIN_SPAN`` apart along x and
+   along y (not in a wall), and the position is enclosed as above (not on a porch). The top of a
    suspended ceiling, a wall's cavity or the slab above a covering are seen from no such position.
-3. **Sensed.** A visible sample is sensed when a point of the cloud lies within ``radius`` of it.
+4. **Sensed.** A visible sample is sensed when a point of the cloud lies within ``radius`` of it.
 
 Only numpy, scipy, open3d (and libusb-package, which open3d's library needs) are imported. The
 class codes are written out (floor 0, ceiling 1, wall 2, as the scene files store them).
@@ -28,6 +32,8 @@ import numpy as np
 FLOOR, CEILING, WALL = 0, 1, 2
 #: Metres: a position between faces nearer than this along x or y is inside a wall, not free.
 MIN_SPAN = 0.6
+#: Metres off a face where its two sides are judged inside or out.
+PROBE = 0.1
 
 
 def _open3d():
@@ -74,18 +80,41 @@ class IndependentCount:
         return 100.0 * self.sensed / max(1, self.visible)
 
 
-def _sample_faces(triangles: np.ndarray, spacing: float, rng: np.random.Generator) -> np.ndarray:
-    """Area-weighted random points on (n, 3, 3) triangles, about one per ``spacing``²."""
+def _sample_faces(triangles: np.ndarray, spacing: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Area-weighted random points on (n, 3, 3) triangles, about one per ``spacing``², and the unit
+    normal of each point's triangle."""
     a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    cross = np.cross(b - a, c - a)
+    area = 0.5 * np.linalg.norm(cross, axis=1)
     n = round(float(area.sum()) / spacing**2)
     if n == 0:
-        return np.zeros((0, 3))
+        return np.zeros((0, 3)), np.zeros((0, 3))
     face = rng.choice(len(triangles), size=n, p=area / area.sum())
     u, v = rng.random(n), rng.random(n)
     flip = u + v > 1
     u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
-    return a[face] + u[:, None] * (b - a)[face] + v[:, None] * (c - a)[face]
+    points = a[face] + u[:, None] * (b - a)[face] + v[:, None] * (c - a)[face]
+    return points, cross[face] / np.maximum(2.0 * area[face], 1e-12)[:, None]
+
+
+def _cast(scene, origins: np.ndarray, direction) -> tuple[np.ndarray, np.ndarray]:
+    """Distance to the first face (inf: none) and its index, per ray from each origin."""
+    o3d = _open3d()
+    direction = np.broadcast_to(np.asarray(direction, dtype=float), origins.shape)
+    hits = scene.cast_rays(o3d.core.Tensor(np.column_stack([origins, direction]).astype(np.float32)))
+    return hits["t_hit"].numpy(), hits["primitive_ids"].numpy()
+
+
+def _enclosed(scene, points: np.ndarray) -> np.ndarray:
+    """Whether faces close a point in: something above it, and of eight horizontal directions at
+    most one escapes (an open door). A porch, a balcony or a carport under a roof is open."""
+    if not len(points):
+        return np.zeros(0, dtype=bool)
+    covered = np.isfinite(_cast(scene, points, (0.0, 0.0, 1.0))[0])
+    escapes = np.zeros(len(points), dtype=np.int64)
+    for angle in np.arange(8) * np.pi / 4:
+        escapes += ~np.isfinite(_cast(scene, points, (np.cos(angle), np.sin(angle), 0.0))[0])
+    return covered & (escapes <= 1)
 
 
 def _free_positions(scene, vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray, lattice: float) -> np.ndarray:
@@ -139,7 +168,9 @@ def _free_positions(scene, vertices: np.ndarray, faces: np.ndarray, labels: np.n
             t = [scene.cast_rays(o3d.core.Tensor(w.astype(np.float32)))["t_hit"].numpy() for w in ways]
             spans.append(t[0] + t[1])
         open_ = np.minimum(*spans) >= MIN_SPAN
-        out.append(p[above & below & open_])
+        keep = above & below & open_
+        keep[keep] = _enclosed(scene, p[keep])
+        out.append(p[keep])
     return np.concatenate(out) if out else np.zeros((0, 3))
 
 
@@ -182,8 +213,20 @@ def count(
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(faces.astype(np.uint32)))
     rng = np.random.default_rng(seed)
-    samples = _sample_faces(vertices[faces[np.isin(labels, (FLOOR, CEILING, WALL))]], spacing, rng)
+    samples, normals = _sample_faces(vertices[faces[np.isin(labels, (FLOOR, CEILING, WALL))]], spacing, rng)
     positions = _free_positions(scene, vertices, faces, labels, lattice)
+    # The storey's own structure: below the ceilings over its free places (the 95th percentile, so
+    # that what a stair opening shows of the storey above does not count), and on a side of its
+    # face that lies inside (enclosed, not a porch seen through the front door).
+    if len(positions):
+        t_up = _cast(scene, positions, (0.0, 0.0, 1.0))[0]
+        top = float(np.percentile(positions[:, 2] + np.where(np.isfinite(t_up), t_up, 0.0), 95)) + 0.05
+        inside = samples[:, 2] <= top
+        sides = np.zeros(len(samples), dtype=bool)
+        for sign in (1.0, -1.0):
+            rest = np.flatnonzero(inside & ~sides)
+            sides[rest] = _enclosed(scene, samples[rest] + sign * PROBE * normals[rest])
+        samples = samples[sides]
     visible = np.zeros(len(samples), dtype=bool)
     for p in positions[rng.permutation(len(positions))]:
         todo = np.flatnonzero(~visible)

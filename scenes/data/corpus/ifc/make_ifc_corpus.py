@@ -37,8 +37,8 @@ garage_house (EG)           m      a house with a 3.7 x 7.7 m garage (2.5 m sect
 
 The output is deterministic for a given ifcopenshell version: every ``GlobalId`` is derived from the
 file's stem and the entity's step id, and the header's time stamp is fixed. The robot's start is
-written into two files (an ``IfcAnnotation`` and a storey property set); ``scenes.ifc`` does not read
-either, so those scenes start where :func:`scenes.geometry.auto_start` puts them.
+written into two files (an ``IfcAnnotation`` and a storey property set), and ``scenes.ifc`` reads
+both; the other files start where :func:`scenes.geometry.auto_start` puts the robot.
 """
 
 from __future__ import annotations
