@@ -105,12 +105,13 @@ def _cast(scene, origins: np.ndarray, direction) -> tuple[np.ndarray, np.ndarray
     return hits["t_hit"].numpy(), hits["primitive_ids"].numpy()
 
 
-def _enclosed(scene, points: np.ndarray) -> np.ndarray:
-    """Whether faces close a point in: something above it, and of eight horizontal directions at
-    most one escapes (an open door). A porch, a balcony or a carport under a roof is open."""
+def _enclosed(scene, points: np.ndarray, roofed: bool = True) -> np.ndarray:
+    """Whether faces close a point in: something above it (when the model has ceilings at all), and
+    of eight horizontal directions at most one escapes (an open door). A porch, a balcony or a carport
+    under a roof is open."""
     if not len(points):
         return np.zeros(0, dtype=bool)
-    covered = np.isfinite(_cast(scene, points, (0.0, 0.0, 1.0))[0])
+    covered = np.isfinite(_cast(scene, points, (0.0, 0.0, 1.0))[0]) if roofed else np.ones(len(points), dtype=bool)
     escapes = np.zeros(len(points), dtype=np.int64)
     for angle in np.arange(8) * np.pi / 4:
         escapes += ~np.isfinite(_cast(scene, points, (np.cos(angle), np.sin(angle), 0.0))[0])
@@ -155,6 +156,8 @@ def _free_positions(scene, vertices: np.ndarray, faces: np.ndarray, labels: np.n
         )
         t_up, id_up = up_hits["t_hit"].numpy(), up_hits["primitive_ids"].numpy()
         above = np.isfinite(t_up) & (labels[np.where(np.isfinite(t_up), id_up, 0)] == CEILING)
+        if not np.any(labels == CEILING):  # a model cut open at the top: the sky is allowed
+            above = np.ones(len(p), dtype=bool)
         down = scene.cast_rays(
             o3d.core.Tensor(np.column_stack([p, np.zeros((len(p), 2)), -np.ones(len(p))]).astype(np.float32))
         )
@@ -169,7 +172,7 @@ def _free_positions(scene, vertices: np.ndarray, faces: np.ndarray, labels: np.n
             spans.append(t[0] + t[1])
         open_ = np.minimum(*spans) >= MIN_SPAN
         keep = above & below & open_
-        keep[keep] = _enclosed(scene, p[keep])
+        keep[keep] = _enclosed(scene, p[keep], roofed=bool(np.any(labels == CEILING)))
         out.append(p[keep])
     return np.concatenate(out) if out else np.zeros((0, 3))
 
@@ -218,14 +221,16 @@ def count(
     # The storey's own structure: below the ceilings over its free places (the 95th percentile, so
     # that what a stair opening shows of the storey above does not count), and on a side of its
     # face that lies inside (enclosed, not a porch seen through the front door).
+    roofed = bool(np.any(labels == CEILING))
     if len(positions):
         t_up = _cast(scene, positions, (0.0, 0.0, 1.0))[0]
         top = float(np.percentile(positions[:, 2] + np.where(np.isfinite(t_up), t_up, 0.0), 95)) + 0.05
+        top = top if roofed else np.inf
         inside = samples[:, 2] <= top
         sides = np.zeros(len(samples), dtype=bool)
         for sign in (1.0, -1.0):
             rest = np.flatnonzero(inside & ~sides)
-            sides[rest] = _enclosed(scene, samples[rest] + sign * PROBE * normals[rest])
+            sides[rest] = _enclosed(scene, samples[rest] + sign * PROBE * normals[rest], roofed)
         samples = samples[sides]
     visible = np.zeros(len(samples), dtype=bool)
     for p in positions[rng.permutation(len(positions))]:
