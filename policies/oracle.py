@@ -88,7 +88,7 @@ class OraclePlan:
         }
 
 
-def reach(scene: Scene, radius: float) -> Polygon:
+def reach(scene: Scene, radius: float, indoor: tuple | None = None) -> Polygon:
     """The indoor free floor a disc of ``radius`` metres drives over from the scene's start.
 
     Parameters
@@ -97,6 +97,8 @@ def reach(scene: Scene, radius: float) -> Polygon:
         The true building; its ``start`` (the file's, the caller's or :func:`scenes.geometry.auto_start`'s).
     radius : float
         The robot's radius (it passes doors with no safety distance, as the storey's crossings do).
+    indoor : (floor, floor_z), optional
+        :func:`scenes.interior.indoor_floor`'s result, when the caller has it.
 
     Returns
     -------
@@ -106,7 +108,7 @@ def reach(scene: Scene, radius: float) -> Polygon:
         part when the start lies in none, which a start within ``radius`` of a wall may); empty
         when the storey has no floor.
     """
-    floor, floor_z = indoor_floor(scene)
+    floor, floor_z = indoor if indoor is not None else indoor_floor(scene)
     # The indoor floor stops at walls, and so at a doorway whose floor lies under no ceiling (a wall's
     # thickness): closing it over gaps up to DOORWAY_DEPTH and taking the walls out again joins rooms
     # at their doorways only.
@@ -136,7 +138,7 @@ def _positions(scene: Scene, lattice: float, clearance: float, radius: float) ->
     annotations) that keep ``clearance`` from every obstacle and lie in the :func:`reach` of a
     disc of ``radius``."""
     floor, floor_z = indoor_floor(scene)
-    reachable = reach(scene, radius)
+    reachable = reach(scene, radius, (floor, floor_z))
     out = []
     for part in getattr(floor, "geoms", [floor]):
         if not isinstance(part, Polygon) or part.is_empty:

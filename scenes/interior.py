@@ -270,8 +270,14 @@ def interior_samples(scene: Scene, spacing: float = 0.05) -> StructureSamples:
     return cache[key]
 
 
-def free_positions(scene: Scene) -> np.ndarray:
+def free_positions(scene: Scene, caster=None) -> np.ndarray:
     """Places of the storey's free space to look from (module docstring, *Visible*).
+
+    Parameters
+    ----------
+    scene : Scene
+    caster : open3d RaycastingScene, optional
+        Of every face of ``scene``, when the caller has built it.
 
     Returns
     -------
@@ -294,7 +300,7 @@ def free_positions(scene: Scene) -> np.ndarray:
     if not len(xy):
         xy = np.array([[p.x, p.y] for p in (floor.representative_point(),)])
     o3d = open3d()
-    caster = _all_faces(scene)
+    caster = caster if caster is not None else _all_faces(scene)
     out = []
     for height in VIEW_HEIGHTS:
         p = np.column_stack([xy, np.full(len(xy), floor_z + height)]).astype(np.float32)
@@ -332,11 +338,13 @@ def visible_mask(scene: Scene, points: np.ndarray, positions: np.ndarray | None 
     from scenes._open3d import open3d
 
     points = np.asarray(points, dtype=float).reshape(-1, 3)
-    positions = free_positions(scene) if positions is None else np.asarray(positions, dtype=float).reshape(-1, 3)
+    caster = _all_faces(scene)
+    positions = (
+        free_positions(scene, caster) if positions is None else np.asarray(positions, dtype=float).reshape(-1, 3)
+    )
     if not len(positions) or not len(points):
         return np.ones(len(points), dtype=bool)
     o3d = open3d()
-    caster = _all_faces(scene)
     seen = np.zeros(len(points), dtype=bool)
 
     def look(origins: np.ndarray, which: np.ndarray) -> None:
