@@ -9,14 +9,19 @@ here reads ``Scene.rooms`` or ``Scene.face_rooms``: only the mesh and its surfac
 *Interior side.* A point ``p`` on a structural face with unit normal ``n`` faces the interior when,
 on one of its two sides, the probe ``q = p ± INTERIOR_PROBE · n``
 
-- stands above a floor: straight down from ``q`` the first structural surface is a FLOOR face;
+- stands above a floor of the storey: straight down from ``q`` the first structural surface is a
+  FLOOR face, within :data:`LEVEL_SPAN` (and the floor band) of the storey's floor level (a split
+  level counts; the storey above, seen up a stair, does not);
 - stands under cover: straight up from ``q`` the first structural surface is not a FLOOR face (the
   storey's own slab seen from below or from inside), and there is one, unless the storey has no
   ceiling faces at all (a model cut open at the top), where the sky is allowed;
 - is not enclosed in a wall: along none of four horizontal directions do the first structural faces
   met either way lie on two parallel planes less than :data:`MIN_SPAN` apart (inside a wall solid,
   a ray either way meets the wall's own two faces; in a room's corner they are two walls at an
-  angle).
+  angle);
+- is closed in: of :data:`ENCLOSURE_RAYS` horizontal rays at most :data:`MAX_ESCAPES` leave the
+  model, faces of every class closing it (a porch, a balcony or a carport under a roof is open on
+  more sides; a model with no ceiling faces is not tested).
 
 Both sides are tried because files do not agree on normals: a single-quad wall has one normal for
 two visible sides, and a solid's faces point out of the solid. A side counts only when the straight
@@ -25,7 +30,8 @@ way from ``p`` to its probe crosses no structural face: the top of a suspended c
 
 *Visible.* Of the interior side, what counts is what some place of the storey's free space sees: a
 straight line from one of the :func:`free_positions` (a :data:`VIEW_LATTICE` lattice over the
-indoor floor at :data:`VIEW_HEIGHTS`, under a ceiling and over the floor with nothing between)
+free floor of every level of the storey at :data:`VIEW_HEIGHTS`, under a ceiling and over the floor
+with nothing between, closed in as above)
 reaches the point before any face, furniture included. A point is tried from the positions within
 :data:`VIEW_RING` lattice cells of its own, then from every position of a lattice three times coarser
 (the full lattice costs minutes on a large storey; on ``five_rooms`` the two leave out 6.2% of
@@ -63,20 +69,30 @@ _KEY = 1 << 32
 #: Their heights above the floor, metres: low enough to see under a table, high enough to see over
 #: a sideboard.
 VIEW_HEIGHTS = (0.5, 1.2, 1.8)
+#: Least horizontal distance (m) from a free position to any face: a scanner stands on a body (the
+#: robot's radius), not in a wall and not in the slot behind a wardrobe.
+VIEW_CLEARANCE = 0.25
 
 if TYPE_CHECKING:
     from scenes.model import Room, Scene, StructureSamples
 
 __all__ = [
+    "ENCLOSURE_RAYS",
     "INTERIOR_PROBE",
+    "LEVEL_SPAN",
+    "MAX_ESCAPES",
     "MIN_ROOM_AREA",
     "MIN_SPAN",
     "ROOM_NECK",
+    "VIEW_CLEARANCE",
     "VIEW_HEIGHTS",
     "VIEW_LATTICE",
     "VIEW_RING",
     "derive_rooms",
+    "escapes",
+    "floor_levels",
     "free_positions",
+    "horizontal_hits",
     "indoor_floor",
     "interior_area",
     "interior_mask",
@@ -100,6 +116,16 @@ MIN_ROOM_AREA = 1.0
 FLOOR_BAND = 0.35
 #: How far (m) a probe looks down for its floor.
 MAX_DROP = 8.0
+#: Horizontal directions along which a place is tested for being closed in, and how many of them
+#: may leave the model for the place to be inside (two open doors in line, a door and a window
+#: without a pane): a porch, a balcony, a loggia or a carport is open on more sides than that. A
+#: model with no ceiling faces at all (cut open at the top) gets no such test: nothing tells its
+#: roofed porch from its rooms.
+ENCLOSURE_RAYS = 8
+MAX_ESCAPES = 2
+#: Floor levels other than the storey's own (a split level, a raised dais) belong to its free space
+#: when they lie within this height (m) of it; floors higher up are the storey above.
+LEVEL_SPAN = 1.6
 #: Rays leave a surface this far (m) off it, so as not to hit the face they start on.
 _SURFACE_EPS = 1e-3
 
@@ -128,6 +154,17 @@ class _Caster:
         # Floors alone: a wall standing on a slab ties with the slab's top, and either may win.
         self._floors = raycaster(np.flatnonzero(scene.face_labels == SurfaceClass.FLOOR))
         self.has_ceiling = bool(np.any(self.labels == SurfaceClass.CEILING))
+        floors = scene.mesh.vertices[scene.mesh.faces[scene.face_labels == SurfaceClass.FLOOR]]
+        self.floor_z = floor_level(floors) if len(floors) else 0.0
+        self._all = None
+        self._every = scene
+
+    def escapes(self, origins: np.ndarray) -> np.ndarray:
+        """Of :data:`ENCLOSURE_RAYS` horizontal rays from each origin, how many meet no face at all
+        (every face: a door leaf, a window pane and furniture close a room as well as a wall)."""
+        if self._all is None:
+            self._all = _all_faces(self._every)
+        return escapes(self._all, origins)
 
     def cast(
         self, origins: np.ndarray, direction: np.ndarray, floors_only: bool = False
@@ -149,7 +186,10 @@ class _Caster:
 
 def _probe_is_inside(caster: _Caster, q: np.ndarray) -> np.ndarray:
     t_down, below, _ = caster.cast(q, np.array([0.0, 0.0, -1.0]))
-    ok = (below == SurfaceClass.FLOOR) & (t_down <= MAX_DROP)
+    # Over a floor of the storey: its own level or one within LEVEL_SPAN of it, not the storey
+    # above seen up a stair.
+    level = np.abs(q[:, 2] - np.where(np.isfinite(t_down), t_down, 0.0) - caster.floor_z) <= LEVEL_SPAN + FLOOR_BAND
+    ok = (below == SurfaceClass.FLOOR) & (t_down <= MAX_DROP) & level
     todo = np.flatnonzero(ok)  # the rays up only for probes above a floor
     if len(todo):
         up = np.array([0.0, 0.0, 1.0])
@@ -178,7 +218,31 @@ def _probe_is_inside(caster: _Caster, q: np.ndarray) -> np.ndarray:
             enclosed[near] = np.isfinite(t_b) & (np.abs(n_b[:, 2]) < 0.3) & parallel & (gap < MIN_SPAN)
         ok[todo[enclosed]] = False
         todo = todo[~enclosed]
+    if len(todo) and caster.has_ceiling:  # a porch, a balcony or a carport under a roof is open to the sides
+        ok[todo[caster.escapes(q[todo]) > MAX_ESCAPES]] = False
     return ok
+
+
+def horizontal_hits(caster, origins: np.ndarray) -> np.ndarray:
+    """Distance to the first face (inf: none) along each of :data:`ENCLOSURE_RAYS` horizontal
+    directions from each (n, 3) origin (an open3d ray caster of every face): (n, ENCLOSURE_RAYS)."""
+    from scenes._open3d import open3d
+
+    o3d = open3d()
+    origins = np.asarray(origins, dtype=np.float32).reshape(-1, 3)
+    out = np.empty((len(origins), ENCLOSURE_RAYS))
+    rays = np.empty((len(origins), 6), dtype=np.float32)
+    rays[:, :3] = origins
+    for k, angle in enumerate(np.arange(ENCLOSURE_RAYS) * (2.0 * np.pi / ENCLOSURE_RAYS)):
+        rays[:, 3:] = (np.cos(angle), np.sin(angle), 0.0)
+        out[:, k] = caster.cast_rays(o3d.core.Tensor.from_numpy(rays))["t_hit"].numpy()
+    return out
+
+
+def escapes(caster, origins: np.ndarray) -> np.ndarray:
+    """Of :data:`ENCLOSURE_RAYS` horizontal rays from each (n, 3) origin, how many leave the model
+    (an open3d ray caster of every face): (n,) int."""
+    return np.count_nonzero(~np.isfinite(horizontal_hits(caster, origins)), axis=1)
 
 
 def interior_mask(scene: Scene, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
@@ -270,6 +334,47 @@ def interior_samples(scene: Scene, spacing: float = 0.05) -> StructureSamples:
     return cache[key]
 
 
+def floor_levels(scene: Scene) -> list[tuple[Polygon | MultiPolygon, float]]:
+    """The free floor of every level of the storey, and its height.
+
+    The storey's own level (:func:`indoor_floor`) first; then each other band of upward FLOOR faces
+    within :data:`LEVEL_SPAN` of it (a split level up a few steps, a sunken living room), under a
+    CEILING face when the storey has any, minus the walls, doors and windows at its height. A band of
+    less than :data:`MIN_ROOM_AREA` (a stair's tread) is no level.
+
+    Returns
+    -------
+    list of (shapely geometry, float)
+        Empty when the storey has no floor.
+    """
+    main, floor_z = indoor_floor(scene)
+    if main.is_empty:
+        return []
+    levels = [(main, floor_z)]
+    tri = scene.mesh.vertices[scene.mesh.faces[scene.face_labels == SurfaceClass.FLOOR]]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    z = tri[..., 2]
+    own = (z.min(axis=1) > floor_z - FLOOR_BAND) & (z.max(axis=1) < floor_z + FLOOR_BAND)
+    height = z.mean(axis=1)
+    rest = (cross[:, 2] > 0.5 * np.linalg.norm(cross, axis=1)) & ~own & (np.abs(height - floor_z) <= LEVEL_SPAN)
+    if not rest.any():
+        return levels
+    ceiling_tri = scene.mesh.vertices[scene.mesh.faces[scene.face_labels == SurfaceClass.CEILING]]
+    ceiling = _union_xy(ceiling_tri) if len(ceiling_tri) else None
+    while rest.any():
+        level = floor_level(tri[rest])
+        band = rest & (np.abs(height - level) < FLOOR_BAND)
+        rest &= ~band
+        region = _union_xy(tri[band])
+        if ceiling is not None:
+            region = region.intersection(ceiling)
+        walls = separating_footprint(scene, level)
+        region = region.difference(walls) if not walls.is_empty else region
+        if region.area >= MIN_ROOM_AREA:
+            levels.append((region, level))
+    return levels
+
+
 def free_positions(scene: Scene, caster=None) -> np.ndarray:
     """Places of the storey's free space to look from (module docstring, *Visible*).
 
@@ -282,40 +387,47 @@ def free_positions(scene: Scene, caster=None) -> np.ndarray:
     Returns
     -------
     (m, 3) float
-        Lattice points of :func:`indoor_floor` at each of :data:`VIEW_HEIGHTS` above it, kept where
-        the first face straight up is a CEILING face (not furniture, not the sky) and the first face
-        straight down is the floor they stand over.
+        Lattice points of each of the :func:`floor_levels` at each of :data:`VIEW_HEIGHTS` above it,
+        kept where the first face straight up is a CEILING face (not furniture, not the sky), the first
+        face straight down is the floor they stand over, no face lies nearer than
+        :data:`VIEW_CLEARANCE` along any of the :data:`ENCLOSURE_RAYS` horizontal directions, and
+        faces close them in (at most
+        :data:`MAX_ESCAPES` of :data:`ENCLOSURE_RAYS` horizontal rays leave the model: not a porch).
     """
     from scenes._open3d import open3d
 
-    floor, floor_z = indoor_floor(scene)
-    if floor.is_empty:
-        return np.zeros((0, 3))
-    x0, y0, x1, y1 = floor.bounds
-    gx, gy = np.meshgrid(
-        np.arange(x0 + VIEW_LATTICE / 2, x1, VIEW_LATTICE), np.arange(y0 + VIEW_LATTICE / 2, y1, VIEW_LATTICE)
-    )
-    xy = np.column_stack([gx.ravel(), gy.ravel()])
-    xy = xy[shapely.contains_xy(floor, xy[:, 0], xy[:, 1])]
-    if not len(xy):
-        xy = np.array([[p.x, p.y] for p in (floor.representative_point(),)])
     o3d = open3d()
     caster = caster if caster is not None else _all_faces(scene)
     out = []
-    for height in VIEW_HEIGHTS:
-        p = np.column_stack([xy, np.full(len(xy), floor_z + height)]).astype(np.float32)
-        up = caster.cast_rays(
-            o3d.core.Tensor.from_numpy(np.column_stack([p, np.tile([0, 0, 1], (len(p), 1))]).astype(np.float32))
+    for floor, floor_z in floor_levels(scene):
+        # The lattice is anchored on the world's origin: the same places whatever the floor's extent.
+        x0, y0, x1, y1 = (np.floor(np.asarray(floor.bounds) / VIEW_LATTICE) * VIEW_LATTICE).tolist()
+        gx, gy = np.meshgrid(
+            np.arange(x0 + VIEW_LATTICE / 2, x1 + VIEW_LATTICE, VIEW_LATTICE),
+            np.arange(y0 + VIEW_LATTICE / 2, y1 + VIEW_LATTICE, VIEW_LATTICE),
         )
-        t_up, id_up = up["t_hit"].numpy(), up["primitive_ids"].numpy()
-        covered = np.isfinite(t_up)
-        covered[covered] = scene.face_labels[id_up[covered]] == SurfaceClass.CEILING
-        down = caster.cast_rays(
-            o3d.core.Tensor.from_numpy(np.column_stack([p, np.tile([0, 0, -1], (len(p), 1))]).astype(np.float32))
-        )
-        clear = np.abs(down["t_hit"].numpy() - height) < 0.05
-        out.append(p[covered & clear])
-    return np.concatenate(out).astype(float)
+        xy = np.column_stack([gx.ravel(), gy.ravel()])
+        xy = xy[shapely.contains_xy(floor, xy[:, 0], xy[:, 1])]
+        if not len(xy):
+            xy = np.array([[p.x, p.y] for p in (floor.representative_point(),)])
+        for height in VIEW_HEIGHTS:
+            p = np.column_stack([xy, np.full(len(xy), floor_z + height)]).astype(np.float32)
+            up = caster.cast_rays(
+                o3d.core.Tensor.from_numpy(np.column_stack([p, np.tile([0, 0, 1], (len(p), 1))]).astype(np.float32))
+            )
+            t_up, id_up = up["t_hit"].numpy(), up["primitive_ids"].numpy()
+            covered = np.isfinite(t_up)
+            covered[covered] = scene.face_labels[id_up[covered]] == SurfaceClass.CEILING
+            down = caster.cast_rays(
+                o3d.core.Tensor.from_numpy(np.column_stack([p, np.tile([0, 0, -1], (len(p), 1))]).astype(np.float32))
+            )
+            keep = covered & (np.abs(down["t_hit"].numpy() - height) < 0.05)
+            around = horizontal_hits(caster, p[keep])
+            keep[keep] = (around.min(axis=1) >= VIEW_CLEARANCE) & (
+                np.count_nonzero(~np.isfinite(around), axis=1) <= MAX_ESCAPES
+            )
+            out.append(p[keep])
+    return np.concatenate(out).astype(float) if out else np.zeros((0, 3))
 
 
 def visible_mask(scene: Scene, points: np.ndarray, positions: np.ndarray | None = None) -> np.ndarray:

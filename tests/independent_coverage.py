@@ -8,15 +8,20 @@ project prints can be checked against it:
 
 1. **Samples.** Structural faces (floor, ceiling, wall) are sampled uniformly by area, one random
    point per ``spacing``² on average (not the project's per-face lattice).
-2. **Inside.** A sample counts only when a point ``PROBE`` off its face, on one side, is enclosed
-   (something above; of eight horizontal rays at most one escapes) and it lies no higher than the
-   ceilings over the free positions (their 95th percentile): not a porch's floor or a facade, not the
-   storey above seen through a stair opening.
+2. **Inside.** A sample counts only when a point ``PROBE`` off its face, on one side, lies in free
+   space (floor, ceiling and wall faces at least ``MIN_SPAN`` apart along x, y and z: not inside
+   a wall or a slab), is
+   enclosed (something above; of eight horizontal rays at most two escape; a model with no
+   ceiling faces is open at the top, and every side counts), and has a floor of the storey as the
+   first floor, ceiling or wall face straight below (within ``LEVEL_SPAN`` of the lowest floor a
+   free position stands on): not a porch's floor or a facade, not the storey above seen through a
+   stair opening, not the void over a suspended ceiling.
 3. **Visible.** A sample counts when a straight line from some free position reaches it unblocked:
-   positions are a lattice over the upward floor faces at three heights, kept where a vertical ray
-   meets a ceiling above and the floor below, faces lie at least ``MIN_SPAN`` apart along x and
-   along y (not in a wall), and the position is enclosed as above (not on a porch). The top of a
-   suspended ceiling, a wall's cavity or the slab above a covering are seen from no such position.
+   positions are a lattice over every floor face a ray dropped through the model lands on, at three
+   heights, kept where a vertical ray meets a ceiling above and the floor below, no face lies
+   nearer than ``CLEARANCE`` horizontally (a scanner stands on a body), the position is enclosed as above (not
+   on a porch), and its floor is within ``LEVEL_SPAN`` of the lowest one. The top of a suspended
+   ceiling, a wall's cavity or the slab above a covering are seen from no such position.
 4. **Sensed.** A visible sample is sensed when a point of the cloud lies within ``radius`` of it.
 
 Only numpy, scipy, open3d (and libusb-package, which open3d's library needs) are imported. The
@@ -32,8 +37,12 @@ import numpy as np
 FLOOR, CEILING, WALL = 0, 1, 2
 #: Metres: a position between faces nearer than this along x or y is inside a wall, not free.
 MIN_SPAN = 0.6
+#: Metres: the least horizontal distance from a free position to any face.
+CLEARANCE = 0.25
 #: Metres off a face where its two sides are judged inside or out.
 PROBE = 0.1
+#: Metres: floors this far above the storey's lowest one (a split level) are still its own.
+LEVEL_SPAN = 1.95
 
 
 def _open3d():
@@ -106,16 +115,18 @@ def _cast(scene, origins: np.ndarray, direction) -> tuple[np.ndarray, np.ndarray
 
 
 def _enclosed(scene, points: np.ndarray, roofed: bool = True) -> np.ndarray:
-    """Whether faces close a point in: something above it (when the model has ceilings at all), and
-    of eight horizontal directions at most one escapes (an open door). A porch, a balcony or a carport
-    under a roof is open."""
+    """Whether faces close a point in: something above it, and of eight horizontal directions at
+    most two escape (two open doors in line). A porch, a balcony or a carport under a roof is open.
+    A model with no ceiling faces (``roofed`` false) is cut open at the top: every point is in."""
+    if not roofed:
+        return np.ones(len(points), dtype=bool)
     if not len(points):
         return np.zeros(0, dtype=bool)
-    covered = np.isfinite(_cast(scene, points, (0.0, 0.0, 1.0))[0]) if roofed else np.ones(len(points), dtype=bool)
+    covered = np.isfinite(_cast(scene, points, (0.0, 0.0, 1.0))[0])
     escapes = np.zeros(len(points), dtype=np.int64)
     for angle in np.arange(8) * np.pi / 4:
         escapes += ~np.isfinite(_cast(scene, points, (np.cos(angle), np.sin(angle), 0.0))[0])
-    return covered & (escapes <= 1)
+    return covered & (escapes <= 2)
 
 
 def _free_positions(scene, vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray, lattice: float) -> np.ndarray:
@@ -126,16 +137,17 @@ def _free_positions(scene, vertices: np.ndarray, faces: np.ndarray, labels: np.n
     up = tri[normal[:, 2] > 1e-12]
     if not len(up):
         return np.zeros((0, 3))
-    lo, hi = up[..., :2].reshape(-1, 2).min(axis=0), up[..., :2].reshape(-1, 2).max(axis=0)
+    lo = np.floor(up[..., :2].reshape(-1, 2).min(axis=0) / lattice) * lattice
+    hi = up[..., :2].reshape(-1, 2).max(axis=0)
     gx, gy = np.meshgrid(np.arange(lo[0], hi[0], lattice) + lattice / 2, np.arange(lo[1], hi[1], lattice) + lattice / 2)
     xy = np.column_stack([gx.ravel(), gy.ravel()])
     top = float(vertices[:, 2].max()) + 1.0
-    # Drop a ray from above the model at each lattice point and walk down through roofs and slabs
-    # to the first FLOOR face it lands on.
+    # Drop a ray from above the model at each lattice point and walk down through roofs and slabs,
+    # keeping every FLOOR face it lands on: each is a floor a place may stand over.
     start = np.column_stack([xy, np.full(len(xy), top), np.zeros((len(xy), 2)), -np.ones(len(xy))])
-    z = np.full(len(xy), np.nan)
+    landings = []
     going = np.ones(len(xy), dtype=bool)
-    for _ in range(12):
+    for _ in range(24):
         if not going.any():
             break
         hits = scene.cast_rays(o3d.core.Tensor(start.astype(np.float32)))
@@ -143,13 +155,13 @@ def _free_positions(scene, vertices: np.ndarray, faces: np.ndarray, labels: np.n
         going &= np.isfinite(t)
         land = start[:, 2] - np.where(going, t, 0.0)
         floor = going & (labels[np.where(going, ids, 0)] == FLOOR)
-        z[floor] = land[floor]
-        going &= ~floor
+        landings.append(np.column_stack([xy[floor], land[floor]]))
         start[:, 2] = np.where(going, land - 1e-3, start[:, 2])
-    ok = np.isfinite(z)
+    found = np.concatenate(landings) if landings else np.zeros((0, 3))
+    xy, z = found[:, :2], found[:, 2]
     out = []
     for height in (0.5, 1.2, 1.8):
-        p = np.column_stack([xy[ok], z[ok] + height])
+        p = np.column_stack([xy, z + height])
         # Inside: straight up meets a ceiling face, straight down the floor it stands on.
         up_hits = scene.cast_rays(
             o3d.core.Tensor(np.column_stack([p, np.zeros((len(p), 2)), np.ones(len(p))]).astype(np.float32))
@@ -162,19 +174,132 @@ def _free_positions(scene, vertices: np.ndarray, faces: np.ndarray, labels: np.n
             o3d.core.Tensor(np.column_stack([p, np.zeros((len(p), 2)), -np.ones(len(p))]).astype(np.float32))
         )
         below = np.abs(down["t_hit"].numpy() - height) < 0.02
-        # Not inside a wall: along x and along y the faces met either way lie MIN_SPAN apart or more.
-        spans = []
-        for axis in ((1.0, 0.0), (0.0, 1.0)):
-            ways = [
-                np.column_stack([p, np.tile([sign * axis[0], sign * axis[1], 0.0], (len(p), 1))]) for sign in (1, -1)
-            ]
-            t = [scene.cast_rays(o3d.core.Tensor(w.astype(np.float32)))["t_hit"].numpy() for w in ways]
-            spans.append(t[0] + t[1])
-        open_ = np.minimum(*spans) >= MIN_SPAN
+        # A scanner stands on a body: no face nearer than CLEARANCE in sixteen horizontal directions
+        # (not inside a wall, not in the slot behind a wardrobe).
+        open_ = np.ones(len(p), dtype=bool)
+        for angle in np.arange(16) * np.pi / 8:
+            open_ &= _cast(scene, p, (np.cos(angle), np.sin(angle), 0.0))[0] >= CLEARANCE
         keep = above & below & open_
         keep[keep] = _enclosed(scene, p[keep], roofed=bool(np.any(labels == CEILING)))
         out.append(p[keep])
-    return np.concatenate(out) if out else np.zeros((0, 3))
+    positions = np.concatenate(out) if out else np.zeros((0, 3))
+    if len(positions):
+        # The storey is its lowest floor and the levels up to LEVEL_SPAN above it; higher floors
+        # (the storey above, seen up a stair) are not its free space.
+        ground = positions[:, 2] - _cast(scene, positions, (0.0, 0.0, -1.0))[0]
+        positions = positions[ground <= ground.min() + LEVEL_SPAN]
+    return positions
+
+
+def _spans(scene, points: np.ndarray) -> np.ndarray:
+    """The least free span through each point along x, y and z: the distance between the faces met
+    either way (inside a wall or a slab it is the solid's thickness)."""
+    least = np.full(len(points), np.inf)
+    for axis in np.eye(3):
+        t = _cast(scene, points, axis)[0] + _cast(scene, points, -axis)[0]
+        least = np.minimum(least, t)
+    return least
+
+
+def _floor_below(scene, labels: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Height of the first floor, ceiling or wall face straight down from each point when it is a
+    FLOOR face (furniture is looked through); NaN otherwise."""
+    o3d = _open3d()
+    z = np.full(len(points), np.nan)
+    rays = np.column_stack([points, np.zeros((len(points), 2)), -np.ones(len(points))]).astype(np.float32)
+    going = np.ones(len(points), dtype=bool)
+    for _ in range(12):
+        if not going.any():
+            break
+        hits = scene.cast_rays(o3d.core.Tensor(rays))
+        t, ids = hits["t_hit"].numpy(), hits["primitive_ids"].numpy()
+        going &= np.isfinite(t)
+        label = labels[np.where(going, ids, 0)]
+        land = rays[:, 2] - np.where(going, t, 0.0)
+        structure = going & np.isin(label, (FLOOR, CEILING, WALL))
+        z[structure & (label == FLOOR)] = land[structure & (label == FLOOR)]
+        going &= ~structure
+        rays[:, 2] = np.where(going, land - 1e-3, rays[:, 2])
+    return z
+
+
+def visible_structure(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    labels: np.ndarray,
+    *,
+    spacing: float = 0.05,
+    lattice: float = 0.5,
+    seed: int = 0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The storey's inside structural samples, which of them some free position sees, and the
+    positions (module docstring, steps 1-3).
+
+    Parameters
+    ----------
+    vertices : (V, 3) float
+        The true storey's vertices, metres, z up.
+    faces : (F, 3) int
+    labels : (F,) int
+        Class of each face: 0 floor, 1 ceiling, 2 wall; others are occluders only.
+    spacing : float
+        Sample spacing, metres.
+    lattice : float
+        Spacing of the free positions, metres.
+    seed : int
+        Seeds the random samples.
+
+    Returns
+    -------
+    samples : (n, 3) float
+    visible : (n,) bool
+    positions : (m, 3) float
+    """
+    o3d = _open3d()
+
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    labels = np.asarray(labels).astype(np.int64)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(faces.astype(np.uint32)))
+    # Walls and slabs alone: a probe is inside a solid when these close it in (a wardrobe's top
+    # 0.3 m under the ceiling does not).
+    solids = o3d.t.geometry.RaycastingScene()
+    structural = faces[np.isin(labels, (FLOOR, CEILING, WALL))]
+    solids.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(structural.astype(np.uint32)))
+    rng = np.random.default_rng(seed)
+    samples, normals = _sample_faces(vertices[faces[np.isin(labels, (FLOOR, CEILING, WALL))]], spacing, rng)
+    positions = _free_positions(scene, vertices, faces, labels, lattice)
+    # The storey's own structure: a sample counts when, on one side of its face, the point PROBE off
+    # it lies in free space (not inside a wall or slab), closed in (not a porch seen through the
+    # front door), and over a floor of the storey (not the storey above, seen up a stair; not the
+    # void over a suspended ceiling, whose first face below is the ceiling).
+    roofed = bool(np.any(labels == CEILING))
+    if len(positions):
+        ground = positions[:, 2] - _cast(scene, positions, (0.0, 0.0, -1.0))[0]
+        low, high = ground.min() - LEVEL_SPAN, ground.min() + LEVEL_SPAN
+        sides = np.zeros(len(samples), dtype=bool)
+        for sign in (1.0, -1.0):
+            rest = np.flatnonzero(~sides)
+            probe = samples[rest] + sign * PROBE * normals[rest]
+            floor = _floor_below(scene, labels, probe)
+            ok = (floor >= low) & (floor <= high)
+            ok[ok] = _spans(solids, probe[ok]) >= MIN_SPAN
+            ok[ok] = _enclosed(scene, probe[ok], roofed)
+            sides[rest[ok]] = True
+        samples = samples[sides]
+    visible = np.zeros(len(samples), dtype=bool)
+    for p in positions[rng.permutation(len(positions))]:
+        todo = np.flatnonzero(~visible)
+        if not len(todo):
+            break
+        offset = samples[todo] - p
+        dist = np.linalg.norm(offset, axis=1)
+        rays = np.column_stack([np.repeat(p[None], len(todo), axis=0), offset / np.maximum(dist, 1e-9)[:, None]])
+        t = scene.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))["t_hit"].numpy()
+        # The first surface the line meets is the sample's own (to float precision and 1 cm).
+        visible[todo[t >= dist - 0.01]] = True
+    return samples, visible, positions
 
 
 def count(
@@ -192,57 +317,18 @@ def count(
 
     Parameters
     ----------
-    vertices : (V, 3) float
-        The true storey's vertices, metres, z up.
-    faces : (F, 3) int
-    labels : (F,) int
-        Class of each face: 0 floor, 1 ceiling, 2 wall; others are occluders only.
+    vertices, faces, labels, spacing, lattice, seed
+        As :func:`visible_structure`.
     cloud : (N, 3) float
         The registered measured points, the storey's frame.
-    spacing, radius : float
-        Sample spacing and sensing radius, metres.
-    lattice : float
-        Spacing of the free positions, metres.
-    seed : int
-        Seeds the random samples.
+    radius : float
+        Sensing radius, metres.
     """
     from scipy.spatial import cKDTree
 
-    o3d = _open3d()
-
-    vertices = np.asarray(vertices, dtype=np.float64)
-    faces = np.asarray(faces, dtype=np.int64)
-    labels = np.asarray(labels).astype(np.int64)
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(faces.astype(np.uint32)))
-    rng = np.random.default_rng(seed)
-    samples, normals = _sample_faces(vertices[faces[np.isin(labels, (FLOOR, CEILING, WALL))]], spacing, rng)
-    positions = _free_positions(scene, vertices, faces, labels, lattice)
-    # The storey's own structure: below the ceilings over its free places (the 95th percentile, so
-    # that what a stair opening shows of the storey above does not count), and on a side of its
-    # face that lies inside (enclosed, not a porch seen through the front door).
-    roofed = bool(np.any(labels == CEILING))
-    if len(positions):
-        t_up = _cast(scene, positions, (0.0, 0.0, 1.0))[0]
-        top = float(np.percentile(positions[:, 2] + np.where(np.isfinite(t_up), t_up, 0.0), 95)) + 0.05
-        top = top if roofed else np.inf
-        inside = samples[:, 2] <= top
-        sides = np.zeros(len(samples), dtype=bool)
-        for sign in (1.0, -1.0):
-            rest = np.flatnonzero(inside & ~sides)
-            sides[rest] = _enclosed(scene, samples[rest] + sign * PROBE * normals[rest], roofed)
-        samples = samples[sides]
-    visible = np.zeros(len(samples), dtype=bool)
-    for p in positions[rng.permutation(len(positions))]:
-        todo = np.flatnonzero(~visible)
-        if not len(todo):
-            break
-        offset = samples[todo] - p
-        dist = np.linalg.norm(offset, axis=1)
-        rays = np.column_stack([np.repeat(p[None], len(todo), axis=0), offset / np.maximum(dist, 1e-9)[:, None]])
-        t = scene.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))["t_hit"].numpy()
-        # The first surface the line meets is the sample's own (to float precision and 1 cm).
-        visible[todo[t >= dist - 0.01]] = True
+    samples, visible, positions = visible_structure(
+        vertices, faces, labels, spacing=spacing, lattice=lattice, seed=seed
+    )
     sensed = np.zeros(len(samples), dtype=bool)
     if len(cloud) and visible.any():
         distance, _ = cKDTree(np.asarray(cloud, dtype=float)).query(samples[visible], distance_upper_bound=radius)

@@ -4,6 +4,7 @@ whose point straight in front is blocked is still crossed; an exterior door is r
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from nbs_env.config import make_config
 from nbs_env.env import NBSEnv
@@ -41,12 +42,16 @@ def test_a_door_whose_point_in_front_is_blocked_is_still_crossed():
     assert any(s.true_position[0] > 5.2 for s in env.storey.scans)
 
 
-def test_an_exterior_door_is_recorded_and_not_crossed():
-    # Room A has a 1.0 m door in its south wall onto a terrace: floor outside, no ceiling over it.
+@pytest.mark.parametrize("roofed", [False, True], ids=["terrace", "carport"])
+def test_an_exterior_door_is_recorded_and_not_crossed(roofed):
+    # Room A has a 1.0 m door in its south wall onto a terrace: floor outside and no ceiling over
+    # it; or onto a carport, a roof 7 m deep and 7 m wide on no walls, from which most rising rays
+    # through the door return: the level ones leave under its edge.
     south = ((0, 0), (9, 0), [(2.0, 3.0, 2.05)])
     walls = [south, *[(a, b, []) for a, b in OUTLINE[1:]], PARTITION]
-    terrace = (1.0, -3.5, 4.0, -0.1)
-    scene = boxed_storey(walls, [BUILDING, terrace], [BUILDING], start=(1.5, 2.0), name="exterior")
+    outside = (-1.0, -7.1, 6.0, -0.1) if roofed else (1.0, -3.5, 4.0, -0.1)
+    ceilings = [BUILDING, outside] if roofed else [BUILDING]
+    scene = boxed_storey(walls, [BUILDING, outside], ceilings, start=(1.5, 2.0), name="exterior")
     env = _episode(scene)
     detected = _events(env, "detected")
     outside = [e for e in detected if abs(e["centre"][1]) < 0.4 and 1.8 < e["centre"][0] < 3.2]

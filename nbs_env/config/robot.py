@@ -495,6 +495,12 @@ class DoorConfig(Config):
         the opening to lead indoors (module docstring).
     min_rising_rays : int
         Fewer rising rays through an opening than this decide nothing: the door counts as interior.
+    level_elevation_deg : float
+        The rising rays through an opening below this elevation are its level rays: beyond a door
+        onto a porch, a balcony or a carport under a roof they pass under the roof's edge and return
+        nothing, where beyond an interior door they meet the next room's walls. Fewer than
+        ``covered_share`` of them returning (of at least ``min_rising_rays``) also makes the door
+        exterior (module docstring of :mod:`nbs_env.perception.doors`); 0 turns the test off.
     cross_exterior : bool
         Cross exterior doors as if they led into rooms (off by default: the robot stays inside).
     fill_gap : float
@@ -515,6 +521,7 @@ class DoorConfig(Config):
     pixel: float = 0.05
     covered_share: float = 0.5
     min_rising_rays: int = 20
+    level_elevation_deg: float = 10.0
     cross_exterior: bool = False
     fill_gap: float = 0.2
     max_extension: float = 8.0
@@ -530,6 +537,7 @@ class DoorConfig(Config):
             "behind",
             "pixel",
             "covered_share",
+            "level_elevation_deg",
             "fill_gap",
             "max_extension",
         )
@@ -547,6 +555,10 @@ class DoorConfig(Config):
         _integer(self, "min_behind_points", 0)
         _integer(self, "min_rising_rays", 1)
         _require(0 <= self.covered_share <= 1, f"covered_share must be in [0, 1], got {self.covered_share}")
+        _require(
+            0 <= self.level_elevation_deg < 90,
+            f"level_elevation_deg must be in [0, 90), got {self.level_elevation_deg}",
+        )
         _require(isinstance(self.cross_exterior, bool), f"cross_exterior must be a bool, got {self.cross_exterior!r}")
         _require(
             0 <= self.fill_gap < self.min_width,

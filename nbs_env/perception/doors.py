@@ -35,6 +35,12 @@ it return nothing. Of the rising rays of the room's scans that cross the opening
 scanner's minimum range, those that returned a point beyond the face are counted against those that
 returned nothing (the scan's no-return directions, which the robot knows from its own pattern);
 when fewer than ``covered_share`` of them returned, the door is ``exterior``.
+
+A porch, a balcony, a loggia or a carport has a roof, and its rising rays return from it. What
+tells it from a room is that it is not closed in: of the rising rays through the opening flatter
+than ``level_elevation_deg`` (its level rays), which beyond an interior door meet the next room's
+far wall, most pass under the roof's edge and return nothing. When fewer than ``covered_share`` of
+them returned, the door is ``exterior`` too.
 """
 
 from __future__ import annotations
@@ -72,7 +78,8 @@ class DetectedDoor:
     behind_points : int
         Points seen through it.
     covered : float
-        Share of the rising rays through it that returned a point beyond it (nan: too few rays).
+        Share of the rising rays through it that returned a point beyond it, or of its level rays
+        when that is less (module docstring; nan: too few rays).
     exterior : bool
         It opens onto the outside: ``covered`` below the config's ``covered_share``.
     """
@@ -409,9 +416,11 @@ def _rising_rays(
     min_range: float,
     blockers: Sequence[WallFace] = (),
     measured: cKDTree | None = None,
-) -> tuple[int, int]:
-    """(returned, empty): the rising rays through [u0, u1] x [0, height] that crossed farther than
-    ``min_range`` from their scanner, by whether they returned a point beyond the face.
+    level_sin: float = 0.0,
+) -> tuple[int, int, int, int]:
+    """(returned, empty, level returned, level empty): the rising rays through [u0, u1] x [0, height]
+    that crossed farther than ``min_range`` from their scanner, by whether they returned a point
+    beyond the face; then those of them whose elevation's sine is at most ``level_sin``.
 
     A ray that returned nothing may have met something within the minimum range before it reached
     the opening: it tells of the sky beyond only when its way there crosses none of the room's
@@ -421,7 +430,7 @@ def _rising_rays(
     them within the minimum range (edge_8rooms_3: 392 rays toward a door 2.75 m off skimmed a box
     whose top stood 1 cm above the scanner, 1.1 m out, and made an interior door exterior; a
     scan in a door frame loses its rays to the frame's jambs in the same way)."""
-    returned = empty = 0
+    returned = empty = level_returned = level_empty = 0
     for (points, origin), directions in zip(scans, no_return, strict=True):
         o = face.local(np.asarray(origin, dtype=float).reshape(1, 3))[0]
         if o[2] <= 0:
@@ -431,8 +440,10 @@ def _rising_rays(
         if len(far):
             t = o[2] / (o[2] - far[:, 2])
             u, v = o[0] + t * (far[:, 0] - o[0]), o[1] + t * (far[:, 1] - o[1])
-            reach = t * np.linalg.norm(far - o, axis=1)
-            returned += int(np.count_nonzero((u > u0) & (u < u1) & (v > 0) & (v < height) & (reach >= min_range)))
+            length = np.linalg.norm(far - o, axis=1)
+            crossed = (u > u0) & (u < u1) & (v > 0) & (v < height) & (t * length >= min_range)
+            returned += int(np.count_nonzero(crossed))
+            level_returned += int(np.count_nonzero(crossed & ((far[:, 1] - o[1]) <= level_sin * length)))
         d = np.asarray(directions, dtype=float).reshape(-1, 3)
         if not len(d):
             continue
@@ -450,7 +461,8 @@ def _rising_rays(
         if through.any() and measured is not None and min_range > 0:
             through[np.flatnonzero(through)] = ~_near_measured(origin, d[out][through], min_range, measured)
         empty += int(np.count_nonzero(through))
-    return returned, empty
+        level_empty += int(np.count_nonzero(through & (dl[:, 1] <= level_sin)))
+    return returned, empty, level_returned, level_empty
 
 
 def _near_measured(origin: np.ndarray, directions: np.ndarray, reach: float, measured: cKDTree) -> np.ndarray:
@@ -522,6 +534,7 @@ def detect_doors(
     measured: cKDTree | None = None  # built for the first opening whose rays are counted
     px = cfg.pixel
     gap = int(np.floor(cfg.fill_gap / px + 1e-9))
+    level_sin = float(np.sin(np.radians(cfg.level_elevation_deg))) if cfg.level_elevation_deg > 0 else -1.0
 
     def search(k: int, given: WallFace, others: list[WallFace]) -> list[DetectedDoor]:
         """The openings on the wall of ``given``, reported as on face ``k``."""
@@ -571,9 +584,15 @@ def detect_doors(
             if no_return is not None:
                 if measured is None:
                     measured = cKDTree(_within(index, [o for _, o in scans], min_range + 2 * _CLEARANCE))
-                hits, misses = _rising_rays(face, scans, no_return, u0, u1, height, min_range, others, measured)
+                hits, misses, level_hits, level_misses = _rising_rays(
+                    face, scans, no_return, u0, u1, height, min_range, others, measured, level_sin
+                )
                 if hits + misses >= cfg.min_rising_rays:
                     covered = hits / (hits + misses)
+                if level_hits + level_misses >= cfg.min_rising_rays:
+                    # A roof beyond returns the steep rays; an open side loses the level ones.
+                    level = level_hits / (level_hits + level_misses)
+                    covered = level if np.isnan(covered) else min(covered, level)
             width = width + px  # the run counts whole pixels; the opening's edges fall inside its end pixels
             mid = (u0 + u1) / 2
             xy = np.asarray(face.p0, dtype=float) + mid * face.direction
