@@ -22,7 +22,7 @@ from nbs_env.perception.roi import RoI, RoIConfig, RoIScan, compute_roi
 from nbs_env.perception.structure import SEClassifier, face_image, face_images, label_points
 from nbs_env.sensing.scanner import Scan
 
-__all__ = ["BeliefUpdate", "RoomBelief", "RoomModel"]
+__all__ = ["BeliefUpdate", "MissedVoxels", "RoomBelief", "RoomModel"]
 
 
 @dataclass(frozen=True)
@@ -96,6 +96,29 @@ def frontier_faces(
     return out
 
 
+@dataclass(frozen=True)
+class MissedVoxels:
+    """Occluded-structure voxels scans had in view beyond the dense range and missed
+    (:meth:`RoomBelief.missed_from_afar`).
+
+    Attributes
+    ----------
+    voxels : (k, 3) float
+        Their centres, one entry a voxel.
+    voxel : (r,) int
+        For each miss, its voxel's row of ``voxels``.
+    sensors : (r, 3) float
+        The scanner position of each miss.
+    ranges : (r,) float
+        Its distance to the voxel, metres.
+    """
+
+    voxels: np.ndarray
+    voxel: np.ndarray
+    sensors: np.ndarray
+    ranges: np.ndarray
+
+
 class RoomBelief:
     """The robot's knowledge of the room it is scanning.
 
@@ -125,6 +148,11 @@ class RoomBelief:
         Centres of Occluded-structure voxels that a scan was predicted to see, close enough to be hit,
         and left unconverted (:func:`nbs_env.planning.planner.unobservable_after`); later gains
         leave them out.
+    missed : (k, 3) float
+        Centres of Occluded-structure voxels a scan had in view beyond that range and left
+        unconverted; ``missed_range`` (k,) float: its distance to each, ``missed_from`` (k, 3) float:
+        its scanner position. Later gains from about the same place leave them out
+        (:func:`nbs_env.planning.planner.missed_again`).
     """
 
     def __init__(
@@ -149,6 +177,10 @@ class RoomBelief:
         self.scans: list[RoIScan] = []
         # Occluded-structure voxels a scan was predicted to see and did not: kept out of later gains.
         self.unobservable = np.zeros((0, 3))
+        # Those it had in view beyond the dense range, with the distance: kept out of gains from as far.
+        self.missed = np.zeros((0, 3))
+        self.missed_range = np.zeros(0)
+        self.missed_from = np.zeros((0, 3))
         self.cloud = VoxelMeans(perception_voxel)
         self.grid: VoxelGrid | None = None
         self.roi: RoI | None = None
@@ -277,7 +309,13 @@ class RoomBelief:
             index, roi.polygon.copy(), roi.floor_z, roi.ceiling_z, se_faces, points, structure, roi.has_ceiling
         )
 
-    def keep_unobservable(self, expected: np.ndarray) -> None:
+    def keep_unobservable(
+        self,
+        expected: np.ndarray,
+        far: np.ndarray | None = None,
+        far_range: np.ndarray | None = None,
+        sensor: np.ndarray | None = None,
+    ) -> None:
         """Mark the Occluded-structure voxels a scan was predicted to see and did not.
 
         Parameters
@@ -286,10 +324,34 @@ class RoomBelief:
             Voxel centres the last scan was predicted to convert
             (:func:`nbs_env.planning.planner.unobservable_after`); those still Occluded-structure
             join :attr:`unobservable`, which later gains leave out.
+        far : (m, 3) float, optional
+            Voxel centres it had in view beyond the dense range; those still Occluded-structure are
+            kept with their distance ``far_range`` (m,) float and the scan's ``sensor`` (3,) float
+            as :attr:`missed`, out of later gains from about as far and the same place
+            (:func:`nbs_env.planning.planner.missed_again`).
         """
         if len(expected):
             missed = expected[self.labels_at(expected) == VoxelLabel.OCCLUDED_STRUCTURE]
             self.unobservable = np.concatenate([self.unobservable, missed])
+        if far is not None and len(far) and sensor is not None:
+            still = self.labels_at(far) == VoxelLabel.OCCLUDED_STRUCTURE
+            self.missed = np.concatenate([self.missed, far[still]])
+            self.missed_range = np.concatenate([self.missed_range, np.asarray(far_range, dtype=float)[still]])
+            where = np.broadcast_to(np.asarray(sensor, dtype=float), (int(still.sum()), 3))
+            self.missed_from = np.concatenate([self.missed_from, where])
+
+    def missed_from_afar(self, labels: np.ndarray | None = None) -> MissedVoxels:
+        """The :attr:`missed` voxels still Occluded-structure in ``labels`` (V(t)'s by default)."""
+        grid = self.grid
+        if grid is None or not len(self.missed):
+            return MissedVoxels(np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0))
+        idx = grid.index_of(self.missed)
+        keep = grid.inside(idx)
+        labels = grid.labels if labels is None else labels
+        keep[keep] = labels[tuple(idx[keep].T)] == VoxelLabel.OCCLUDED_STRUCTURE
+        idx = idx[keep]
+        cells, voxel = np.unique(idx, axis=0, return_inverse=True)
+        return MissedVoxels(grid.centres(cells), voxel.reshape(-1), self.missed_from[keep], self.missed_range[keep])
 
     def occluded_structure_centres(self) -> np.ndarray:
         """(n, 3) float: world centres of the OCCLUDED_STRUCTURE voxels."""

@@ -183,13 +183,13 @@ class Robot:
         watched = self.belief.occluded_structure_centres() if count_conversions else None
         roi = self.belief.roi
         grid = self.belief.grid
-        expected, _ = unobservable_after(
+        expected, sensor, far, far_range = unobservable_after(
             planned, index, roi.floor_z, self.config.scanner, self.config.voxel_size, grid.speculative if grid else None
         )
         path = cands.path(index)
         length = float(cands.path_length[index])
         report = self._drive_and_scan(cands.points[index], path, length, int(planned.gains[index]))
-        self.belief.keep_unobservable(expected)
+        self.belief.keep_unobservable(expected, far, far_range, sensor)
         return replace(report, path=path, conversions=self._converted(watched))
 
     def _drive_and_scan(self, point: np.ndarray, path: np.ndarray, length: float, predicted_gain: int) -> StepReport:

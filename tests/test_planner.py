@@ -151,3 +151,22 @@ def test_within_roi_tests_the_free_cells_as_the_whole_grid_test_did():
     got = within_roi(tmap, polygon).free
     assert np.array_equal(got, tmap.free & (inside | tmap.visited))
     assert got.any() and (tmap.free & ~got).any() and (got & ~inside).any()  # visited cells kept outside
+
+
+def test_a_voxel_missed_from_afar_is_out_of_the_gains_of_views_as_far_from_about_there():
+    """A scan that had a voxel in view 6 m off and left it Occluded-structure: a view from within a
+    metre of that scan and no nearer to the voxel will miss it again and gains nothing for it; a view
+    nearer to it, or from elsewhere, still counts it."""
+    from nbs_env.belief import MissedVoxels
+    from nbs_env.planning.planner import missed_again
+
+    class SeesAll:
+        def sees(self, sensors, targets, scanner):
+            return np.ones((len(sensors), len(targets)), dtype=bool)
+
+    voxel = np.array([[6.0, 0.0, 2.5]])
+    missed = MissedVoxels(voxel, np.array([0]), np.array([[0.0, 0.0, 1.5]]), np.array([np.hypot(6.0, 1.0)]))
+    sensors = np.array([[0.0, 0.0, 1.5], [-0.5, 0.5, 1.5], [0.9, 0.0, 1.5], [3.0, 2.0, 1.5], [0.0, -2.0, 1.5]])
+    again = missed_again(SeesAll(), sensors, make_config().robot.scanner, missed, 0.05)
+    # The same place and one farther back within a metre: out; 0.9 m nearer, elsewhere: in.
+    assert again.tolist() == [1, 1, 0, 0, 0]
