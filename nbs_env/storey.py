@@ -242,7 +242,9 @@ class Storey:
         its RoI (``roi_m2``) and the ``reason`` it ended: ``"gain"``, ``"declared"``, ``"cap"``, ``"no
         NVP"`` or ``"earlier room"`` (no NVP, and at least :data:`EARLIER_ROOM_SHARE` of the RoI its
         scans outline lies in rooms scanned before: the door was found inside a room whose RoI had
-        already reached beyond it).
+        already reached beyond it). A ``"no NVP"`` end also has ``standing_room``: the places of the
+        RoI the robot reaches keeping only its radius clear (0: its measured floor holds no footprint
+        of the robot, as in a stack room whose aisles are narrower).
     wall_searches : list of dict
         One per search scan (``config.rooms.wall_search.scans`` > 0), in order: the index of
         its ``scan``, the robot's ``room`` number and the ``kind`` of stop
@@ -427,9 +429,10 @@ class Storey:
                 reason = "earlier room"
             roi = robot.belief.roi
             area = 0.0 if roi is None else float(Polygon(roi.polygon).area)
-            self.room_ends.append(
-                {"room": self.rooms.current, "scans": robot.scans_in_room, "reason": reason, "roi_m2": round(area, 2)}
-            )
+            end = {"room": self.rooms.current, "scans": robot.scans_in_room, "reason": reason, "roi_m2": round(area, 2)}
+            if reason == "no NVP":
+                end["standing_room"] = self.rooms.standing_room(robot)
+            self.room_ends.append(end)
             before = len(self.rooms.doors)
             self.rooms.finish_room(robot)
             for door in self.rooms.doors[before:]:

@@ -260,6 +260,12 @@ def test_methods_table_tells_the_rule_from_the_cap_and_from_no_nvp_left():
     # 5 rooms: 2 by the rule (40%), 1 by the cap, 2 with no NVP left, of which 1 after one scan
     # (room 2; room 4 had two).
     assert row.split(" | ")[2:7] == ["5", "40.0", "1", "2", "1"], row
+    # A room whose measured floor holds no footprint of the robot (aisles narrower than it) is no
+    # room whose candidates vanished: not counted after one scan.
+    narrow = run(["declared", "cap", "no NVP", "gain", "no NVP"])
+    narrow["metrics"]["room_ends"][2]["standing_room"] = 0
+    row = next(line for line in _methods_markdown([narrow], {}).splitlines() if line.startswith("| p |"))
+    assert row.split(" | ")[2:7] == ["5", "40.0", "1", "2", "0"], row
 
 
 @pytest.mark.parametrize("name", ["ppo:../../outside", "ppo:/abs/run", "ppo:a/b", "..", "scenes/x.obj"])

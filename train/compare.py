@@ -321,8 +321,11 @@ def _run_quantities(m: dict[str, Any], oracle: dict[str, Any]) -> dict[str, floa
         "processed_points": float(m["processed_points"]),
         "path_length_m": float(m["path_length_m"]),
         "cap_ended": float(sum(1 for e in ends if e["reason"] == "cap")),
-        # A room its first scan ended for want of a place to scan from: the candidates vanished.
-        "no_nvp_first": float(sum(1 for e in ends if e["reason"] == "no NVP" and e["scans"] <= 1)),
+        # A room its first scan ended for want of a place to scan from while its measured floor held
+        # the robot (the candidates vanished); aisles too narrow for it are no such place.
+        "no_nvp_first": float(
+            sum(1 for e in ends if e["reason"] == "no NVP" and e["scans"] <= 1 and e.get("standing_room", 1) > 0)
+        ),
         # A "room" beyond a door found inside a room whose RoI already held it: scanned there.
         "earlier_room": float(sum(1 for e in ends if e["reason"] == "earlier room")),
         "abandoned": float(sum(1 for e in events if e["event"] == "abandoned")),

@@ -35,6 +35,7 @@ from nbs_env.planning.planner import (
     blocked_directions,
     sensor_positions,
     traversable_floor,
+    within_roi,
     without_unobservable,
 )
 from nbs_env.planning.visibility import VisibilityModel
@@ -392,6 +393,16 @@ class Rooms:
         safety distance (the NVPs' margin can close a gap between furniture the robot fits through)."""
         tmap, route = self.door_routes(robot)
         return candidates(tmap, robot.pose[:2, 3], replace(self.config.navigation, safety_distance=0.0), route)
+
+    def standing_room(self, robot: RobotView) -> int:
+        """How many places of the current room's RoI the robot reaches keeping only its radius clear
+        (none: the room's measured floor holds no footprint of the robot; its aisles are narrower)."""
+        roi = robot.belief.roi
+        if roi is None or robot.belief.grid is None:
+            return 0
+        tmap, route = self.door_routes(robot)
+        narrow = replace(self.config.navigation, safety_distance=0.0)
+        return candidates(within_roi(tmap, roi.polygon), robot.pose[:2, 3], narrow, route).count
 
     # ------------------------------------------------------------------ searches
     def wall_search(self, robot: RobotView) -> SearchStop | None:
