@@ -310,6 +310,12 @@ RULE_ENDS = ("gain", "declared")
 COVERABLE_ROOM_PCT = 10.0
 
 
+def _vanished_at_first_scan(end: dict) -> bool:
+    """A room its first scan ended for want of a place to scan from while its measured floor held
+    the robot (the candidates vanished); a room whose aisles are narrower than the robot is not."""
+    return end["reason"] == "no NVP" and end["scans"] <= 1 and end.get("standing_room", 1) > 0
+
+
 def _run_quantities(m: dict[str, Any], oracle: dict[str, Any]) -> dict[str, float]:
     """One run's storey totals, and its standing against the scene's oracle when there is one."""
     events = m.get("door_events", [])
@@ -321,11 +327,7 @@ def _run_quantities(m: dict[str, Any], oracle: dict[str, Any]) -> dict[str, floa
         "processed_points": float(m["processed_points"]),
         "path_length_m": float(m["path_length_m"]),
         "cap_ended": float(sum(1 for e in ends if e["reason"] == "cap")),
-        # A room its first scan ended for want of a place to scan from while its measured floor held
-        # the robot (the candidates vanished); aisles too narrow for it are no such place.
-        "no_nvp_first": float(
-            sum(1 for e in ends if e["reason"] == "no NVP" and e["scans"] <= 1 and e.get("standing_room", 1) > 0)
-        ),
+        "no_nvp_first": float(sum(1 for e in ends if _vanished_at_first_scan(e))),
         # A "room" beyond a door found inside a room whose RoI already held it: scanned there.
         "earlier_room": float(sum(1 for e in ends if e["reason"] == "earlier room")),
         "abandoned": float(sum(1 for e in events if e["event"] == "abandoned")),
@@ -541,7 +543,7 @@ def _methods_markdown(results: Sequence[dict[str, Any]], oracles: dict[str, dict
         qs = [_run_quantities(r["metrics"], oracles.get(r["spec"]["scene"], {})) for r in runs]
         rule = sum(1 for e in ends if e["reason"] in RULE_ENDS)
         cap = sum(1 for e in ends if e["reason"] == "cap")
-        first = sum(1 for e in ends if e["reason"] == "no NVP" and e["scans"] <= 1)
+        first = sum(1 for e in ends if _vanished_at_first_scan(e))
 
         def mean(key: str, qs=qs) -> str:
             v = [q[key] for q in qs if key in q]
