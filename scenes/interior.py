@@ -34,8 +34,8 @@ free floor of every level of the storey at :data:`VIEW_HEIGHTS`, under a ceiling
 with nothing between, closed in as above)
 reaches the point before any face, furniture included. A point is tried from the positions within
 :data:`VIEW_RING` lattice cells of its own, then from every position of a lattice three times coarser
-(the full lattice costs minutes on a large storey; on ``five_rooms`` the two leave out 6.2% of
-the interior structure where the full lattice leaves out 5.3%: surface seen only along a grazing
+(the full lattice costs minutes on a large storey; on ``five_rooms`` the two leave out 7.3% of
+the interior structure where the full lattice leaves out 6.9%: surface seen only along a grazing
 line from a few far places). The floor under a low cabinet, the wall
 behind a wardrobe standing against it, and a wall's face inside a closed cupboard are seen from no
 such place and do not count: no robot, and no plan of scans, could sense them.
