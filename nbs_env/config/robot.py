@@ -341,6 +341,12 @@ class NavigationConfig(Config):
     min_distance : float
         Candidates closer than this to the robot (Euclidean, metres) are dropped: scanning again
         from where the robot stands gains nothing.
+    snap : bool
+        Where a lattice point is not itself a candidate (too near an obstacle) but its lattice cell
+        (the ``lattice``-wide square around it) holds reachable floor with the clearance, that
+        floor's most clear cell stands in for it: a passage narrower than the lattice spacing but
+        wide enough for the robot keeps candidates. Off, only lattice points are candidates (the
+        paper's sampling).
     """
 
     robot_radius: float = 0.25
@@ -350,6 +356,7 @@ class NavigationConfig(Config):
     lattice: float = 0.5
     max_candidates: int = 64
     min_distance: float = 0.5
+    snap: bool = True
 
     def __post_init__(self) -> None:
         _finite(
@@ -374,6 +381,7 @@ class NavigationConfig(Config):
         )
         _require(self.max_candidates >= 1, f"max_candidates must be >= 1, got {self.max_candidates}")
         _require(self.min_distance >= 0, f"min_distance must be >= 0, got {self.min_distance}")
+        _require(isinstance(self.snap, bool), f"snap must be a bool, got {self.snap!r}")
 
     @property
     def required_clearance(self) -> float:
