@@ -128,9 +128,41 @@ def test_lattice_point_checked_exactly_not_by_its_cell():
     labels[1, :, :] = VoxelLabel.STRUCTURE
     tmap = traversability(labels, np.zeros(3), VS, VS, CFG)
     assert tmap.free[10, 40]
-    c = candidates(tmap, (2.3, 1.8), CFG)
+    lattice_only = NavigationConfig(snap=False)
+    c = candidates(tmap, (2.3, 1.8), lattice_only)
     assert c.count > 0 and real(c)[:, 0].min() == 1.0
     assert brute_clearance(labels, np.zeros(3), VS, VS, real(c)).min() >= NEED - 1e-9
+    # Snapped, the lattice cell round x = 0.5 is represented by its nearest clear floor: the cell
+    # centre x = 0.525.
+    snapped = candidates(tmap, (2.3, 1.8), CFG).points
+    assert snapped[:, 0].min() == pytest.approx(0.525, abs=1e-6)
+    assert brute_clearance(labels, np.zeros(3), VS, VS, snapped).min() >= NEED - 1e-9
+
+
+def test_a_passage_narrower_than_the_lattice_keeps_candidates():
+    # Two rooms joined by a passage whose walls' voxel centres are 0.95 m apart (x = 0.475, 1.425): its
+    # clear floor, x 0.925..0.975, lies between the lattice columns x = 0.5 and 1.0, neither clear.
+    labels = box_room(122, 162, nz=40)  # 6 x 8 m
+    labels[:, 60:100, 1:-1] = VoxelLabel.STRUCTURE  # a solid block y 3..5 ...
+    labels[10:28, 60:100, 1:-1] = VoxelLabel.EMPTY  # ... cut by the passage, x 0.5..1.4
+    tmap = traversability(labels, np.zeros(3), VS, VS, CFG)
+    start = (3.0, 1.5)
+    lattice = real(candidates(tmap, start, NavigationConfig(snap=False, max_candidates=500)))
+    snapped_c = candidates(tmap, start, NavigationConfig(max_candidates=500))
+    snapped = snapped_c.points
+    def in_passage(p):
+        return p[(p[:, 1] > 3.0) & (p[:, 1] < 5.0)]
+
+    assert lattice[:, 1].max() > 5.0 and not len(in_passage(lattice))  # the robot passes, never stops in it
+    # Snapped, every lattice cell of the passage has its stop: one scan can look along it.
+    assert len(in_passage(snapped)) == 4 and np.allclose(in_passage(snapped)[:, 0], 0.975)
+    assert brute_clearance(labels, np.zeros(3), VS, VS, snapped).min() >= NEED - 1e-9
+    # One candidate per lattice cell, each inside its cell, and the lattice points kept as they were.
+    index = snapped_c.lattice_index[snapped_c.mask]
+    assert len({tuple(i) for i in index.tolist()}) == len(index)
+    assert np.abs(snapped - index * CFG.lattice).max() <= CFG.lattice / 2 + 1e-6
+    on_lattice = {tuple(np.round(p, 6)) for p in lattice}
+    assert on_lattice <= {tuple(np.round(p, 6)) for p in snapped}
 
 
 def test_clutter_box_keeps_candidates_away():

@@ -20,14 +20,15 @@ __all__ = ["PRESETS", "config_paths", "make_config"]
 
 #: Named configurations, as dotted overrides of ``EnvConfig()``: ``"default"`` is the best robot
 #: the project knows (the paper's method with the searches for doors no scan faced, three scans a
-#: room); ``"paper"`` the paper's literal robot (a room ends by its gain alone: no wall or door
-#: search), which the paper's §5 comparison uses; ``"fast"`` the RL preset (the default robot with a
+#: room, and NVPs in passages narrower than the lattice); ``"paper"`` the paper's literal robot (a
+#: room ends by its gain alone: no wall or door search; NVPs on the lattice only), which the
+#: paper's §5 comparison uses; ``"fast"`` the RL preset (the default robot with a
 #: 1° scanner, 10 cm voxels, perfect localisation, 1-3 room storeys, 40 scans). A preset changes the
 #: robot, never the evaluation: coverage is counted at the same sample spacing and radius whatever
 #: the preset, so that one cloud gives one figure.
 PRESETS: dict[str, dict[str, Any]] = {
     "default": {},
-    "paper": {"rooms.wall_search.scans": 0},
+    "paper": {"rooms.wall_search.scans": 0, "robot.navigation.snap": False},
     "fast": {
         "robot.scanner.angular_step": 1.0,
         "robot.odometry": {"sigma_xy_per_m": 0.0, "sigma_yaw_deg_per_m": 0.0, "sigma_tilt_deg": 0.0},

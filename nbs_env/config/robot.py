@@ -343,8 +343,8 @@ class NavigationConfig(Config):
         from where the robot stands gains nothing.
     snap : bool
         Where a lattice point is not itself a candidate (too near an obstacle) but its lattice cell
-        (the ``lattice``-wide square around it) holds reachable floor with the clearance, that
-        floor's most clear cell stands in for it: a passage narrower than the lattice spacing but
+        (the ``lattice``-wide square around it) holds reachable floor with the clearance, the cell
+        of that floor nearest the point stands in for it: a passage narrower than the lattice spacing but
         wide enough for the robot keeps candidates. Off, only lattice points are candidates (the
         paper's sampling).
     """

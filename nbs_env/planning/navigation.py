@@ -703,11 +703,13 @@ def candidates(
         keep = np.zeros(len(points), dtype=bool)
     else:
         keep = np.isfinite(geodesic_result.distances[cells[:, 0], cells[:, 1]])
-        keep &= np.hypot(*(points - start).T) >= config.min_distance - _DIST_EPS
         keep[keep] &= tmap.clearance_at(points[keep]) >= tmap.required_clearance - _DIST_EPS
+    # A lattice point too near the robot is no candidate, and no other point of its cell stands in.
+    clear_index = index[keep]
+    keep &= np.hypot(*(points - start).T) >= config.min_distance - _DIST_EPS
     index, points, cells = index[keep], points[keep], cells[keep]
     if config.snap and geodesic_result.source is not None:
-        index, points, cells = _with_snapped(tmap, geodesic_result, start, config, index, points, cells)
+        index, points, cells = _with_snapped(tmap, geodesic_result, start, config, clear_index, index, points, cells)
     total = len(points)
     if total > K:
         pick = (np.arange(K) * total) // K
@@ -750,13 +752,15 @@ def _with_snapped(
     geodesic_result: Geodesic,
     start: np.ndarray,
     config: NavigationConfig,
+    clear_index: np.ndarray,
     index: np.ndarray,
     points: np.ndarray,
     cells: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The lattice candidates plus, for each lattice cell (the square of side ``lattice`` around a
-    lattice point) whose point is not a candidate, its reachable cell of most clearance that has
-    the required clearance (ties: nearest the point), all in (a, b) order."""
+    lattice point) whose point is not reachable with the clearance (``clear_index`` lists those that
+    are), its reachable cell nearest the point that has the required clearance (ties: the clearer),
+    at least ``min_distance`` from the robot; all in (a, b) order."""
     step = config.lattice
     reach = np.isfinite(geodesic_result.distances)
     free_cells = np.argwhere(reach & (tmap.clearance >= tmap.required_clearance - _DIST_EPS))
@@ -766,14 +770,14 @@ def _with_snapped(
     far = np.hypot(*(centres - start).T) >= config.min_distance - _DIST_EPS
     free_cells, centres = free_cells[far], centres[far]
     square = np.floor(centres / step + 0.5).astype(np.int64)
-    taken = {(int(a), int(b)) for a, b in index}
+    taken = {(int(a), int(b)) for a, b in clear_index}
     open_square = np.array([(int(a), int(b)) not in taken for a, b in square], dtype=bool)
     free_cells, centres, square = free_cells[open_square], centres[open_square], square[open_square]
     if not len(free_cells):
         return index, points, cells
     clearance = tmap.clearance[free_cells[:, 0], free_cells[:, 1]]
     off = np.hypot(*(centres - square * step).T)
-    order = np.lexsort((off, -clearance, square[:, 1], square[:, 0]))
+    order = np.lexsort((-clearance, off, square[:, 1], square[:, 0]))
     square, centres, free_cells = square[order], centres[order], free_cells[order]
     first = np.ones(len(square), dtype=bool)
     first[1:] = np.any(square[1:] != square[:-1], axis=1)
