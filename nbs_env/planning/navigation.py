@@ -143,6 +143,11 @@ class TraversabilityMap:
         The robot's radius, metres (how far a start position may be snapped to a traversable cell).
     required_clearance : float
         robot_radius + safety_distance, metres.
+    outline_clearance : (nx, ny) float64 or None
+        Metres from the cell centre to the nearest cell centre outside the room's outline, where
+        the map is limited to one (:func:`~nbs_env.planning.planner.within_roi`); None otherwise.
+        A door's opening holds no obstacle but is the outline's edge: snapped candidates
+        (``NavigationConfig.snap``) keep the clearance from it too.
     """
 
     free: np.ndarray
@@ -154,6 +159,7 @@ class TraversabilityMap:
     voxel_size: float
     robot_radius: float
     required_clearance: float
+    outline_clearance: np.ndarray | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -759,11 +765,14 @@ def _with_snapped(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The lattice candidates plus, for each lattice cell (the square of side ``lattice`` around a
     lattice point) whose point is not reachable with the clearance (``clear_index`` lists those that
-    are), its reachable cell nearest the point that has the required clearance (ties: the clearer),
-    at least ``min_distance`` from the robot; all in (a, b) order."""
+    are), its reachable cell nearest the point that has the required clearance from obstacles and
+    from the room's outline (ties: the clearer), at least ``min_distance`` from the robot; all in
+    (a, b) order."""
     step = config.lattice
-    reach = np.isfinite(geodesic_result.distances)
-    free_cells = np.argwhere(reach & (tmap.clearance >= tmap.required_clearance - _DIST_EPS))
+    clear = np.isfinite(geodesic_result.distances) & (tmap.clearance >= tmap.required_clearance - _DIST_EPS)
+    if tmap.outline_clearance is not None:
+        clear &= tmap.outline_clearance >= tmap.required_clearance - _DIST_EPS
+    free_cells = np.argwhere(clear)
     if not len(free_cells):
         return index, points, cells
     centres = tmap.centre_of(free_cells)

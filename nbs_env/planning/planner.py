@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import shapely
+from scipy import ndimage
 from scipy.spatial.distance import cdist
 from shapely.geometry import Polygon
 
@@ -294,12 +295,15 @@ def within_roi(tmap: TraversabilityMap, polygon: np.ndarray) -> TraversabilityMa
     through a door, the box holds floor of other rooms that the scans saw, and an NVP there would
     scan the wrong room (measured on corpus:open_plan: a bathroom's first NVP lay in the living room
     it was entered from, and the RoI followed the robot there)."""
-    # Only free cells that the robot did not stand on can change: the polygon test is theirs alone.
-    test = tmap.free & ~tmap.visited
-    centres = tmap.centre_of(np.argwhere(test))
-    free = tmap.free.copy()
-    free[test] = shapely.contains_xy(Polygon(polygon), centres[:, 0], centres[:, 1])
-    return replace(tmap, free=free)
+    # Every cell is tested: free cells the robot did not stand on are limited to the polygon, and
+    # the outline's distance keeps snapped candidates out of door openings.
+    centres = tmap.centre_of(np.argwhere(np.ones(tmap.shape, dtype=bool)))
+    inside = shapely.contains_xy(Polygon(polygon), centres[:, 0], centres[:, 1]).reshape(tmap.shape)
+    free = tmap.free & (inside | tmap.visited)
+    outline = np.full(tmap.shape, np.inf)
+    if not inside.all():
+        outline = ndimage.distance_transform_edt(inside) * tmap.voxel_size
+    return replace(tmap, free=free, outline_clearance=outline)
 
 
 def blocked_directions(belief, stops) -> list[np.ndarray] | None:

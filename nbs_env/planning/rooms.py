@@ -392,7 +392,9 @@ class Rooms:
         """Places the robot reaches keeping only its radius clear: the door routes' map, with no
         safety distance (the NVPs' margin can close a gap between furniture the robot fits through)."""
         tmap, route = self.door_routes(robot)
-        return candidates(tmap, robot.pose[:2, 3], replace(self.config.navigation, safety_distance=0.0), route)
+        # On the lattice alone: this map has no outline, and a stand-in could stand in a doorway.
+        lattice = replace(self.config.navigation, safety_distance=0.0, snap=False)
+        return candidates(tmap, robot.pose[:2, 3], lattice, route)
 
     def standing_room(self, robot: RobotView) -> int:
         """How many places of the current room's RoI the robot reaches keeping only its radius clear
@@ -401,7 +403,7 @@ class Rooms:
         if roi is None or robot.belief.grid is None:
             return 0
         tmap, route = self.door_routes(robot)
-        narrow = replace(self.config.navigation, safety_distance=0.0)
+        narrow = replace(self.config.navigation, safety_distance=0.0, snap=False)
         return candidates(within_roi(tmap, roi.polygon), robot.pose[:2, 3], narrow, route).count
 
     # ------------------------------------------------------------------ searches
