@@ -150,6 +150,7 @@ def test_a_passage_narrower_than_the_lattice_keeps_candidates():
     lattice = real(candidates(tmap, start, NavigationConfig(snap=False, max_candidates=500)))
     snapped_c = candidates(tmap, start, NavigationConfig(max_candidates=500))
     snapped = snapped_c.points
+
     def in_passage(p):
         return p[(p[:, 1] > 3.0) & (p[:, 1] < 5.0)]
 
