@@ -779,8 +779,11 @@ def _with_snapped(
     far = np.hypot(*(centres - start).T) >= config.min_distance - _DIST_EPS
     free_cells, centres = free_cells[far], centres[far]
     square = np.floor(centres / step + 0.5).astype(np.int64)
-    taken = {(int(a), int(b)) for a, b in clear_index}
-    open_square = np.array([(int(a), int(b)) not in taken for a, b in square], dtype=bool)
+    lo = square.min(axis=0)
+    taken = np.zeros(tuple(square.max(axis=0) - lo + 1), dtype=bool)
+    inside = np.all((clear_index >= lo) & (clear_index - lo < taken.shape), axis=1)
+    taken[tuple((clear_index[inside] - lo).T)] = True
+    open_square = ~taken[tuple((square - lo).T)]
     free_cells, centres, square = free_cells[open_square], centres[open_square], square[open_square]
     if not len(free_cells):
         return index, points, cells

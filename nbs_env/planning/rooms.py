@@ -397,14 +397,22 @@ class Rooms:
         return candidates(tmap, robot.pose[:2, 3], lattice, route)
 
     def standing_room(self, robot: RobotView) -> int:
-        """How many places of the current room's RoI the robot reaches keeping only its radius clear
-        (none: the room's measured floor holds no footprint of the robot; its aisles are narrower)."""
-        roi = robot.belief.roi
-        if roi is None or robot.belief.grid is None:
+        """How many places of the current room's RoI the robot reaches over measured floor keeping
+        only its radius clear (none: the room's measured floor holds no footprint of the robot; its
+        aisles are narrower).
+
+        Measured: the blind zone under and around the stops is not taken as free here, as it is
+        for driving. In a stack room entered from its door frame, the shelf in front of the robot
+        lies within the minimum range; the blind zone would hold places the robot cannot reach."""
+        belief = robot.belief
+        if belief.roi is None or belief.grid is None:
             return 0
-        tmap, route = self.door_routes(robot)
         narrow = replace(self.config.navigation, safety_distance=0.0, snap=False)
-        return candidates(within_roi(tmap, roi.polygon), robot.pose[:2, 3], narrow, route).count
+        tmap = traversable_floor(
+            belief.grid, belief.roi.floor_z, robot.stops, robot.visited, self.config.scanner, narrow,
+            labels=belief.grid.labels,
+        )  # fmt: skip
+        return candidates(within_roi(tmap, belief.roi.polygon), robot.pose[:2, 3], narrow).count
 
     # ------------------------------------------------------------------ searches
     def wall_search(self, robot: RobotView) -> SearchStop | None:
