@@ -166,6 +166,14 @@ def test_a_passage_narrower_than_the_lattice_keeps_candidates():
     assert on_lattice <= {tuple(np.round(p, 6)) for p in snapped}
 
 
+def test_no_stand_in_where_all_clear_floor_is_near_the_robot():
+    # A 1.4 x 1.4 m closet: its clear floor lies within min_distance of the robot in its middle.
+    labels = box_room(30, 30)
+    tmap = traversability(labels, np.zeros(3), VS, VS, CFG)
+    c = candidates(tmap, (0.75, 0.75), CFG)
+    assert c.count == 0 and not c.mask.any()
+
+
 def test_clutter_box_keeps_candidates_away():
     labels = box_room(122, 122)  # 6 x 6 m
     # A table-high clutter box, centres x 2.075..3.075, y 2.075..3.075, z up to 0.8 m.

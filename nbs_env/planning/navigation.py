@@ -778,6 +778,8 @@ def _with_snapped(
     centres = tmap.centre_of(free_cells)
     far = np.hypot(*(centres - start).T) >= config.min_distance - _DIST_EPS
     free_cells, centres = free_cells[far], centres[far]
+    if not len(free_cells):
+        return index, points, cells
     square = np.floor(centres / step + 0.5).astype(np.int64)
     lo = square.min(axis=0)
     taken = np.zeros(tuple(square.max(axis=0) - lo + 1), dtype=bool)
