@@ -132,11 +132,10 @@ def test_lattice_point_checked_exactly_not_by_its_cell():
     c = candidates(tmap, (2.3, 1.8), lattice_only)
     assert c.count > 0 and real(c)[:, 0].min() == 1.0
     assert brute_clearance(labels, np.zeros(3), VS, VS, real(c)).min() >= NEED - 1e-9
-    # Snapped, the lattice cell round x = 0.5 is represented by its nearest clear floor: the cell
-    # centre x = 0.525.
-    snapped = candidates(tmap, (2.3, 1.8), CFG).points
-    assert snapped[:, 0].min() == pytest.approx(0.525, abs=1e-6)
-    assert brute_clearance(labels, np.zeros(3), VS, VS, snapped).min() >= NEED - 1e-9
+    # Snapped, the same: the lattice point next in, x = 1.0, is a candidate, so the wall's lattice cell
+    # is no hole to fill.
+    snapped = candidates(tmap, (2.3, 1.8), CFG)
+    np.testing.assert_array_equal(snapped.lattice_index, c.lattice_index)
 
 
 def test_a_passage_narrower_than_the_lattice_keeps_candidates():
@@ -155,8 +154,9 @@ def test_a_passage_narrower_than_the_lattice_keeps_candidates():
         return p[(p[:, 1] > 3.0) & (p[:, 1] < 5.0)]
 
     assert lattice[:, 1].max() > 5.0 and not len(in_passage(lattice))  # the robot passes, never stops in it
-    # Snapped, every lattice cell of the passage has its stop: one scan can look along it.
-    assert len(in_passage(snapped)) == 4 and np.allclose(in_passage(snapped)[:, 0], 0.975)
+    # Snapped, every lattice cell of the passage with no clear lattice point beside it (y = 3.5, 4.0,
+    # 4.5; y = 3.0 has y = 2.5 beside it) has its stop: one scan can look along it.
+    assert len(in_passage(snapped)) == 3 and np.allclose(in_passage(snapped)[:, 0], 0.975)
     assert brute_clearance(labels, np.zeros(3), VS, VS, snapped).min() >= NEED - 1e-9
     # One candidate per lattice cell, each inside its cell, and the lattice points kept as they were.
     index = snapped_c.lattice_index[snapped_c.mask]

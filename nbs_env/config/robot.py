@@ -342,11 +342,12 @@ class NavigationConfig(Config):
         Candidates closer than this to the robot (Euclidean, metres) are dropped: scanning again
         from where the robot stands gains nothing.
     snap : bool
-        Where a lattice point is not itself a candidate (too near an obstacle) but its lattice cell
-        (the ``lattice``-wide square around it) holds reachable floor with the clearance, the cell
-        of that floor nearest the point stands in for it: a passage narrower than the lattice spacing but
-        wide enough for the robot keeps candidates. Off, only lattice points are candidates (the
-        paper's sampling).
+        Fill the lattice's holes: where neither a lattice point nor any of its eight neighbours is a
+        candidate (too near an obstacle) but its lattice cell (the ``lattice``-wide square around
+        it) holds reachable floor with the clearance, the cell of that floor nearest the point, kept
+        the clearance from the room's outline too, stands in for it. An aisle narrower than the
+        lattice spacing but wide enough for the robot keeps candidates. Off, only lattice points are
+        candidates (the paper's sampling).
     """
 
     robot_radius: float = 0.25

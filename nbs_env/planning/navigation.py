@@ -764,10 +764,13 @@ def _with_snapped(
     cells: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The lattice candidates plus, for each lattice cell (the square of side ``lattice`` around a
-    lattice point) whose point is not reachable with the clearance (``clear_index`` lists those that
-    are), its reachable cell nearest the point that has the required clearance from obstacles and
-    from the room's outline (ties: the clearer), at least ``min_distance`` from the robot; all in
-    (a, b) order."""
+    lattice point) where neither its point nor any of its eight neighbours is reachable with the
+    clearance (``clear_index`` lists those that are), its reachable cell nearest the point that has
+    the required clearance from obstacles and from the room's outline (ties: the clearer), at least
+    ``min_distance`` from the robot; all in (a, b) order.
+
+    Only the lattice's holes are filled: beside a wall of an open room the next lattice point in
+    is a candidate, and a stand-in there would add a place the lattice already nearly has."""
     step = config.lattice
     clear = np.isfinite(geodesic_result.distances) & (tmap.clearance >= tmap.required_clearance - _DIST_EPS)
     if tmap.outline_clearance is not None:
@@ -781,11 +784,12 @@ def _with_snapped(
     if not len(free_cells):
         return index, points, cells
     square = np.floor(centres / step + 0.5).astype(np.int64)
-    lo = square.min(axis=0)
-    taken = np.zeros(tuple(square.max(axis=0) - lo + 1), dtype=bool)
+    lo = square.min(axis=0) - 1  # one lattice cell of margin: the neighbours of the outermost
+    taken = np.zeros(tuple(square.max(axis=0) - lo + 2), dtype=bool)
     inside = np.all((clear_index >= lo) & (clear_index - lo < taken.shape), axis=1)
     taken[tuple((clear_index[inside] - lo).T)] = True
-    open_square = ~taken[tuple((square - lo).T)]
+    near_taken = ndimage.binary_dilation(taken, structure=np.ones((3, 3), dtype=bool))
+    open_square = ~near_taken[tuple((square - lo).T)]
     free_cells, centres, square = free_cells[open_square], centres[open_square], square[open_square]
     if not len(free_cells):
         return index, points, cells
