@@ -143,11 +143,11 @@ class TraversabilityMap:
         The robot's radius, metres (how far a start position may be snapped to a traversable cell).
     required_clearance : float
         robot_radius + safety_distance, metres.
-    outline_clearance : (nx, ny) float64 or None
-        Metres from the cell centre to the nearest cell centre outside the room's outline, where
-        the map is limited to one (:func:`~nbs_env.planning.planner.within_roi`); None otherwise.
-        A door's opening holds no obstacle but is the outline's edge: snapped candidates
-        (``NavigationConfig.snap``) keep the clearance from it too.
+    outline : (nx, ny) bool or None
+        Cells whose centre lies inside the room's outline, where the map is limited to one
+        (:func:`~nbs_env.planning.planner.within_roi`); None otherwise. A door's opening holds no
+        obstacle but is the outline's edge: snapped candidates (``NavigationConfig.snap``) keep the
+        clearance from it too.
     """
 
     free: np.ndarray
@@ -159,7 +159,7 @@ class TraversabilityMap:
     voxel_size: float
     robot_radius: float
     required_clearance: float
-    outline_clearance: np.ndarray | None = None
+    outline: np.ndarray | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -773,8 +773,9 @@ def _with_snapped(
     is a candidate, and a stand-in there would add a place the lattice already nearly has."""
     step = config.lattice
     clear = np.isfinite(geodesic_result.distances) & (tmap.clearance >= tmap.required_clearance - _DIST_EPS)
-    if tmap.outline_clearance is not None:
-        clear &= tmap.outline_clearance >= tmap.required_clearance - _DIST_EPS
+    if tmap.outline is not None and not tmap.outline.all():
+        # Distance to the outline, computed only here: the lattice candidates do not need it.
+        clear &= ndimage.distance_transform_edt(tmap.outline) * tmap.voxel_size >= tmap.required_clearance - _DIST_EPS
     free_cells = np.argwhere(clear)
     if not len(free_cells):
         return index, points, cells

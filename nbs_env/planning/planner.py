@@ -34,7 +34,6 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import shapely
-from scipy import ndimage
 from scipy.spatial.distance import cdist
 from shapely.geometry import Polygon
 
@@ -296,14 +295,10 @@ def within_roi(tmap: TraversabilityMap, polygon: np.ndarray) -> TraversabilityMa
     scan the wrong room (measured on corpus:open_plan: a bathroom's first NVP lay in the living room
     it was entered from, and the RoI followed the robot there)."""
     # Every cell is tested: free cells the robot did not stand on are limited to the polygon, and
-    # the outline's distance keeps snapped candidates out of door openings.
+    # the outline keeps snapped candidates out of door openings.
     centres = tmap.centre_of(np.argwhere(np.ones(tmap.shape, dtype=bool)))
     inside = shapely.contains_xy(Polygon(polygon), centres[:, 0], centres[:, 1]).reshape(tmap.shape)
-    free = tmap.free & (inside | tmap.visited)
-    outline = np.full(tmap.shape, np.inf)
-    if not inside.all():
-        outline = ndimage.distance_transform_edt(inside) * tmap.voxel_size
-    return replace(tmap, free=free, outline_clearance=outline)
+    return replace(tmap, free=tmap.free & (inside | tmap.visited), outline=inside)
 
 
 def blocked_directions(belief, stops) -> list[np.ndarray] | None:
