@@ -257,15 +257,23 @@ def test_bad_checkpoints_raise_clear_errors(tmp_path):
 
 
 def test_a_policy_requires_the_room_rules_it_was_trained_with(tmp_path):
-    """The reference checkpoint was trained with 3 search scans a room: a grid without --wall-search
-    runs every policy with them, one that sets another count is refused with the flag to pass, and
-    two checkpoints trained with different rules are not compared in one grid."""
+    """The reference checkpoint was trained with the default robot's room rules (3 search scans a
+    room among them): a grid without --wall-search runs every policy with them, one that sets
+    another count is refused with the flag to pass, and two checkpoints trained with different
+    rules are not compared in one grid."""
     from nbs_env.errors import ConfigError
     from policies import config_for
     from train.compare import grid
 
     policy = make_policy("ppo:reference")
-    assert policy.requires == {"rooms.wall_search.scans": 3}
+    # It records every room rule it was trained with, the default robot's.
+    assert policy.requires["rooms.wall_search.scans"] == 3 and len(policy.requires) > 5
+    default = make_config("fast").to_dict()
+    for name, value in policy.requires.items():
+        node = default
+        for part in name.split("."):
+            node = node[part]
+        assert json.loads(json.dumps(node)) == value, name
     assert policy.config_overrides == {"rooms.completion": "policy"}
     specs = grid("l_room", "greedy,ppo:reference", "0", "fast", {"max_scans": 80})
     assert {s.overrides["rooms.wall_search.scans"] for s in specs} == {3}
@@ -279,7 +287,7 @@ def test_a_policy_requires_the_room_rules_it_was_trained_with(tmp_path):
     other = tmp_path / "other"
     other.mkdir()
     document = json.loads((BUNDLED["reference"] / "policy.json").read_text())
-    document["training"] = {**document["training"], "wall_search": 0}
+    document["training"]["config"]["rooms"]["wall_search"]["scans"] = 0
     (other / "policy.json").write_text(json.dumps(document))
     (other / "policy.pt").write_bytes((BUNDLED["reference"] / "policy.pt").read_bytes())
     with pytest.raises(ConfigError, match="made for different robots"):

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-import nbs_env  # noqa: F401  (registers the ids)
+from nbs_env.config import make_config
 from nbs_env.env import NBSEnv
-from policies import GreedyPolicy, make_policy
+from policies import GreedyPolicy, config_for, make_policy
 
 OUT = Path(__file__).with_name("ppo_reference_observations.npz")
 
@@ -30,7 +30,8 @@ def main() -> None:
     keys = ("voxels", "candidates", "pose", "room")
     keep: dict[str, list[np.ndarray]] = {k: [] for k in (*keys, "mask", "logits")}
     for storey in (20_000_000, 20_000_001):
-        env = NBSEnv("fast", scene=f"generated:{storey}", **getattr(policy, "env_overrides", {}))
+        # The robot the policy requires (its room rules and its "room done" action).
+        env = NBSEnv(config_for(make_config("fast", scene=f"generated:{storey}"), policy))
         obs, info = env.reset(seed=0)
         for step in range(40):
             if step % 2 == 0:
