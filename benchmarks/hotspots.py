@@ -53,7 +53,7 @@ def _short(key: tuple[str, int, str]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--preset", choices=("fast", "default"), default="fast")
+    parser.add_argument("--preset", choices=("fast", "train", "default"), default="fast")
     parser.add_argument("--scenes", default="generated:0-9", help="generated:A-B or a comma-separated list")
     parser.add_argument("--seeds", default="0", help="comma-separated seeds")
     parser.add_argument("--max-scans", type=int, default=40)

@@ -84,9 +84,10 @@ class NBSEnv(gym.Env):
 
     `RewardConfig`. By default the increase of the true structural surface sensed, in percentage
     points of the storey's structural surface, minus `scan_cost` (0.5) per scan and `metre_cost`
-    (0.05) per metre driven. `kind="conversions"` replaces the first term with the robot's own
-    realised Occluded-structure→Structure conversions (% of the room's structural voxels): no
-    ground truth.
+    (0.05) per metre driven. `kind="mapped"` replaces the first term with the surface the robot
+    itself labelled Structure, on the same scale (the training fidelity's reward: no meter runs);
+    `kind="conversions"` with the robot's own realised Occluded-structure→Structure conversions
+    (% of the room's structural voxels).
 
     ## Starting State
 
@@ -289,6 +290,8 @@ class NBSEnv(gym.Env):
         cfg = self.config.reward
         if cfg.kind == "coverage":
             gain = outcome.coverage_gain
+        elif cfg.kind == "mapped":
+            gain = outcome.mapped_gain
         else:
             gain = 100.0 * outcome.conversions / max(1, outcome.structural_voxels)
         return float(gain - cfg.scan_cost * outcome.scans - cfg.metre_cost * outcome.metres)

@@ -36,6 +36,7 @@ from nbs_env.belief import RoomModel
 from nbs_env.config import EnvConfig
 from nbs_env.errors import ConfigError, InvalidPoseError, UnreachableDoorError
 from nbs_env.evaluation import CoverageMeter
+from nbs_env.labels import VoxelLabel
 from nbs_env.observation import BeliefView
 from nbs_env.perception.roi import RoIError
 from nbs_env.planning.planner import Plan
@@ -44,6 +45,7 @@ from nbs_env.robot import Robot, StepReport
 from scenes import FloorPlan, Scene, load_scene
 from scenes.generator import generate_storey
 from scenes.geometry import point_is_free
+from scenes.labels import STRUCTURAL_CLASSES
 
 __all__ = ["STAGES", "ScanPoints", "ScanRecord", "StageTimes", "StepOutcome", "Storey", "resolve_scene"]
 
@@ -143,6 +145,9 @@ class StepOutcome:
     structural_voxels : int
         Structure + Occluded-structure voxels of the room before the decision (the unit
         ``conversions`` is read in).
+    mapped_gain : float
+        Increase of the surface the robot labelled Structure, percentage points of the storey's
+        structural surface (:attr:`Storey.mapped_pct`).
     """
 
     scans: int = 0
@@ -150,6 +155,7 @@ class StepOutcome:
     coverage_gain: float = 0.0
     conversions: int = 0
     structural_voxels: int = 0
+    mapped_gain: float = 0.0
 
 
 def resolve_scene(
@@ -267,7 +273,15 @@ class Storey:
         self.rules = config.rooms
         self.robot = Robot(scene, config.robot, rng)
         self.rooms = Rooms(config.robot, config.rooms)
-        self.meter = CoverageMeter(scene, config.coverage_spacing, config.coverage_radius)
+        self.meter = (
+            CoverageMeter(scene, config.coverage_spacing, config.coverage_radius) if config.coverage_meter else None
+        )
+        # The robot's own account of the surface it sensed (reward.kind="mapped"): its Structure
+        # voxels, summed over the rooms' grids as each scan changed them.
+        self.mapped_voxels = 0
+        self._mapped_at: tuple[int, int] = (-1, 0)  # (room, its Structure voxels after the last scan)
+        structural = np.isin(np.asarray(scene.face_labels), [int(c) for c in STRUCTURAL_CLASSES])
+        self.structure_area = float(np.asarray(scene.mesh.area_faces)[structural].sum())
         self.scans: list[ScanRecord] = []
         self.door_events: list[dict[str, Any]] = []
         self.room_ends: list[dict[str, Any]] = []
@@ -334,8 +348,20 @@ class Storey:
         return self.open and robot.config.predict_gains and self.plan.gain_below(fraction)
 
     def coverage_pct(self) -> float:
-        """True structural surface sensed, % of the storey's (evaluation side)."""
-        return self.meter.percent()
+        """True structural surface sensed, % of the storey's (evaluation side); NaN without the
+        meter (``config.coverage_meter=False``)."""
+        return float("nan") if self.meter is None else self.meter.percent()
+
+    @property
+    def mapped_pct(self) -> float:
+        """The surface the robot labelled Structure, one voxel face per Structure voxel, in % of
+        the storey's structural surface (the area of the mesh's floor, ceiling and wall faces).
+
+        The robot's own account (its labels, not ground truth) put on the scale of
+        :meth:`coverage_pct`; the normaliser is the one figure of the true building it reads, a
+        constant of the episode. Over 100 where walls are thicker than a voxel layer."""
+        size = self.config.robot.voxel_size
+        return 100.0 * self.mapped_voxels * size * size / max(self.structure_area, 1e-9)
 
     def room_models(self, current: bool = True) -> list[RoomModel]:
         """The recovered model of every room completed, and of the current one (``current``)."""
@@ -593,17 +619,21 @@ class Storey:
         robot = self.robot
         self.step_scans.append((report.world_points, report.estimated_pose[:3, 3].copy()))
 
+        meter = self.meter
+
         def evaluate() -> float:
             t = time.perf_counter()
-            self.meter.add(report.world_points, report.estimated_pose[:3, 3])
+            if meter is not None:
+                meter.add(report.world_points, report.estimated_pose[:3, 3])
             return time.perf_counter() - t
 
         # The meter (ground truth, not the robot's) shares nothing with the plan: on more than one
         # core it runs beside it, its compiled query free of the GIL the plan's numpy holds.
-        measured = threads.beside(evaluate)
+        measured = threads.beside(evaluate) if meter is not None else None
         # Planning for the next decision belongs to this step: it runs now, not at the next call.
         planned = robot.plan()
-        evaluation = measured.result()
+        evaluation = 0.0 if measured is None else measured.result()
+        self._count_mapped()
         times = {**{s: 0.0 for s in STAGES}, **report.times, "planning": planned.seconds, "evaluation": evaluation}
         processing = sum(times[s] for s in STAGES if s != "scan")
         # The first scan has no S(t) to register to: registration then reports no overlap.
@@ -617,7 +647,7 @@ class Storey:
                 estimated_position=report.estimated_pose[:3, 3].copy(),
                 predicted_gain=int(report.predicted_gain),
                 path_length=robot.path_length,
-                structure_sensed_pct=self.meter.percent(),
+                structure_sensed_pct=self.coverage_pct(),
                 processing_time=processing,
                 acquisition_time=report.acquisition_time,
                 points=report.points,
@@ -645,19 +675,29 @@ class Storey:
                 )
             )
 
+    def _count_mapped(self) -> None:
+        """Add the last scan's change of the current room's Structure voxels to :attr:`mapped_voxels`."""
+        room = self.rooms.current
+        now = int(np.count_nonzero(self.robot.belief.grid.labels == VoxelLabel.STRUCTURE))
+        last_room, last = self._mapped_at
+        self.mapped_voxels += now - (last if room == last_room else 0)
+        self._mapped_at = (room, now)
+
     def _check_open(self) -> None:
         if not self.open:
             raise RuntimeError("the episode is over: the storey is complete or the scan budget is spent")
 
-    def _before(self) -> tuple[int, float, float, int]:
-        return len(self.scans), self.robot.path_length, self.meter.percent(), self.robot.plan().structural_voxels
+    def _before(self) -> tuple[int, float, float, int, float]:
+        plan = self.robot.plan()
+        return len(self.scans), self.robot.path_length, self.coverage_pct(), plan.structural_voxels, self.mapped_pct
 
-    def _outcome(self, before: tuple[int, float, float, int], conversions: int) -> StepOutcome:
-        scans, metres, pct, structural = before
+    def _outcome(self, before: tuple[int, float, float, int, float], conversions: int) -> StepOutcome:
+        scans, metres, pct, structural, mapped = before
         return StepOutcome(
             scans=len(self.scans) - scans,
             metres=self.robot.path_length - metres,
-            coverage_gain=self.meter.percent() - pct,
+            coverage_gain=self.coverage_pct() - pct,
             conversions=conversions,
             structural_voxels=structural,
+            mapped_gain=self.mapped_pct - mapped,
         )

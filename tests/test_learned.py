@@ -70,7 +70,7 @@ def test_loaded_policy_acts_as_the_trained_model(trained):
     assert policy.config_overrides.get("rooms.completion", "gain") == completion
     # The checkpoint records the configuration its envs ran with, and the policy requires its room rules.
     recorded = json.loads(path.read_text())["training"]["config"]
-    assert recorded["preset"] == "fast" and recorded["rooms"]["completion"] == completion
+    assert recorded["preset"] == "train" and recorded["rooms"]["completion"] == completion
     assert policy.requires["rooms.wall_search.scans"] == recorded["rooms"]["wall_search"]["scans"]
     assert "rooms.completion" not in policy.requires
     for obs, info in observations(completion=completion):
@@ -347,8 +347,8 @@ def test_the_bundled_reference_policy_gives_its_stored_logits():
 
 def test_training_envs_charge_the_run_s_prices():
     """The reward the agent is trained on charges the run's scan and metre prices, not the env's
-    defaults: a step's reward is the coverage it gained minus them. The robot searches for doors
-    as the run says."""
+    defaults: a step's reward is the surface the robot mapped (the training fidelity's reward)
+    minus them. The robot searches for doors as the run says."""
     from train.ppo import TrainConfig, make_training_envs
 
     config = TrainConfig(
@@ -369,7 +369,8 @@ def test_training_envs_charge_the_run_s_prices():
         _, reward, _, _ = venv.step(np.array([action]))
         outcome = env._last
         assert outcome.scans >= 1 and outcome.metres > 0
-        expected = outcome.coverage_gain - 0.25 * outcome.scans - 0.1 * outcome.metres
+        assert env.config.reward.kind == "mapped" and outcome.mapped_gain > 0
+        expected = outcome.mapped_gain - 0.25 * outcome.scans - 0.1 * outcome.metres
         assert reward[0] == pytest.approx(expected, abs=1e-5)
     finally:
         venv.close()

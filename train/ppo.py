@@ -13,6 +13,7 @@ the CPU build). Uses a GPU when torch sees one.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -94,7 +95,10 @@ class TrainConfig(Config):
     ent_coef : float
         PPO's entropy bonus (stable-baselines3's ``ent_coef``; 0 is its default).
     preset : str
-        The configuration preset of the training and validation envs (``"fast"``).
+        The configuration preset of the training envs: ``"train"`` (the default), the training
+        fidelity (the fast preset's robot, observations and decisions, without the ground-truth
+        coverage meter, rewarded by the surface the robot itself mapped), or any other preset. The
+        validation envs run the same robot with the coverage meter on: coverage is what they report.
     overrides : dict
         Dotted configuration overrides on the preset (:func:`nbs_env.config.make_config`): the
         robot options of ``nbs train``'s command line (``--scanner``, ``--wall-search``, ``--set``
@@ -129,7 +133,7 @@ class TrainConfig(Config):
     metre_cost: float = 0.05
     scan_cost: float = 0.5
     ent_coef: float = 0.0
-    preset: str = "fast"
+    preset: str = "train"
     overrides: dict[str, Any] = field(default_factory=dict)
     completion: str = "gain"
     cell_size: tuple[float, float] = (2.0, 3.6)
@@ -193,6 +197,13 @@ class TrainConfig(Config):
         }
         return make_config(make_config(self.preset, **{**self.overrides, **run}), **overrides)
 
+    def evaluation_config(self) -> EnvConfig:
+        """The validation envs' configuration: the run's robot with the coverage meter on and the
+        coverage reward (what the periodic evaluation reports is the true surface sensed)."""
+        from nbs_env.config import make_config
+
+        return make_config(self.env_config(), coverage_meter=True, **{"reward.kind": "coverage"})
+
     @property
     def network(self) -> NetworkConfig:
         """The network this run trains: K + 1 actions and the room vector with ``completion="policy"``."""
@@ -206,9 +217,17 @@ def _env_factory(run: TrainConfig):
     its prices, completion and episode length."""
 
     def make():
+        import multiprocessing
+
         import gymnasium as gym
         from stable_baselines3.common.monitor import Monitor
 
+        if multiprocessing.parent_process() is not None:
+            # A worker process: Ctrl-C is the learner's to handle (it saves the run, then closes
+            # the workers), not a worker's to die of mid-step.
+            import signal
+
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
         config = run.env_config()
         # Monitor puts each episode's return in info["episode"], for the learning-curve log.
         env = gym.make("nbs_env:nbs_env/NBS-Fast-v0", config=config, max_episode_steps=run.max_episode_steps)
@@ -306,9 +325,10 @@ def evaluate(policy_fn, storeys: list[int], max_episode_steps: int, config: EnvC
     }
 
 
-def make_training_envs(config: TrainConfig):
+def make_training_envs(config: TrainConfig, seed: int | None = None):
     """The vector env ``nbs train`` steps: ``config.envs`` generated-storey envs, each in a worker
-    process of its own (``SubprocVecEnv``) when there are several, seeded with ``config.seed``."""
+    process of its own (``SubprocVecEnv``) when there are several, seeded with ``seed`` (None:
+    ``config.seed``)."""
     _require_rl()
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
@@ -325,34 +345,138 @@ def make_training_envs(config: TrainConfig):
                 del os.environ["NBS_THREADS"]
     else:
         venv = DummyVecEnv(workers)
-    venv.seed(config.seed)
+    venv.seed(config.seed if seed is None else seed)
     return venv
 
 
-def train(config: TrainConfig, out: str | Path, progress: bool = True):
-    """Train, write checkpoints and the final policy into ``out``.
+#: The file of a run's resumable state: every tensor of the policy (value head included) and the
+#: optimiser's state, tensors and numbers only (``torch.load(weights_only=True)`` reads it).
+STATE_FILE = "training_state.pt"
+#: Its description: the format, the timesteps it holds, the run's settings and the tensors' checksum.
+STATE_JSON = "training_state.json"
+STATE_FORMAT = "nbs-env-training-state"
+
+
+def save_training_state(model, folder: str | Path, run: TrainConfig) -> Path:
+    """Write what a run continues from into ``folder``: :data:`STATE_FILE` (the whole policy's
+    tensors and the optimiser's state) and :data:`STATE_JSON` (the timesteps done and the run's
+    settings). Never a pickle of objects: tensors and numbers, and JSON.
 
     Returns
     -------
-    (Path, MaskablePPO)
-        The final checkpoint's ``policy.json`` and the trained model.
+    Path
+        The JSON file.
     """
-    _require_rl()
     import torch
+
+    from policies.learned import _sha256
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    tensors = folder / STATE_FILE
+    policy = model.policy
+    state = {
+        "policy": {k: v.detach().cpu() for k, v in policy.state_dict().items()},
+        "optimizer": policy.optimizer.state_dict(),
+    }
+    temporary = tensors.with_suffix(".tmp")
+    torch.save(state, temporary)
+    temporary.replace(tensors)  # a signal during the write leaves the previous state whole
+    document = {
+        "format": STATE_FORMAT,
+        "version": 1,
+        "timesteps": int(model.num_timesteps),
+        "tensors": tensors.name,
+        "sha256": _sha256(tensors),
+        "run": run.to_dict(),
+    }
+    path = folder / STATE_JSON
+    path.write_text(json.dumps(document, indent=1))
+    return path
+
+
+def latest_state(run_folder: str | Path) -> tuple[Path, dict]:
+    """The latest resumable state of a run folder: its own, or its newest ``checkpoint_N``'s.
+
+    Returns
+    -------
+    (Path, dict)
+        The state's folder and its :data:`STATE_JSON` document.
+
+    Raises
+    ------
+    ModelFileError
+        No state in the folder, or a state file that is not this format.
+    """
+    run_folder = Path(run_folder)
+    if not run_folder.is_dir():
+        raise ModelFileError(f"{run_folder}: no such run folder")
+    found = []
+    for path in [run_folder / STATE_JSON, *run_folder.glob(f"checkpoint_*/{STATE_JSON}")]:
+        if not path.is_file():
+            continue
+        try:
+            document = json.loads(path.read_text())
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ModelFileError(f"{path}: not a JSON training state ({exc})") from None
+        if not isinstance(document, dict) or document.get("format") != STATE_FORMAT or document.get("version") != 1:
+            raise ModelFileError(f"{path}: not an {STATE_FORMAT!r} file of version 1")
+        if not isinstance(document.get("timesteps"), int) or not isinstance(document.get("run"), dict):
+            raise ModelFileError(f"{path}: malformed training state (timesteps, run)")
+        found.append((document["timesteps"], path.parent, document))
+    if not found:
+        raise ModelFileError(
+            f"{run_folder}: no resumable state ({STATE_JSON}); runs save one with each checkpoint and when stopped"
+        )
+    _, folder, document = max(found, key=lambda f: f[0])
+    return folder, document
+
+
+def resume_config(run_folder: str | Path, timesteps: int | None = None) -> TrainConfig:
+    """The settings of the run in ``run_folder``, with a new total of ``timesteps`` if given.
+
+    Raises
+    ------
+    ModelFileError
+        No resumable state, or settings this version refuses.
+    """
+    folder, document = latest_state(run_folder)
+    try:
+        config = TrainConfig.from_dict(document["run"])
+        if timesteps is not None:
+            config = dataclasses.replace(config, timesteps=timesteps)
+    except (ConfigError, TypeError) as exc:
+        raise ModelFileError(f"{folder / STATE_JSON}: its run settings are refused ({exc})") from None
+    return config
+
+
+def _load_state(model, folder: Path, document: dict) -> None:
+    import torch
+
+    from policies.learned import _sha256
+
+    tensors = folder / str(document.get("tensors", STATE_FILE))
+    if not tensors.is_file():
+        raise ModelFileError(f"{tensors}: missing (named by {folder / STATE_JSON})")
+    if _sha256(tensors) != document.get("sha256"):
+        raise ModelFileError(f"{tensors}: its checksum is not the one {STATE_JSON} records (a modified file)")
+    try:
+        state = torch.load(tensors, map_location=model.device, weights_only=True)
+        model.policy.load_state_dict(state["policy"])
+        model.policy.optimizer.load_state_dict(state["optimizer"])
+    except (RuntimeError, KeyError, ValueError, TypeError) as exc:
+        raise ModelFileError(f"{tensors}: does not fit this run's network ({exc})") from None
+    model.num_timesteps = int(document["timesteps"])
+
+
+def build_model(config: TrainConfig, venv, device: str = "cpu", tensorboard: str | None = None):
+    """The MaskablePPO of a run: :mod:`policies.learned`'s network as its policy, with the run's
+    PPO settings, on ``venv``. Also what loads a checkpoint into a user's own code (docs/training.md)."""
+    _require_rl()
     from sb3_contrib import MaskablePPO
-    from stable_baselines3.common.callbacks import BaseCallback
-    from tqdm import tqdm
 
-    from policies import GreedyPolicy
-
-    network = config.network
-    # Checked before any worker starts: a bad checkpoint fails at once, not after the envs are up.
-    initial = _load_init(config.init, network) if config.init else None
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    venv = make_training_envs(config)
-    device = "cuda" if torch.cuda.is_available() else "cpu"
-    model = MaskablePPO(
+    algorithm = getattr(venv, "ppo_class", MaskablePPO)  # Ray's rollouts bring their own collection
+    return algorithm(
         _policy_class(),
         venv,
         n_steps=config.n_steps,
@@ -361,32 +485,161 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
         ent_coef=config.ent_coef,
         seed=config.seed,
         device=device,
-        tensorboard_log=str(out / "tb") if _has_tensorboard() else None,
-        policy_kwargs={"network": network},
+        tensorboard_log=tensorboard,
+        policy_kwargs={"network": config.network},
         verbose=0,
     )
-    if initial is not None:  # the encoder and scorer from the checkpoint; the value head starts afresh
+
+
+def load_model(checkpoint: str | Path, env=None, device: str = "cpu"):
+    """A MaskablePPO with a run's whole policy (value head included) and optimiser state.
+
+    Parameters
+    ----------
+    checkpoint : str or Path
+        A run folder or one of its ``checkpoint_N`` folders (the latest state in it is read).
+    env : gymnasium.Env or VecEnv, optional
+        What the model will step; None: one env of the run's own configuration.
+    device : str
+        torch's device.
+
+    Raises
+    ------
+    ModelFileError
+        No state, a modified tensors file, or a network other than the run's.
+    """
+    _require_rl()
+    folder, document = latest_state(checkpoint)
+    config = TrainConfig.from_dict(document["run"])
+    if env is None:
+        from stable_baselines3.common.vec_env import DummyVecEnv
+
+        env = DummyVecEnv([_env_factory(config)])
+    model = build_model(config, env, device=device)
+    _load_state(model, folder, document)
+    return model
+
+
+class _Stop:
+    """SIGINT and SIGTERM during training ask the run to stop at its next step, with its state saved."""
+
+    def __init__(self) -> None:
+        self.signal: int | None = None
+        self._previous: dict[int, Any] = {}
+
+    def __enter__(self) -> _Stop:
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def _handle(self, sig, frame) -> None:
+        self.signal = sig
+
+    def __exit__(self, *exc) -> None:
+        import signal
+
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+
+
+def train(
+    config: TrainConfig,
+    out: str | Path,
+    progress: bool = True,
+    resume: bool = False,
+    backend: str = "local",
+    address: str | None = None,
+):
+    """Train, write checkpoints and the final policy into ``out``.
+
+    Parameters
+    ----------
+    config : TrainConfig
+    out : str or Path
+        The run folder: checkpoints, the learning curve, the final policy and its resumable state.
+    progress : bool
+        A progress bar.
+    resume : bool
+        Continue the run in ``out`` from its latest state (:func:`latest_state`), with its
+        optimiser, up to ``config.timesteps`` in all; behaviour cloning is not repeated.
+    backend : {"local", "ray"}
+        Where rollouts are collected: ``"local"``, ``config.envs`` worker processes stepped in
+        lockstep (stable-baselines3's ``SubprocVecEnv``); ``"ray"``, ``config.envs`` Ray actors that
+        each collect their share of a rollout on their own (:mod:`train.ray_rollouts`).
+    address : str, optional
+        The Ray cluster to join (``"auto"`` or ``host:port``); None starts a local instance.
+
+    Returns
+    -------
+    (Path, MaskablePPO)
+        The final checkpoint's ``policy.json`` and the trained model; ``model.interrupted`` is the
+        signal that stopped the run early (None when it ran to the end).
+
+    Raises
+    ------
+    ModelFileError
+        ``config.init`` or the state to resume from cannot be read.
+    """
+    _require_rl()
+    import torch
+    from stable_baselines3.common.callbacks import BaseCallback
+    from tqdm import tqdm
+
+    from policies import GreedyPolicy
+
+    if backend not in ("local", "ray"):
+        raise ConfigError(f"backend must be 'local' or 'ray', got {backend!r}")
+    network = config.network
+    out = Path(out)
+    state = latest_state(out) if resume else None
+    # Checked before any worker starts: a bad checkpoint fails at once, not after the envs are up.
+    initial = _load_init(config.init, network) if config.init and state is None else None
+    out.mkdir(parents=True, exist_ok=True)
+    done_before = 0 if state is None else int(state[1]["timesteps"])
+    if backend == "ray":
+        from train.ray_rollouts import RayRollouts
+
+        venv = RayRollouts(config, address=address, seed=config.seed + done_before)
+    else:
+        venv = make_training_envs(config, seed=config.seed + done_before)
+    device = "cuda" if torch.cuda.is_available() else "cpu"
+    model = build_model(config, venv, device, str(out / "tb") if _has_tensorboard() else None)
+    if state is not None:
+        _load_state(model, *state)
+    elif initial is not None:  # the encoder and scorer from the checkpoint; the value head starts afresh
         model.policy.features_extractor.encoder.load_state_dict(initial[0].state_dict())
         model.policy.action_net.load_state_dict(initial[1].state_dict())
+    if backend == "ray":
+        venv.attach(model)
     held_out = [VALIDATION_BASE + k for k in range(config.eval_storeys)]
     # Every checkpoint records the run and the full configuration its envs ran with: what a user of
     # it reproduces, and the room rules the policy then requires (policies.learned.trained_rules).
     recorded = {**config.to_dict(), "config": config.env_config().to_dict()}
     log = out / "learning_curve.jsonl"
-    log.write_text("")
+    if state is None:
+        log.write_text("")
     greedy = GreedyPolicy()
     baseline = None
     if config.eval_every:
-        baseline = evaluate(greedy.act, held_out, config.max_episode_steps, config.env_config())
+        baseline = evaluate(greedy.act, held_out, config.max_episode_steps, config.evaluation_config())
+
+    def checkpoint(n: int) -> None:
+        folder = out / f"checkpoint_{n}"
+        save_checkpoint(folder, network, _state_dict(model), _layout(model), recorded)
+        save_training_state(model, folder, config)
 
     class Progress(BaseCallback):
         def _on_training_start(self) -> None:
             # SB3 collects whole rollouts, so it stops at the next multiple of n_steps × envs.
             rollout = config.n_steps * config.envs
-            total = -(-config.timesteps // rollout) * rollout
-            self.bar = tqdm(total=total, unit="step", disable=not progress, dynamic_ncols=True)
-            self.last_eval = 0
-            self.last_checkpoint = 0
+            total = done_before + -(-(config.timesteps - done_before) // rollout) * rollout
+            self.bar = tqdm(total=total, initial=done_before, unit="step", disable=not progress, dynamic_ncols=True)
+            self.last_eval = done_before
+            self.last_checkpoint = done_before
             self.episodes: list[float] = []
             if config.eval_every and warm is not None:
                 self._evaluate(0)  # the behaviour-cloned start
@@ -397,11 +650,11 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
                 if "episode" in info:
                     self.episodes.append(float(info["episode"]["r"]))
             n = self.num_timesteps
+            if stop.signal is not None:
+                return False
             if config.checkpoint_every and n - self.last_checkpoint >= config.checkpoint_every:
                 self.last_checkpoint = n
-                save_checkpoint(
-                    out / f"checkpoint_{n}", network, _state_dict(self.model), _layout(self.model), recorded
-                )
+                checkpoint(n)
             if config.eval_every and n - self.last_eval >= config.eval_every:
                 self.last_eval = n
                 self._evaluate(n)
@@ -414,9 +667,10 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
                 )
                 return int(action[0])
 
-            learned = evaluate(act, held_out, config.max_episode_steps, config.env_config())
+            learned = evaluate(act, held_out, config.max_episode_steps, config.evaluation_config())
             record = {"timesteps": n, "learned": learned, "greedy": baseline}
             record["train_return"] = float(np.mean(self.episodes[-20:])) if self.episodes else None
+            record["seconds"] = time.time() - started
             with log.open("a") as f:
                 f.write(json.dumps(record) + "\n")
 
@@ -425,29 +679,44 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True):
 
     started = time.time()
     warm = None
-    if config.bc_steps:
+    if config.bc_steps and state is None:
         warm = behaviour_clone(model, config.bc_steps, progress=progress, teacher=_teacher(config.bc_teacher))
     if warm is not None:
         (out / "behaviour_cloning.json").write_text(json.dumps(warm, indent=1))
         if config.checkpoint_every:  # the behaviour-cloned start, a policy of its own to compare
-            save_checkpoint(out / "checkpoint_0", network, _state_dict(model), _layout(model), recorded)
-    model.learn(total_timesteps=config.timesteps, callback=Progress())
+            checkpoint(0)
+    elif state is not None and (out / "behaviour_cloning.json").is_file():
+        warm = json.loads((out / "behaviour_cloning.json").read_text())
+    with _Stop() as stop:
+        model.learn(
+            total_timesteps=max(0, config.timesteps - done_before),
+            callback=Progress(),
+            reset_num_timesteps=state is None,
+        )
     venv.close()
-    final = save_checkpoint(
-        out,
-        network,
-        _state_dict(model),
-        _layout(model),
-        training={
-            **recorded,
-            "seconds": time.time() - started,
-            "device": device,
-            "algo": "maskable_ppo",
-            "behaviour_cloning": warm,
-        },
-    )
+    seconds = time.time() - started + (0.0 if state is None else float(_previous_seconds(out)))
+    training = {
+        **recorded,
+        "seconds": seconds,
+        "timesteps_done": int(model.num_timesteps),
+        "device": device,
+        "algo": "maskable_ppo",
+        "backend": backend,
+        "behaviour_cloning": warm,
+    }
+    final = save_checkpoint(out, network, _state_dict(model), _layout(model), training=training)
+    save_training_state(model, out, config)
     plot_learning_curve(log, out / "learning_curve.png")
+    model.interrupted = stop.signal
     return final, model
+
+
+def _previous_seconds(out: Path) -> float:
+    """The seconds the run's earlier sessions took, as its last policy.json recorded them."""
+    try:
+        return float(json.loads((out / "policy.json").read_text())["training"]["seconds"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return 0.0
 
 
 def _load_init(path: str, network: NetworkConfig):
@@ -596,7 +865,7 @@ def _has_tensorboard() -> bool:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="nbs train", description="Train a masked PPO agent on generated storeys.")
     p.add_argument("--algo", choices=("maskable_ppo",), default="maskable_ppo")
-    p.add_argument("--timesteps", type=int, default=2048)
+    p.add_argument("--timesteps", type=int, default=None, help="PPO timesteps in all (default 2048)")
     p.add_argument("--envs", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--rooms", default="1-5", help="room range of the training storeys, e.g. 1-5")
@@ -623,7 +892,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-episode-steps", type=int, default=40, help="decisions per episode at the most")
     p.add_argument("--cell-size", default="2.0-3.6", help="range of the generator's cell edge in metres, e.g. 2.0-6.0")
     p.add_argument("--init", default="", help="checkpoint to start the network from (default: random weights)")
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=Path, help="the run folder (required unless --resume)")
+    p.add_argument(
+        "--resume",
+        type=Path,
+        metavar="RUN",
+        help="continue the run in folder RUN from its latest state, optimiser included, with its own "
+        "settings (--timesteps sets a new total; --backend, --address and --quiet apply)",
+    )
+    p.add_argument(
+        "--backend",
+        choices=("local", "ray"),
+        default="local",
+        help="where rollouts are collected: local worker processes (default) or Ray actors",
+    )
+    p.add_argument(
+        "--address", default=None, help="with --backend ray: the cluster to join (default: a local instance)"
+    )
     p.add_argument("--quiet", action="store_true")
     add_robot_arguments(p)
     return p
@@ -631,6 +916,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.resume is not None:
+        return _resume(args)
+    if args.out is None:
+        print("nbs train: error: --out is required (or --resume RUN)", file=sys.stderr)
+        return 2
     try:
         rooms = parse_range(args.rooms)
     except ValueError as exc:
@@ -647,9 +937,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"nbs train: error: {problem} (nbs train scans generated storeys)", file=sys.stderr)
         return 2
     try:
-        preset, overrides = config_from_arguments(args, "fast")
+        preset, overrides = config_from_arguments(args, "train")
         config = TrainConfig(
-            timesteps=args.timesteps,
+            timesteps=2048 if args.timesteps is None else args.timesteps,
             envs=args.envs,
             seed=args.seed,
             rooms=rooms,
@@ -673,11 +963,48 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"nbs train: error: {exc}", file=sys.stderr)
         return 2
-    try:
-        path, _ = train(config, args.out, progress=not args.quiet)
-    except ModelFileError as exc:
-        print(f"nbs train: error: --init: {exc}", file=sys.stderr)
+    if args.out.exists() and any(args.out.glob("**/training_state.json")):
+        print(
+            f"nbs train: error: --out {args.out} holds a run already; continue it with --resume {args.out}, "
+            "or name another folder",
+            file=sys.stderr,
+        )
         return 2
+    return _run(config, args.out, args, resume=False)
+
+
+def _resume(args) -> int:
+    if args.out is not None and Path(args.out) != Path(args.resume):
+        print("nbs train: error: --resume continues in its own folder; leave out --out", file=sys.stderr)
+        return 2
+    try:
+        config = resume_config(args.resume, args.timesteps)
+    except ModelFileError as exc:
+        print(f"nbs train: error: --resume: {exc}", file=sys.stderr)
+        return 2
+    if args.envs != build_parser().get_default("envs"):
+        config = dataclasses.replace(config, envs=args.envs)
+    return _run(config, args.resume, args, resume=True)
+
+
+def _run(config: TrainConfig, out: Path, args, resume: bool) -> int:
+    try:
+        path, model = train(
+            config, out, progress=not args.quiet, resume=resume, backend=args.backend, address=args.address
+        )
+    except ModelFileError as exc:
+        print(f"nbs train: error: {'--resume' if resume else '--init'}: {exc}", file=sys.stderr)
+        return 2
+    except ConfigError as exc:
+        print(f"nbs train: error: {exc}", file=sys.stderr)
+        return 2
+    if model.interrupted is not None:
+        print(
+            f"nbs train: stopped by signal {model.interrupted} at {model.num_timesteps} timesteps; "
+            f"the run is saved: continue it with nbs train --resume {out}",
+            file=sys.stderr,
+        )
+        return 130
     print(f"wrote {path}")
     return 0
 

@@ -100,11 +100,15 @@ class RewardConfig(Config):
 
     Attributes
     ----------
-    kind : {"coverage", "conversions"}
+    kind : {"coverage", "mapped", "conversions"}
         ``"coverage"`` (default): the increase of the true structural surface sensed, in
-        percentage points of the storey's structural surface (evaluation-side ground truth).
-        ``"conversions"``: the robot's own realised Occluded-structure→Structure conversions, in
-        percent of the room's structural voxels; no ground truth is read.
+        percentage points of the storey's structural surface (evaluation-side ground truth: the
+        coverage meter must run). ``"mapped"``: the increase of the surface the robot itself
+        labelled Structure (its Structure voxels, one voxel face each), in percentage points of the
+        storey's structural surface as the mesh's structural faces give it: the robot's own
+        account on the same scale as ``"coverage"``, without the meter (the training fidelity's
+        reward). ``"conversions"``: the robot's own realised Occluded-structure→Structure
+        conversions, in percent of the room's structural voxels.
     scan_cost : float
         Subtracted per scan taken in the step (a door crossing adds a scan).
     metre_cost : float
@@ -120,8 +124,8 @@ class RewardConfig(Config):
 
     def __post_init__(self) -> None:
         _require(
-            self.kind in ("coverage", "conversions"),
-            f"reward kind must be 'coverage' or 'conversions', got {self.kind!r}",
+            self.kind in ("coverage", "mapped", "conversions"),
+            f"reward kind must be 'coverage', 'mapped' or 'conversions', got {self.kind!r}",
         )
         _finite(
             scan_cost=self.scan_cost, metre_cost=self.metre_cost, invalid_action_penalty=self.invalid_action_penalty
@@ -169,6 +173,11 @@ class EnvConfig(Config):
         1.4 MB a scan at the default 0.5° pattern and 6 MB at 0.2°.
     travel_speed : float
         Driving speed for the travel time, m/s.
+    coverage_meter : bool
+        Run the ground-truth coverage meter (True, the default). Off, nothing measures the true
+        surface sensed: ``info["structure_sensed_pct"]`` is NaN, the reward must be robot-side
+        (``reward.kind`` other than ``"coverage"``), and a reset skips the meter's sampling of the
+        storey's interior (most of a reset's time). The training fidelity turns it off.
     """
 
     preset: str = "default"
@@ -186,6 +195,7 @@ class EnvConfig(Config):
     quality: QualityConfig = field(default_factory=QualityConfig)
     keep_scans: bool = False
     travel_speed: float = 0.5
+    coverage_meter: bool = True
 
     def __post_init__(self) -> None:
         _require(
@@ -198,6 +208,11 @@ class EnvConfig(Config):
         _require(self.coverage_spacing > 0 and self.coverage_radius > 0, "coverage spacing and radius must be > 0")
         _require(self.travel_speed > 0, f"travel_speed must be > 0, got {self.travel_speed}")
         _require(isinstance(self.preset, str), f"preset must be a preset's name, got {self.preset!r}")
+        _require(isinstance(self.coverage_meter, bool), f"coverage_meter must be a bool, got {self.coverage_meter!r}")
+        _require(
+            self.coverage_meter or self.reward.kind != "coverage",
+            "reward.kind 'coverage' reads the coverage meter: with coverage_meter=False use 'mapped' or 'conversions'",
+        )
         _require(
             self.robot.predict_gains or self.rooms.completion == "policy",
             "rooms.completion='gain' needs robot.predict_gains (the room ends when the predicted gain is small)",

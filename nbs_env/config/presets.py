@@ -37,6 +37,16 @@ PRESETS: dict[str, dict[str, Any]] = {
         "generator.rooms": (1, 3),
         "max_scans": 40,
     },
+    "train": {
+        "robot.scanner.angular_step": 1.0,
+        "robot.odometry": {"sigma_xy_per_m": 0.0, "sigma_yaw_deg_per_m": 0.0, "sigma_tilt_deg": 0.0},
+        "robot.voxel_size": 0.1,
+        "robot.perfect_localisation": True,
+        "generator.rooms": (1, 3),
+        "max_scans": 40,
+        "coverage_meter": False,
+        "reward.kind": "mapped",
+    },
 }
 
 

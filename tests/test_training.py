@@ -1,0 +1,229 @@
+"""Training at scale: the training fidelity, resumable runs and rollouts on Ray."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nbs_env.config import make_config
+from nbs_env.env import NBSEnv
+from nbs_env.errors import ConfigError
+from policies import GreedyPolicy
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _episode(preset: str, seed: int = 4, steps: int = 6):
+    env = NBSEnv(make_config(preset, **{"generator.rooms": (2, 2)}))
+    obs, info = env.reset(seed=seed)
+    policy = GreedyPolicy()
+    out = [(obs, info, 0.0)]
+    for _ in range(steps):
+        obs, reward, terminated, truncated, info = env.step(policy.act(obs, info))
+        out.append((obs, info, reward))
+        if terminated or truncated:
+            break
+    return env, out
+
+
+def test_the_training_fidelity_sees_and_decides_as_the_fast_preset():
+    """The training fidelity drops the ground-truth meter, not the method: on one storey its
+    observations, masks, candidates' gains and path are the fast preset's, step for step, while the
+    true coverage is not measured (NaN) and the reward is the robot's own mapped surface."""
+    fast_env, fast = _episode("fast")
+    train_env, train = _episode("train")
+    assert len(fast) == len(train) > 2
+    for (a, ia, _), (b, ib, _) in zip(fast, train, strict=True):
+        for key in a:
+            np.testing.assert_array_equal(a[key], b[key])
+        np.testing.assert_array_equal(ia["candidate_gains"], ib["candidate_gains"])
+        assert ia["path_length_m"] == ib["path_length_m"]
+        assert np.isnan(ib["structure_sensed_pct"]) and not np.isnan(ia["structure_sensed_pct"])
+    assert fast_env.storey.meter is not None and train_env.storey.meter is None
+    # The robot-side reward is paid for new structure: positive where a step sensed some.
+    assert sum(r for _, _, r in train[1:]) > 0
+    assert train_env.storey.mapped_pct > 20.0
+
+
+def test_the_mapped_reward_follows_the_true_coverage():
+    """The robot's own mapped surface rises with the true one, step by step, on the same scale: a
+    reward counting something else (all occupied voxels, the whole grid) would not."""
+    env2 = NBSEnv(make_config("fast", **{"generator.rooms": (2, 2)}))
+    obs, info = env2.reset(seed=7)
+    policy = GreedyPolicy()
+    coverage, mapped = [], []
+    for _ in range(12):
+        before = (env2.storey.coverage_pct(), env2.storey.mapped_pct)
+        obs, _, terminated, truncated, info = env2.step(policy.act(obs, info))
+        coverage.append(env2.storey.coverage_pct() - before[0])
+        mapped.append(env2.storey.mapped_pct - before[1])
+        if terminated or truncated:
+            break
+    coverage, mapped = np.array(coverage), np.array(mapped)
+    assert len(coverage) >= 3
+    assert np.corrcoef(coverage, mapped)[0, 1] > 0.6
+    ratio = env2.storey.mapped_pct / env2.storey.coverage_pct()
+    assert 0.5 < ratio < 2.0, ratio
+
+
+def test_the_coverage_reward_needs_the_meter():
+    with pytest.raises(ConfigError, match="coverage meter"):
+        make_config("train", **{"reward.kind": "coverage"})
+    with pytest.raises(ConfigError, match="coverage_meter must be a bool"):
+        make_config("fast", coverage_meter=1)
+    assert make_config("train").reward.kind == "mapped"
+
+
+# ---------------------------------------------------------------------- resumable runs
+def _tiny(**changes):
+    from train.ppo import TrainConfig
+
+    base = {
+        "timesteps": 16, "envs": 1, "seed": 0, "rooms": (1, 1), "n_steps": 8, "batch_size": 8,
+        "completion": "policy", "checkpoint_every": 8,
+    }  # fmt: skip
+    return TrainConfig(**{**base, **changes})
+
+
+def _state(folder: Path):
+    torch = pytest.importorskip("torch")
+    return torch.load(folder / "training_state.pt", weights_only=True)
+
+
+def test_a_resumed_run_continues_with_its_optimiser(tmp_path):
+    """--resume loads the whole policy and Adam's moments and step counts: resumed with nothing left
+    to do it writes back the very state it read; resumed further, Adam's step count goes on from the
+    saved one (a fresh optimiser would start again from the update count of one rollout)."""
+    pytest.importorskip("sb3_contrib")
+    torch = pytest.importorskip("torch")
+    from train.ppo import latest_state, load_model, resume_config, train
+
+    out = tmp_path / "run"
+    train(_tiny(), out, progress=False)
+    saved = _state(out)
+    steps_saved = max(int(s["step"]) for s in saved["optimizer"]["state"].values())
+    assert steps_saved > 0
+    assert latest_state(out)[1]["timesteps"] == 16
+
+    train(resume_config(out), out, progress=False, resume=True)  # 16 of 16 done: nothing to do
+    same = _state(out)
+    for key, value in saved["policy"].items():
+        torch.testing.assert_close(same["policy"][key], value)
+    for k, s in saved["optimizer"]["state"].items():
+        torch.testing.assert_close(same["optimizer"]["state"][k]["exp_avg"], s["exp_avg"])
+
+    _, model = train(resume_config(out, timesteps=32), out, progress=False, resume=True)
+    assert model.num_timesteps == 32
+    later = _state(out)
+    steps_later = max(int(s["step"]) for s in later["optimizer"]["state"].values())
+    assert steps_later == 2 * steps_saved  # one more rollout, as many updates as the first
+    assert json.loads((out / "training_state.json").read_text())["timesteps"] == 32
+    # A user's own MaskablePPO from the run (docs/training.md): the same tensors, value head included.
+    loaded = load_model(out)
+    for key, value in loaded.policy.state_dict().items():
+        torch.testing.assert_close(value.cpu(), later["policy"][key])
+
+
+def test_a_modified_state_is_refused(tmp_path):
+    pytest.importorskip("sb3_contrib")
+    from nbs_env.errors import ModelFileError
+    from train.ppo import latest_state, train
+
+    out = tmp_path / "run"
+    train(_tiny(timesteps=8), out, progress=False)
+    with (out / "training_state.pt").open("ab") as f:
+        f.write(b"\0")
+    with pytest.raises(ModelFileError, match="checksum"):
+        train(_tiny(timesteps=16), out, progress=False, resume=True)
+    with pytest.raises(ModelFileError, match="no resumable state"):
+        latest_state(tmp_path)
+
+
+def _cli(*args: str, **kwargs) -> subprocess.Popen:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen(
+        [sys.executable, "-m", "train.ppo", *args], cwd=ROOT, env=env, stderr=subprocess.PIPE, text=True, **kwargs
+    )
+
+
+def test_the_cli_refuses_to_resume_nothing_and_to_overwrite_a_run(tmp_path):
+    pytest.importorskip("sb3_contrib")
+    from train.ppo import train
+
+    p = _cli("--resume", str(tmp_path / "none"), "--quiet")
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 2 and "no such run folder" in err and "Traceback" not in err
+    out = tmp_path / "run"
+    train(_tiny(timesteps=8), out, progress=False)
+    p = _cli("--out", str(out), "--timesteps", "8", "--quiet")
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 2 and "--resume" in err and "Traceback" not in err
+
+
+@pytest.mark.expensive
+def test_a_signal_stops_a_run_with_its_state_saved(tmp_path):
+    """SIGTERM mid-run: the run stops at its next step, saves its state and exits 130 with the
+    command that continues it; --resume then finishes it."""
+    pytest.importorskip("sb3_contrib")
+    out = tmp_path / "run"
+    p = _cli(
+        "--out", str(out), "--timesteps", "4000", "--envs", "1", "--n-steps", "8", "--rooms", "1-1",
+        "--completion", "policy", "--checkpoint-every", "8", "--quiet",
+    )  # fmt: skip
+    deadline = time.time() + 300
+    while not (out / "checkpoint_8" / "training_state.json").is_file():
+        assert p.poll() is None and time.time() < deadline, p.stderr.read() if p.poll() is not None else "timeout"
+        time.sleep(0.5)
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=300)
+    assert p.returncode == 130, err
+    assert "--resume" in err and "Traceback" not in err
+    done = json.loads((out / "training_state.json").read_text())["timesteps"]
+    assert 8 <= done < 4000
+    p = _cli("--resume", str(out), "--timesteps", str(done + 8), "--quiet")
+    _, err = p.communicate(timeout=300)
+    assert p.returncode == 0, err
+    assert json.loads((out / "training_state.json").read_text())["timesteps"] == done + 8
+
+
+# ---------------------------------------------------------------------- Ray
+@pytest.mark.expensive
+def test_rollouts_on_a_local_ray_instance(tmp_path):
+    """--backend ray: two actors each play their segment with the learner's weights; the learner's
+    own policy gives the same log-probabilities and values of their choices on the same
+    observations (the layout, masks and weights are the learner's), and a run trains and saves."""
+    pytest.importorskip("sb3_contrib")
+    pytest.importorskip("ray")
+    torch = pytest.importorskip("torch")
+    from train.ppo import build_model, train
+    from train.ray_rollouts import RayRollouts
+
+    config = _tiny(envs=2, n_steps=4)
+    venv = RayRollouts(config, seed=5)
+    try:
+        model = build_model(config, venv)
+        venv.attach(model)
+        weights = {k: v.detach().cpu() for k, v in model.policy.state_dict().items()}
+        segments = venv.collect(weights, 4, model.gamma, model.observation_space)
+        assert len(segments) == 2
+        for seg in segments:
+            obs, _ = model.policy.obs_to_tensor(seg["obs"])
+            actions = torch.as_tensor(np.array(seg["actions"]))
+            assert seg["masks"][np.arange(4), seg["actions"]].all()
+            with torch.no_grad():
+                values, log_prob, _ = model.policy.evaluate_actions(obs, actions, action_masks=seg["masks"])
+            np.testing.assert_allclose(log_prob.numpy(), seg["log_probs"], atol=1e-4)
+            np.testing.assert_allclose(values.numpy().ravel(), seg["values"], atol=1e-4)
+    finally:
+        venv.close()
+    path, model = train(_tiny(envs=2, n_steps=4, timesteps=16, checkpoint_every=0), tmp_path / "ray", backend="ray")
+    assert model.num_timesteps == 16
+    assert json.loads(path.read_text())["training"]["backend"] == "ray"
