@@ -8,14 +8,19 @@ first preset, run in the same process, is the figure. The coverage of a preset w
 coverage meter is counted afterwards, outside the timing, by a meter fed the same registered
 points, so that both presets' figures are the same measurement.
 
+A preset may carry dotted overrides, ``NAME+PATH=VALUE+...`` (values read as JSON): how a coarser
+variant of the training fidelity would fare.
+
 Usage:
     python benchmarks/fidelity.py --storeys 12 --cores 1
     python benchmarks/fidelity.py --presets fast,train --policy greedy:0.8+stop=0.04 --completion policy
+    python benchmarks/fidelity.py --presets fast,train,train+robot.scanner.angular_step=2.0
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 
@@ -44,6 +49,10 @@ def _play(env, policy, seed: int) -> dict:
         if terminated or truncated:
             break
     storey = env.storey
+    stages: dict[str, float] = {}
+    for record in storey.scans:  # every scan's stage times, the reset's first scan included
+        for stage, t in record.times.items():
+            stages[stage] = stages.get(stage, 0.0) + t
     coverage = storey.coverage_pct()
     if storey.meter is None:  # counted outside the timing, with the meter the other preset ran
         meter = CoverageMeter(storey.scene, env.config.coverage_spacing, env.config.coverage_radius)
@@ -57,6 +66,7 @@ def _play(env, policy, seed: int) -> dict:
         "scans": len(storey.scans),
         "path": storey.path_length,
         "coverage": coverage,
+        "stages": stages,
     }
 
 
@@ -81,19 +91,19 @@ def main() -> None:
 
     lo, _, hi = args.rooms.partition("-")
     presets = args.presets.split(",")
-    envs = {
-        name: NBSEnv(
-            make_config(
-                name,
-                **{
-                    "generator.rooms": (int(lo), int(hi or lo)),
-                    "rooms.completion": args.completion,
-                    "max_scans": args.max_episode_steps,
-                },
-            )
-        )
-        for name in presets
+    common = {
+        "generator.rooms": (int(lo), int(hi or lo)),
+        "rooms.completion": args.completion,
+        "max_scans": args.max_episode_steps,
     }
+    envs = {}
+    for name in presets:
+        base, *assignments = name.split("+")
+        overrides = dict(common)
+        for assignment in assignments:
+            key, _, value = assignment.partition("=")
+            overrides[key] = json.loads(value)
+        envs[name] = NBSEnv(make_config(base, **overrides))
     policy = make_policy(args.policy)
     _play(envs[presets[0]], policy, args.base - 1)  # warm-up: imports, compilation, first calls
     runs: dict[str, list[dict]] = {name: [] for name in presets}
@@ -118,6 +128,17 @@ def main() -> None:
             f"| {np.mean([x['coverage'] for x in r]):.2f} | {np.mean([x['scans'] for x in r]):.2f} "
             f"| {np.mean([x['path'] for x in r]):.1f} | {np.mean([x['steps'] for x in r]):.2f} |"
         )
+    print("\nWhere a step's time goes, ms a step (the stages of every scan; 'other': the rest of the")
+    print("reset, door detection, the observation and the bookkeeping):\n")
+    stages = ("scan", "registration", "roi", "classification", "voxels", "planning", "evaluation")
+    print("| preset | " + " | ".join(stages) + " | other |")
+    print("|---|" + "---|" * (len(stages) + 1))
+    for name in presets:
+        r = runs[name]
+        steps = sum(x["steps"] for x in r)
+        per = {st: 1000 * sum(x["stages"].get(st, 0.0) for x in r) / steps for st in stages}
+        other = 1000 * sum(x["seconds"] for x in r) / steps - sum(per.values())
+        print(f"| {name} | " + " | ".join(f"{per[st]:.1f}" for st in stages) + f" | {other:.1f} |")
     first = runs[presets[0]]
     for name in presets[1:]:
         d = [b["coverage"] - a["coverage"] for a, b in zip(first, runs[name], strict=True)]

@@ -79,6 +79,7 @@ def __dir__() -> list[str]:
 ENV_IDS: dict[str, tuple[str, dict, int]] = {
     "nbs_env/NBS-v0": ("default", {}, 80),
     "nbs_env/NBS-Fast-v0": ("fast", {}, 40),
+    "nbs_env/NBS-Train-v0": ("train", {}, 40),
     "nbs_env/NBS-FiveRooms-v0": ("default", {"scene": "five_rooms"}, 60),
 }
 

@@ -132,6 +132,7 @@ class NBSEnv(gym.Env):
     |---|---|---|---|
     | `nbs_env/NBS-v0` | default: 0.5° scanner, 5 cm voxels, odometry drift + ICP | generated 1-8 rooms | 80 |
     | `nbs_env/NBS-Fast-v0` | fast: 1° scanner, 10 cm voxels, perfect localisation | generated 1-3 rooms | 40 |
+    | `nbs_env/NBS-Train-v0` | train: fast without the coverage meter, reward `mapped` | generated 1-3 rooms | 40 |
     | `nbs_env/NBS-FiveRooms-v0` | default | `five_rooms` | 60 |
     """
 
@@ -251,8 +252,9 @@ class NBSEnv(gym.Env):
         truncated : bool
             The ``max_scans`` scan budget is spent and the storey is not complete.
         info : dict of str to Any
-            ``scans``, ``room``, ``rooms_done`` (int); ``structure_sensed_pct`` (float, % of the storey's true
-            structural surface: evaluation only); ``path_length_m`` (float); ``times``
+            ``scans``, ``room``, ``rooms_done`` (int); ``structure_sensed_pct`` (float, % of the storey's
+            true structural surface: evaluation only; None with ``coverage_meter=False``);
+            ``path_length_m`` (float); ``times``
             (:class:`~nbs_env.storey.StageTimes`, this step's seconds per stage);
             ``registration_error_m``, ``registration_error_deg`` (float, the last scan's pose error);
             ``registration_refused`` (str, why ICP's pose was refused; "" when accepted);
@@ -388,7 +390,8 @@ class NBSEnv(gym.Env):
             "scans": len(storey.scans),
             "room": storey.room,
             "rooms_done": storey.rooms_done,
-            "structure_sensed_pct": storey.coverage_pct(),
+            # None without the meter (the training fidelity): no figure, rather than a NaN.
+            "structure_sensed_pct": storey.coverage_pct() if storey.meter is not None else None,
             "path_length_m": storey.path_length,
             "times": StageTimes(dict(last.times)),
             "registration_error_m": m,

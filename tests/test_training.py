@@ -37,7 +37,7 @@ def _episode(preset: str, seed: int = 4, steps: int = 6):
 def test_the_training_fidelity_sees_and_decides_as_the_fast_preset():
     """The training fidelity drops the ground-truth meter, not the method: on one storey its
     observations, masks, candidates' gains and path are the fast preset's, step for step, while the
-    true coverage is not measured (NaN) and the reward is the robot's own mapped surface."""
+    true coverage is not measured (None) and the reward is the robot's own mapped surface."""
     fast_env, fast = _episode("fast")
     train_env, train = _episode("train")
     assert len(fast) == len(train) > 2
@@ -46,7 +46,7 @@ def test_the_training_fidelity_sees_and_decides_as_the_fast_preset():
             np.testing.assert_array_equal(a[key], b[key])
         np.testing.assert_array_equal(ia["candidate_gains"], ib["candidate_gains"])
         assert ia["path_length_m"] == ib["path_length_m"]
-        assert np.isnan(ib["structure_sensed_pct"]) and not np.isnan(ia["structure_sensed_pct"])
+        assert ib["structure_sensed_pct"] is None and ia["structure_sensed_pct"] >= 0
     assert fast_env.storey.meter is not None and train_env.storey.meter is None
     # The robot-side reward is paid for new structure: positive where a step sensed some.
     assert sum(r for _, _, r in train[1:]) > 0
@@ -132,6 +132,21 @@ def test_a_resumed_run_continues_with_its_optimiser(tmp_path):
         torch.testing.assert_close(value.cpu(), later["policy"][key])
 
 
+def test_a_resumed_run_extends_its_learning_curve(tmp_path):
+    """The curve of a resumed run goes on from the state's timesteps: the clone's record once, at 0,
+    and the greedy's figures the curve already holds, not evaluated again."""
+    pytest.importorskip("sb3_contrib")
+    from train.ppo import resume_config, train
+
+    out = tmp_path / "run"
+    small = {"eval_every": 8, "eval_storeys": 1, "bc_steps": 2, "max_episode_steps": 3}
+    train(_tiny(timesteps=8, **small), out, progress=False)
+    train(resume_config(out, timesteps=16), out, progress=False, resume=True)
+    curve = [json.loads(line) for line in (out / "learning_curve.jsonl").read_text().splitlines()]
+    assert [r["timesteps"] for r in curve] == [0, 8, 16]
+    assert all(r["greedy"] == curve[0]["greedy"] for r in curve)
+
+
 def test_a_modified_state_is_refused(tmp_path):
     pytest.importorskip("sb3_contrib")
     from nbs_env.errors import ModelFileError
@@ -166,6 +181,37 @@ def test_the_cli_refuses_to_resume_nothing_and_to_overwrite_a_run(tmp_path):
     p = _cli("--out", str(out), "--timesteps", "8", "--quiet")
     _, err = p.communicate(timeout=120)
     assert p.returncode == 2 and "--resume" in err and "Traceback" not in err
+
+
+def test_a_signal_during_behaviour_cloning_ends_the_clone_at_once():
+    """The stop request is read before every cloning step: a clone asked to stop after three steps
+    returns None (nothing saved), one never asked runs all its steps."""
+    pytest.importorskip("sb3_contrib")
+    from sb3_contrib import MaskablePPO
+
+    from train.ppo import TrainConfig, _policy_class, _teacher, behaviour_clone, make_training_envs
+
+    class Stop:
+        def __init__(self, after: int | None) -> None:
+            self.after, self.reads = after, 0
+
+        @property
+        def signal(self) -> int | None:
+            self.reads += 1
+            return signal.SIGTERM if self.after is not None and self.reads > self.after else None
+
+    config = TrainConfig(envs=1, seed=0, rooms=(1, 2), completion="policy")
+    venv = make_training_envs(config)
+    model = MaskablePPO(_policy_class(), venv, n_steps=32, batch_size=32, policy_kwargs={"network": config.network})
+    try:
+        stopped = Stop(3)
+        assert behaviour_clone(model, 6, epochs=1, teacher=_teacher("greedy"), stop=stopped) is None
+        assert stopped.reads == 4
+        kept = Stop(None)
+        warm = behaviour_clone(model, 6, epochs=1, teacher=_teacher("greedy"), stop=kept)
+        assert warm is not None and warm["samples"] == 6 and kept.reads == 6
+    finally:
+        venv.close()
 
 
 @pytest.mark.expensive
@@ -227,3 +273,18 @@ def test_rollouts_on_a_local_ray_instance(tmp_path):
     path, model = train(_tiny(envs=2, n_steps=4, timesteps=16, checkpoint_every=0), tmp_path / "ray", backend="ray")
     assert model.num_timesteps == 16
     assert json.loads(path.read_text())["training"]["backend"] == "ray"
+
+
+def test_commands_that_report_coverage_refuse_the_training_fidelity(tmp_path):
+    """nbs scan and nbs compare report the true coverage, which the training fidelity does not
+    measure: they refuse --preset train with a message that names the preset to use instead."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    for args in (
+        ["scan", "--scene", "l_room", "--preset", "train", "--out", str(tmp_path / "s")],
+        ["compare", "--scenes", "l_room", "--policies", "greedy", "--preset", "train", "--out", str(tmp_path / "c")],
+    ):
+        command = [sys.executable, "-m", "train.cli", *args]
+        p = subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True)
+        assert p.returncode == 2, p.stderr
+        assert "--preset fast" in p.stderr and "Traceback" not in p.stderr
+        assert not (tmp_path / "s").exists() and not (tmp_path / "c").exists()

@@ -66,7 +66,7 @@ def output_folder_problem(path: str | Path) -> str | None:
 # ---------------------------------------------------------------------- the robot's options
 #: :data:`nbs_env.config.PRESETS`' names, written out so that ``--help`` loads no configuration
 #: (tests/test_cli.py checks them against the presets).
-PRESET_NAMES = ("default", "paper", "fast")
+PRESET_NAMES = ("default", "paper", "fast", "train")
 WALL_SEARCH_HELP = (
     "search scans per room (rooms.wall_search.scans): before a room ends, scan from where most of its "
     "wall that no scan faced is seen, so that doors there can be found (default: the preset's, 3; 0: the paper's "
@@ -186,7 +186,9 @@ def scene_options(args: argparse.Namespace) -> dict[str, Any]:
     return options
 
 
-def config_from_arguments(args: argparse.Namespace, preset: str, **defaults: Any) -> tuple[str, dict[str, Any]]:
+def config_from_arguments(
+    args: argparse.Namespace, preset: str, measured: bool = True, **defaults: Any
+) -> tuple[str, dict[str, Any]]:
     """The preset and the dotted configuration overrides the robot options of a command line give.
 
     Parameters
@@ -195,6 +197,9 @@ def config_from_arguments(args: argparse.Namespace, preset: str, **defaults: Any
         Parsed by a parser with :func:`add_robot_arguments`.
     preset : str
         The command's preset when ``--preset`` is not given.
+    measured : bool
+        The command reports the true coverage (``nbs scan``, ``nbs compare``): a configuration
+        without the coverage meter (the ``train`` preset) is refused.
     **defaults
         The command's own defaults of configuration paths (``max_scans=80``), used when no option
         sets them.
@@ -248,7 +253,12 @@ def config_from_arguments(args: argparse.Namespace, preset: str, **defaults: Any
         given[key] = value
     for key, value in defaults.items():
         given.setdefault(key, value)
-    make_config(preset, **given)  # checked now, before any work starts
+    config = make_config(preset, **given)  # checked now, before any work starts
+    if measured and not config.coverage_meter:
+        raise ConfigError(
+            f"--preset {preset} runs no coverage meter (nbs train's training fidelity), and this command reports "
+            "coverage: use --preset fast, the same robot with the meter"
+        )
     return preset, given
 
 

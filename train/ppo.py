@@ -575,9 +575,10 @@ def train(
 
     Returns
     -------
-    (Path, MaskablePPO)
+    (Path or None, MaskablePPO)
         The final checkpoint's ``policy.json`` and the trained model; ``model.interrupted`` is the
-        signal that stopped the run early (None when it ran to the end).
+        signal that stopped the run early (None when it ran to the end). The path is None when a
+        signal stopped the run during behaviour cloning, before there was a state to save.
 
     Raises
     ------
@@ -625,7 +626,12 @@ def train(
     greedy = GreedyPolicy()
     baseline = None
     if config.eval_every:
-        baseline = evaluate(greedy.act, held_out, config.max_episode_steps, config.evaluation_config())
+        # A resumed run's greedy is the one its curve already holds: the same storeys, the same robot.
+        lines = log.read_text().splitlines() if log.is_file() else []
+        earlier = [json.loads(line) for line in lines if line.strip()]
+        baseline = earlier[-1]["greedy"] if earlier and earlier[-1].get("greedy") else None
+        if baseline is None:
+            baseline = evaluate(greedy.act, held_out, config.max_episode_steps, config.evaluation_config())
 
     def checkpoint(n: int) -> None:
         folder = out / f"checkpoint_{n}"
@@ -641,7 +647,7 @@ def train(
             self.last_eval = done_before
             self.last_checkpoint = done_before
             self.episodes: list[float] = []
-            if config.eval_every and warm is not None:
+            if config.eval_every and warm is not None and done_before == 0:
                 self._evaluate(0)  # the behaviour-cloned start
 
         def _on_step(self) -> bool:
@@ -679,15 +685,20 @@ def train(
 
     started = time.time()
     warm = None
-    if config.bc_steps and state is None:
-        warm = behaviour_clone(model, config.bc_steps, progress=progress, teacher=_teacher(config.bc_teacher))
-    if warm is not None:
-        (out / "behaviour_cloning.json").write_text(json.dumps(warm, indent=1))
-        if config.checkpoint_every:  # the behaviour-cloned start, a policy of its own to compare
-            checkpoint(0)
-    elif state is not None and (out / "behaviour_cloning.json").is_file():
-        warm = json.loads((out / "behaviour_cloning.json").read_text())
     with _Stop() as stop:
+        if config.bc_steps and state is None:
+            teacher = _teacher(config.bc_teacher)
+            warm = behaviour_clone(model, config.bc_steps, progress=progress, teacher=teacher, stop=stop)
+            if warm is None:  # stopped while cloning: nothing learned yet that a resume could use
+                venv.close()
+                model.interrupted = stop.signal
+                return None, model
+        if warm is not None:
+            (out / "behaviour_cloning.json").write_text(json.dumps(warm, indent=1))
+            if config.checkpoint_every:  # the behaviour-cloned start, a policy of its own to compare
+                checkpoint(0)
+        elif state is not None and (out / "behaviour_cloning.json").is_file():
+            warm = json.loads((out / "behaviour_cloning.json").read_text())
         model.learn(
             total_timesteps=max(0, config.timesteps - done_before),
             callback=Progress(),
@@ -749,15 +760,17 @@ def _teacher(name: str):
 
 
 def behaviour_clone(
-    model, steps: int, epochs: int = 30, batch_size: int = 64, progress: bool = False, teacher=None
-) -> dict:
+    model, steps: int, epochs: int = 30, batch_size: int = 64, progress: bool = False, teacher=None, stop=None
+) -> dict | None:
     """Warm-start the policy on a greedy's decisions: play the greedy in the training envs for
     ``steps`` vector steps, then fit the masked logits to its choices by cross-entropy. With a
     "room done" action (completion="policy") the greedy declares the room done where the robot's
     gain rule would end it at the teacher's completion fraction (``NBSEnv.gain_rule_done``, the
     robot's own plan; the robot's fraction when the teacher sets none).
 
-    ``teacher``: a :class:`policies.GreedyPolicy` (None: the paper's greedy).
+    ``teacher``: a :class:`policies.GreedyPolicy` (None: the paper's greedy). ``stop``: an object
+    whose ``signal`` turns non-None when the run is asked to stop; the clone then ends at once and
+    returns None.
 
     Returns ``{"samples", "loss_first", "loss_last", "agreement", "teacher", "rooms_declared"}``:
     agreement is the share of the samples where the policy's masked argmax equals the greedy's
@@ -773,11 +786,13 @@ def behaviour_clone(
     obs = venv.reset()
     samples: list[tuple[dict, np.ndarray, np.ndarray]] = []
     for _ in range(steps):
+        if stop is not None and stop.signal is not None:
+            return None
         masks = get_action_masks(venv)
         # The greedy's own rule, one env at a time, from what its info would hold.
         gains = venv.env_method("candidate_gains")
-        stop = masks.shape[1] > len(gains[0])
-        done = venv.env_method("gain_rule_done", greedy.stop) if stop else [False] * len(masks)
+        room_action = masks.shape[1] > len(gains[0])
+        done = venv.env_method("gain_rule_done", greedy.stop) if room_action else [False] * len(masks)
         actions = np.array(
             [
                 greedy.act(
@@ -821,7 +836,7 @@ def behaviour_clone(
         "loss_last": losses[-1],
         "agreement": agreement,
         "teacher": greedy.name,
-        "rooms_declared": int((all_actions == all_masks.shape[1] - 1).sum()) if stop else 0,
+        "rooms_declared": int((all_actions == all_masks.shape[1] - 1).sum()) if room_action else 0,
     }
 
 
@@ -937,7 +952,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"nbs train: error: {problem} (nbs train scans generated storeys)", file=sys.stderr)
         return 2
     try:
-        preset, overrides = config_from_arguments(args, "train")
+        preset, overrides = config_from_arguments(args, "train", measured=False)
         config = TrainConfig(
             timesteps=2048 if args.timesteps is None else args.timesteps,
             envs=args.envs,
@@ -998,6 +1013,16 @@ def _run(config: TrainConfig, out: Path, args, resume: bool) -> int:
     except ConfigError as exc:
         print(f"nbs train: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # before the run's steps began (starting the workers, the first evaluation)
+        print("nbs train: interrupted before training began; nothing to continue from", file=sys.stderr)
+        return 130
+    if model.interrupted is not None and path is None:
+        print(
+            f"nbs train: stopped by signal {model.interrupted} during behaviour cloning, before the run had a "
+            "state to continue from: run the command again",
+            file=sys.stderr,
+        )
+        return 130
     if model.interrupted is not None:
         print(
             f"nbs train: stopped by signal {model.interrupted} at {model.num_timesteps} timesteps; "

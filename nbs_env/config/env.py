@@ -175,7 +175,7 @@ class EnvConfig(Config):
         Driving speed for the travel time, m/s.
     coverage_meter : bool
         Run the ground-truth coverage meter (True, the default). Off, nothing measures the true
-        surface sensed: ``info["structure_sensed_pct"]`` is NaN, the reward must be robot-side
+        surface sensed: ``info["structure_sensed_pct"]`` is None, the reward must be robot-side
         (``reward.kind`` other than ``"coverage"``), and a reset skips the meter's sampling of the
         storey's interior (most of a reset's time). The training fidelity turns it off.
     """
