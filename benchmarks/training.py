@@ -24,7 +24,7 @@ def run(setting: str, args) -> dict:
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from train.ppo import TrainConfig, build_model, make_training_envs
+    from train.ppo import TrainConfig, build_model, make_training_envs, ray_rollouts
 
     backend, _, envs = setting.partition(":")
     config = TrainConfig(
@@ -36,12 +36,7 @@ def run(setting: str, args) -> dict:
         n_steps=args.n_steps,
         preset=args.preset,
     )
-    if backend == "ray":
-        from train.ray_rollouts import RayRollouts
-
-        venv = RayRollouts(config)
-    else:
-        venv = make_training_envs(config)
+    venv = ray_rollouts(config) if backend == "ray" else make_training_envs(config)
     model = build_model(config, venv)
     if backend == "ray":
         venv.attach(model)

@@ -391,7 +391,7 @@ class NBSEnv(gym.Env):
             "room": storey.room,
             "rooms_done": storey.rooms_done,
             # None without the meter (the training fidelity): no figure, rather than a NaN.
-            "structure_sensed_pct": storey.coverage_pct() if storey.meter is not None else None,
+            "structure_sensed_pct": storey.coverage_pct() if self.config.coverage_meter else None,
             "path_length_m": storey.path_length,
             "times": StageTimes(dict(last.times)),
             "registration_error_m": m,

@@ -249,11 +249,10 @@ def test_rollouts_on_a_local_ray_instance(tmp_path):
     pytest.importorskip("sb3_contrib")
     pytest.importorskip("ray")
     torch = pytest.importorskip("torch")
-    from train.ppo import build_model, train
-    from train.ray_rollouts import RayRollouts
+    from train.ppo import build_model, ray_rollouts, train
 
     config = _tiny(envs=2, n_steps=4)
-    venv = RayRollouts(config, seed=5)
+    venv = ray_rollouts(config, seed=5)
     try:
         model = build_model(config, venv)
         venv.attach(model)

@@ -236,6 +236,29 @@ def _env_factory(run: TrainConfig):
     return make
 
 
+def ray_rollouts(config: TrainConfig, address: str | None = None, seed: int = 0):
+    """The run's envs in Ray actors (:class:`train.ray_rollouts.RayRollouts`), each with a copy of
+    the run's policy.
+
+    Parameters
+    ----------
+    config : TrainConfig
+        The run: its envs, their number and its network.
+    address : str, optional
+        The Ray cluster to join; None starts a local instance.
+    seed : int
+        Actor ``i``'s env is seeded with ``seed + i``.
+    """
+    from train.ray_rollouts import RayRollouts
+
+    network = config.network
+
+    def make_policy(observation_space, action_space):
+        return _policy_class()(observation_space, action_space, lambda _: 0.0, network=network)
+
+    return RayRollouts(_env_factory(config), make_policy, config.envs, address=address, seed=seed)
+
+
 def _policy_class():
     from sb3_contrib.common.maskable.policies import MaskableMultiInputActorCriticPolicy
     from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
@@ -602,9 +625,7 @@ def train(
     out.mkdir(parents=True, exist_ok=True)
     done_before = 0 if state is None else int(state[1]["timesteps"])
     if backend == "ray":
-        from train.ray_rollouts import RayRollouts
-
-        venv = RayRollouts(config, address=address, seed=config.seed + done_before)
+        venv = ray_rollouts(config, address=address, seed=config.seed + done_before)
     else:
         venv = make_training_envs(config, seed=config.seed + done_before)
     device = "cuda" if torch.cuda.is_available() else "cpu"

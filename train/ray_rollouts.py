@@ -38,16 +38,14 @@ def _require_ray():
 class _Worker:
     """One env and a copy of the policy, in a Ray actor."""
 
-    def __init__(self, run: dict, seed: int, threads: int) -> None:
+    def __init__(self, make_env, make_policy, seed: int, threads: int) -> None:
         # The worker's share of the machine, read by nbs_env.threads and torch when they start.
         os.environ["NBS_THREADS"] = str(threads)
         import torch
 
         torch.set_num_threads(threads)
-        from train.ppo import TrainConfig, _env_factory
-
-        self.config = TrainConfig.from_dict(run)
-        self.env = _env_factory(self.config)()
+        self.env = make_env()
+        self.make_policy = make_policy
         self.obs, _ = self.env.reset(seed=seed)
         self.episode_start = True
         self.policy = None
@@ -85,10 +83,8 @@ class _Worker:
         first (``VecTransposeImage``); the observations are laid out as the learner's are."""
         import torch
 
-        from train.ppo import _policy_class
-
         if self.policy is None:
-            self.policy = _policy_class()(space, self.env.action_space, lambda _: 0.0, network=self.config.network)
+            self.policy = self.make_policy(space, self.env.action_space)
             self.transposed = [k for k in space.spaces if space[k].shape != self.env.observation_space[k].shape]
 
         def laid_out(obs: dict) -> dict:
@@ -153,13 +149,19 @@ def _portable(info: dict) -> dict:
 
 
 class RayRollouts(VecEnv):
-    """``config.envs`` envs in Ray actors: a ``VecEnv`` for lockstep steps, and :meth:`collect` for
-    rollouts the actors play on their own.
+    """``n_envs`` envs in Ray actors: a ``VecEnv`` for lockstep steps, and :meth:`collect` for
+    rollouts the actors play on their own. The learner (:func:`train.ppo.ray_rollouts`) says what
+    an actor builds, so that this module needs nothing of it.
 
     Parameters
     ----------
-    config : TrainConfig
-        The run (its envs, their number).
+    make_env : callable
+        ``make_env()`` builds one env (cloudpickled to each actor).
+    make_policy : callable
+        ``make_policy(observation_space, action_space)`` builds the learner's policy, whose weights
+        :meth:`collect` loads.
+    n_envs : int
+        Actors, one env each.
     address : str, optional
         The cluster to join (``"auto"``, ``host:port``); None starts a local instance with one CPU
         per env.
@@ -167,7 +169,7 @@ class RayRollouts(VecEnv):
         Actor ``i``'s env is seeded with ``seed + i``.
     """
 
-    def __init__(self, config, address: str | None = None, seed: int = 0) -> None:
+    def __init__(self, make_env, make_policy, n_envs: int, address: str | None = None, seed: int = 0) -> None:
         ray = _require_ray()
         self._ray = ray
         self._started = False
@@ -175,14 +177,14 @@ class RayRollouts(VecEnv):
             if address:
                 ray.init(address=address, log_to_driver=False)
             else:
-                ray.init(num_cpus=config.envs, include_dashboard=False, log_to_driver=False)
+                ray.init(num_cpus=n_envs, include_dashboard=False, log_to_driver=False)
             self._started = True
-        cores = int(ray.cluster_resources().get("CPU", config.envs))
-        threads = max(1, cores // config.envs) if not address else 1
+        cores = int(ray.cluster_resources().get("CPU", n_envs))
+        threads = max(1, cores // n_envs) if not address else 1
         actor = ray.remote(num_cpus=1)(_Worker)
-        self.workers = [actor.remote(config.to_dict(), seed + i, threads) for i in range(config.envs)]
+        self.workers = [actor.remote(make_env, make_policy, seed + i, threads) for i in range(n_envs)]
         observation_space, action_space = ray.get(self.workers[0].spaces.remote())
-        super().__init__(config.envs, observation_space, action_space)
+        super().__init__(n_envs, observation_space, action_space)
         self._actions: np.ndarray | None = None
         self.model = None
 
