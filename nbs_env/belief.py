@@ -55,6 +55,10 @@ class RoomModel:
         Which of ``points`` are labelled Structure.
     has_ceiling : bool
         False for a room open to the sky (:attr:`RoI.has_ceiling`): ``ceiling_z`` is its walls' top.
+    scans : (m,) int32 or None
+        For each of ``points``, the index of the scan that first measured its 5 cm voxel (the
+        episode's scan index, :attr:`nbs_env.storey.ScanRecord.scan`, for a robot's rooms); None
+        where unknown (a model made by hand).
     """
 
     index: int
@@ -65,6 +69,7 @@ class RoomModel:
     points: np.ndarray = field(repr=False)
     structure: np.ndarray = field(repr=False)
     has_ceiling: bool = True
+    scans: np.ndarray | None = field(repr=False, default=None)
 
 
 #: A RoI face is a frontier when less than this share of its image between 0.3 m above the floor and
@@ -181,7 +186,8 @@ class RoomBelief:
         self.missed = np.zeros((0, 3))
         self.missed_range = np.zeros(0)
         self.missed_from = np.zeros((0, 3))
-        self.cloud = VoxelMeans(perception_voxel)
+        # Each voxel keeps the scan that first measured it: the report's point source (cloud.laz).
+        self.cloud = VoxelMeans(perception_voxel, tags=True)
         self.grid: VoxelGrid | None = None
         self.roi: RoI | None = None
         self.se: np.ndarray = np.zeros(0, dtype=bool)
@@ -206,7 +212,12 @@ class RoomBelief:
         return 0.0 if whole <= 0 else max(0.0, 1.0 - Polygon(self.roi.polygon).area / whole)
 
     def add_scan(
-        self, scan: Scan, pose: np.ndarray, keep_direction: np.ndarray | None = None, world: np.ndarray | None = None
+        self,
+        scan: Scan,
+        pose: np.ndarray,
+        keep_direction: np.ndarray | None = None,
+        world: np.ndarray | None = None,
+        scan_index: int | None = None,
     ) -> BeliefUpdate:
         """Take in a registered scan: RoI, SE classification, point labels, V(t).
 
@@ -220,12 +231,19 @@ class RoomBelief:
             For the first scan of a room taken in its door frame: the direction into the room.
         world : (n, 3) float, optional
             The scan placed with ``pose`` (``scan.to_world(pose)``), when the caller has it.
+        scan_index : int, optional
+            The number the working copy's new voxels are tagged with (:attr:`RoomModel.scans`): the
+            robot passes the episode's scan index. Default: the scan's order in this room (0, 1, ...).
+
+        Returns
+        -------
+        BeliefUpdate
         """
         times: dict[str, float] = {}
         t = time.perf_counter()
         new = RoIScan.from_scan(scan, pose, keep_direction, world)
         self.scans.append(new)
-        self.cloud.add(new.points)
+        self.cloud.add(new.points, tag=len(self.scans) - 1 if scan_index is None else scan_index)
         roi = compute_roi(self.scans, self.roi_config, self.exclude)
         times["roi"] = time.perf_counter() - t
 
@@ -306,7 +324,15 @@ class RoomBelief:
         se_faces = self.se_faces
         structure = label_points(points, se_faces, roi.floor_z, roi.ceiling_z, roi.polygon, ceiling=roi.has_ceiling)
         return RoomModel(
-            index, roi.polygon.copy(), roi.floor_z, roi.ceiling_z, se_faces, points, structure, roi.has_ceiling
+            index,
+            roi.polygon.copy(),
+            roi.floor_z,
+            roi.ceiling_z,
+            se_faces,
+            points,
+            structure,
+            roi.has_ceiling,
+            self.cloud.tags.copy(),
         )
 
     def keep_unobservable(

@@ -86,6 +86,11 @@ scene's ground truth (true positions, true rooms), which the robot never sees.
                             before)}
     wall_searches           list, one per wall-search scan (RoomRules.wall_search.scans > 0):
                             {scan (its index in steps), room (the robot's number)}
+    scanner                 {name, setting, model} | null: the datasheet scanner preset that ran
+                            (``--scanner NAME[:SETTING]``, :attr:`~nbs_env.config.ScannerConfig.preset`,
+                            :mod:`nbs_env.config.scanners`): its name (``"rtc360"``), resolution setting
+                            (``"6mm"``) and manufacturer and model (``"Leica RTC360"``; null for a
+                            name no preset has); null for the method's generic simulated scanner
     config                  the env's EnvConfig as a dict (tuples as lists)
 
 A scan belongs to the true room whose floor polygon (clear floor inside the walls) contains its
@@ -113,7 +118,15 @@ from shapely.geometry import Point, Polygon
 if TYPE_CHECKING:
     from nbs_env.storey import Storey
 
-__all__ = ["ROOM_TOLERANCE", "SCHEMA", "json_safe", "metrics_dict", "quaternion_wxyz", "true_rooms_of"]
+__all__ = [
+    "ROOM_TOLERANCE",
+    "SCHEMA",
+    "json_safe",
+    "metrics_dict",
+    "quaternion_wxyz",
+    "scanner_preset",
+    "true_rooms_of",
+]
 
 #: The version tag of :func:`metrics_dict`'s output.
 SCHEMA = "nbs-metrics/1"
@@ -189,6 +202,30 @@ def _share(flags: np.ndarray, mask: np.ndarray | None = None) -> float:
     """% of the samples (of ``mask``'s) whose flag is set; 0 with none."""
     flags = flags if mask is None else flags[mask]
     return 100.0 * float(np.count_nonzero(flags)) / len(flags) if len(flags) else 0.0
+
+
+def scanner_preset(preset: str | None) -> dict[str, str | None] | None:
+    """``metrics.json``'s ``scanner``: the datasheet preset a scanner's values came from.
+
+    Parameters
+    ----------
+    preset : str or None
+        :attr:`nbs_env.config.ScannerConfig.preset` (``"rtc360:6mm"``), None for the generic scanner.
+
+    Returns
+    -------
+    dict or None
+        ``{"name", "setting", "model"}``: the preset's name and setting (None when the spec names
+        none), and its manufacturer and model from :data:`nbs_env.config.scanners.SCANNERS` (None
+        for a name it lacks); None for ``preset`` None.
+    """
+    if preset is None:
+        return None
+    from nbs_env.config.scanners import SCANNERS
+
+    name, colon, setting = str(preset).partition(":")
+    model = SCANNERS.get(name.strip().lower())
+    return {"name": name, "setting": setting if colon else None, "model": None if model is None else model.title}
 
 
 def quaternion_wxyz(pose: np.ndarray) -> np.ndarray:
@@ -357,6 +394,7 @@ def metrics_dict(
         "door_events": storey.door_events,
         "room_ends": storey.room_ends,
         "wall_searches": storey.wall_searches,
+        "scanner": scanner_preset(storey.config.robot.scanner.preset),
         "config": storey.config.to_dict(),
     }
     return json_safe(metrics)

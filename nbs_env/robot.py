@@ -108,6 +108,10 @@ class Robot:
         #: Scans taken in every room (a scan that raised included): what is derived from the
         #: belief is valid until the next one.
         self.scans_taken = 0
+        #: Scans that reached the belief (one that raised left out): the index of the next one in the
+        #: episode's log (:attr:`nbs_env.storey.Storey.scans`), which the rooms' working copies tag
+        #: its points with (:attr:`nbs_env.belief.RoomModel.scans`).
+        self.scans_added = 0
 
     @property
     def scans_in_room(self) -> int:
@@ -140,7 +144,8 @@ class Robot:
         world = scan.to_world(self.pose)
         world.flags.writeable = False  # shared by S(t), the belief's RoI scan and the step's report
         self.cloud.add(world, self.pose[:3, 3], room=self.room_index, pose=None if result is None else self.pose)
-        update = self.belief.add_scan(scan, self.pose, keep_direction, world)
+        update = self.belief.add_scan(scan, self.pose, keep_direction, world, scan_index=self.scans_added)
+        self.scans_added += 1
         nav = self.config.navigation
         self.belief.cover(self.pose[:2, 3], nav.robot_radius + nav.safety_distance + 2 * self.config.voxel_size)
         times.update(update.times)

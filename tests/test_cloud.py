@@ -48,6 +48,35 @@ def test_bad_points_are_refused():
     assert len(cloud) == 0 and cloud.points.shape == (0, 3)
 
 
+def test_tags_are_the_first_batch_that_reached_each_voxel():
+    """With ``tags=True`` each voxel keeps the tag of the first ``add`` that put a point in it
+    (the scan index the report writes as a point's source), in the order of the points."""
+    rng = np.random.default_rng(7)
+    batches = [rng.uniform(-1.0, 1.0, size=(300, 3)) for _ in range(4)]
+    size = 0.25
+    cloud = VoxelMeans(size, tags=True)
+    for tag, batch in enumerate(batches):
+        cloud.add(batch, tag=10 + tag)
+        if tag == 1:
+            copy = cloud.copy()
+    first: dict[tuple[int, int, int], int] = {}
+    for tag, batch in enumerate(batches):
+        for cell in map(tuple, np.floor(batch / size).astype(int)):
+            first.setdefault(cell, 10 + tag)
+    got = {tuple(np.floor(p / size).astype(int)): int(t) for p, t in zip(cloud.points, cloud.tags, strict=True)}
+    assert got == first and len(set(got.values())) == 4  # every batch reached voxels of its own
+    assert cloud.tags.dtype == np.int32 and len(copy.tags) == len(copy) < len(cloud)
+    assert set(copy.tags.tolist()) == {10, 11}  # the copy did not see the later batches
+    with pytest.raises(ValueError, match="tag"):
+        cloud.add(batches[0])
+    with pytest.raises(ValueError, match="tag"):
+        VoxelMeans(size).add(batches[0], tag=0)
+    with pytest.raises(ValueError, match="tag must be in"):
+        VoxelMeans(size, tags=True).add(batches[0], tag=-1)
+    with pytest.raises(ValueError, match="no tags"):
+        _ = VoxelMeans(size).tags
+
+
 def test_normals_are_summed_per_voxel_with_the_points():
     rng = np.random.default_rng(4)
     points = rng.uniform(-1.0, 1.0, size=(500, 3))

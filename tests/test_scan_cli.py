@@ -93,6 +93,7 @@ TOP_LEVEL = {
     "door_events": list,
     "room_ends": list,
     "wall_searches": list,
+    "scanner": (dict, type(None)),
     "config": dict,
 }
 ROOM_KEYS = {
@@ -152,6 +153,7 @@ def test_metrics_json_has_the_schema(report):
     assert m["config"]["max_scans"] == 3 and m["config"]["scene"] == "l_room"
     assert m["config"]["robot"]["scanner"]["angular_step"] == 1.0 and m["config"]["robot"]["voxel_size"] == 0.1
     assert isinstance(m["config"]["observation"]["shape"], list)
+    assert m["scanner"] is None  # the method's generic scanner, no datasheet preset
 
 
 def test_rooms_are_the_true_rooms(report):
@@ -494,7 +496,10 @@ def test_door_frame_scans_belong_to_the_room_entered():
         step(5, 2, (2, 4.9), 12.0, door=True),  # entering c, the budget ran out: the room no scan was in
     ]
     config = SimpleNamespace(
-        travel_speed=0.5, quality=QualityConfig(), to_dict=lambda: {"max_scans": 10, "shape": (1, 2)}
+        travel_speed=0.5,
+        quality=QualityConfig(),
+        robot=SimpleNamespace(scanner=SimpleNamespace(preset=None)),
+        to_dict=lambda: {"max_scans": 10, "shape": (1, 2)},
     )
     # One sample per room; the first dense and seen squarely after the second scan.
     curve = np.array([0.0, 100 / 3, 100 / 3, 100 / 3, 100 / 3, 100 / 3])
@@ -552,7 +557,7 @@ def test_door_frame_scans_belong_to_the_room_entered():
 def test_nbs_scan_with_each_scanner_preset_times_its_stations(tmp_path, spec):
     """Each preset drives a run (a steep -60° field with a 0.5 m minimum range once left the robot no
     way off its first stop), and the acquisition time is the preset's station time per scan."""
-    from nbs_env.config.scanners import scanner_config
+    from nbs_env.config.scanners import SCANNERS, scanner_config
 
     out = tmp_path / "report"
     with contextlib.redirect_stdout(io.StringIO()) as stdout:
@@ -560,6 +565,8 @@ def test_nbs_scan_with_each_scanner_preset_times_its_stations(tmp_path, spec):
     m = json.loads((out / "metrics.json").read_text())
     expected = scanner_config(spec, simulated_step=1.0)
     assert m["config"]["robot"]["scanner"] == json.loads(json.dumps(expected.to_dict()))
+    name, setting = expected.preset.split(":")
+    assert m["scanner"] == {"name": name, "setting": setting, "model": SCANNERS[name].title}
     assert m["scans"] == 3 and m["path_length_m"] > 0  # the robot moved
     assert m["acquisition_time_s"] == pytest.approx(3 * expected.station_time)
     assert f"3 stations at {expected.station_time:g} s" in stdout.getvalue()

@@ -138,6 +138,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="start position in metres (--start=-1,2 for a negative X)",
     )
     scan.add_argument("--no-steps", action="store_true", help="do not save a picture per step")
+    scan.add_argument(
+        "--full-cloud",
+        action="store_true",
+        help="cloud.laz holds every measured point of the scans, not the rooms' 5 cm working copies",
+    )
     scan.add_argument("--quiet", action="store_true", help="no progress bar")
     add_robot_arguments(scan)
 
@@ -509,7 +514,9 @@ def _scan(args: argparse.Namespace, policy, out: Path, cfg) -> int:
         finally:
             if recorder is not None:
                 recorder.close()  # what was recorded stays readable, whatever ended the run
-    metrics = write_report(env, out, args.scene, policy, args.seed, policy_times, run_started=started)
+    metrics = write_report(
+        env, out, args.scene, policy, args.seed, policy_times, run_started=started, full_cloud=args.full_cloud
+    )
     files = [*REPORT_FILES, *([] if args.no_steps else [f"steps/ ({k + 1} pictures)"])]
     if not env.storey.scan_log:
         files.remove("scans.e57")

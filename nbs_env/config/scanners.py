@@ -207,6 +207,8 @@ class ScannerModel:
         The setting a bare ``"name"`` spec takes.
     sources : tuple of str
         The documents the figures come from, with their provenance.
+    vendor : str
+        The manufacturer as its data sheets name it (an E57 record's ``sensorVendor``).
     """
 
     name: str
@@ -220,6 +222,7 @@ class ScannerModel:
     settings: tuple[ResolutionSetting, ...]
     default_setting: str
     sources: tuple[str, ...]
+    vendor: str = ""
 
     def __post_init__(self) -> None:
         # A malformed table fails at import rather than when a run first asks for the preset.
@@ -261,6 +264,7 @@ def _vz400() -> ScannerModel:
     return ScannerModel(
         name="vz400",
         title="Riegl VZ-400",
+        vendor="RIEGL Laser Measurement Systems",
         elevation_min=-40.0,
         elevation_max=60.0,
         min_range=1.5,
@@ -303,6 +307,7 @@ def _rtc360() -> ScannerModel:
     return ScannerModel(
         name="rtc360",
         title="Leica RTC360",
+        vendor="Leica Geosystems",
         elevation_min=-60.0,
         elevation_max=90.0,
         min_range=0.5,
@@ -357,6 +362,7 @@ def _focus() -> ScannerModel:
     return ScannerModel(
         name="focus",
         title="FARO Focus S 350",
+        vendor="FARO Technologies",
         elevation_min=-60.0,
         elevation_max=90.0,
         min_range=0.6,
@@ -389,6 +395,7 @@ def _blk360() -> ScannerModel:
     return ScannerModel(
         name="blk360",
         title="Leica BLK360 G2",
+        vendor="Leica Geosystems",
         elevation_min=-45.0,
         elevation_max=90.0,
         min_range=0.5,

@@ -47,15 +47,22 @@ class VoxelMeans:
         zero matrix for a point without one): a voxel's covariance is then the mean of its points'
         that have one, as in VGICP's voxels (Koide et al., ICRA 2021), which ICP's target reads
         instead of estimating its own at every registration.
+    tags : bool
+        Keep, per voxel, the ``tag`` of the ``add`` that first put a point in it (then every ``add``
+        gives one): the room's copy tags each voxel with the scan that first measured it, the scan
+        index the report's ``cloud.laz`` writes as its point source (:attr:`tags`). Unlike the means,
+        the tags depend on the order the scans came in.
     """
 
-    def __init__(self, voxel_size: float, normals: bool = False, covariances: bool = False) -> None:
+    def __init__(self, voxel_size: float, normals: bool = False, covariances: bool = False, tags: bool = False) -> None:
         if not (np.isfinite(voxel_size) and voxel_size > 0):
             raise ValueError(f"voxel_size must be a positive number of metres, got {voxel_size}")
         self.voxel_size = float(voxel_size)
         self.has_normals = bool(normals)
         self.has_covariances = bool(covariances)
+        self.has_tags = bool(tags)
         self._keys = np.zeros(0, dtype=np.int64)
+        self._tags = np.zeros(0, dtype=np.int32)
         # Columns 0-2 the points' sums, then 3 of their normals' (with ``normals``), then 6 of their
         # covariances' upper triangles (xx, xy, xz, yy, yz, zz) and how many gave one (with
         # ``covariances``).
@@ -67,16 +74,22 @@ class VoxelMeans:
         """Voxels held (points in the working copy)."""
         return len(self._keys)
 
-    def add(self, points: np.ndarray, normals: np.ndarray | None = None, covariances: np.ndarray | None = None) -> None:
+    def add(
+        self,
+        points: np.ndarray,
+        normals: np.ndarray | None = None,
+        covariances: np.ndarray | None = None,
+        tag: int | None = None,
+    ) -> None:
         """Add (n, 3) float world points, with their (n, 3) float unit ``normals`` when the copy
-        keeps normals and their (n, 3, 3) float ``covariances`` when it keeps covariances (a zero
-        matrix: no estimate for that point).
+        keeps normals, their (n, 3, 3) float ``covariances`` when it keeps covariances (a zero
+        matrix: no estimate for that point) and an int ``tag`` (0..2^31-1) when it keeps tags.
 
         Raises
         ------
         ValueError
             The points are not a finite (n, 3) array, lie farther than 2^20 voxels from the origin,
-            or normals or covariances are missing, or given to a copy without.
+            or normals, covariances or the tag are missing, or given to a copy without.
         """
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
@@ -87,6 +100,10 @@ class VoxelMeans:
             raise ValueError(
                 "covariances must be given exactly when the copy keeps them (VoxelMeans(covariances=True))"
             )
+        if (tag is None) == self.has_tags:
+            raise ValueError("tag must be given exactly when the copy keeps tags (VoxelMeans(tags=True))")
+        if tag is not None and not 0 <= int(tag) <= np.iinfo(np.int32).max:
+            raise ValueError(f"tag must be in 0..{np.iinfo(np.int32).max}, got {tag}")
         columns = [points]
         if normals is not None:
             normals = np.asarray(normals, dtype=np.float64)
@@ -108,7 +125,14 @@ class VoxelMeans:
         cells += _HALF
         keys = (cells[:, 0] << (2 * _BITS)) | (cells[:, 1] << _BITS) | cells[:, 2]
         order = np.argsort(keys, kind="stable")
-        self._keys, self._sums, self._counts = _merge(self._keys, self._sums, self._counts, keys, order, values)
+        held = self._keys
+        self._keys, self._sums, self._counts = _merge(held, self._sums, self._counts, keys, order, values)
+        if tag is not None:
+            # The voxels held keep their tags (their keys are among the merged ones, in order); the
+            # new ones take this add's. A search over the sorted keys, not a change to the merge.
+            tags = np.full(len(self._keys), int(tag), dtype=np.int32)
+            tags[np.searchsorted(self._keys, held)] = self._tags
+            self._tags = tags
         self._points = None
 
     @property
@@ -145,10 +169,19 @@ class VoxelMeans:
         """(m,) int: points per voxel."""
         return self._counts
 
+    @property
+    def tags(self) -> np.ndarray:
+        """(m,) int32: per voxel (in the order of :attr:`points`), the ``tag`` of the ``add`` that
+        first put a point in it (the copy keeps tags)."""
+        if not self.has_tags:
+            raise ValueError("this copy keeps no tags (VoxelMeans(tags=True))")
+        return self._tags
+
     def copy(self) -> VoxelMeans:
         """An independent copy."""
-        out = VoxelMeans(self.voxel_size, self.has_normals, self.has_covariances)
+        out = VoxelMeans(self.voxel_size, self.has_normals, self.has_covariances, self.has_tags)
         out._keys, out._sums, out._counts = self._keys.copy(), self._sums.copy(), self._counts.copy()
+        out._tags = self._tags.copy()
         out._points = None
         return out
 
