@@ -9,7 +9,7 @@ top-down: env → storey → robot → sensing and belief → planner.
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -20,6 +20,9 @@ from nbs_env.errors import ConfigError, InvalidActionError
 from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES, BeliefView, candidate_table_of, observe
 from nbs_env.storey import STAGES, StageTimes, StepOutcome, Storey, resolve_scene
 from scenes import Scene
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = [
     "PRESETS",
@@ -426,7 +429,8 @@ class NBSEnv(gym.Env):
 
     def render(self):
         """A top-down picture of the robot's belief: the current room's voxel labels, RoI and
-        candidates, the rooms finished before, and its stops and paths.
+        candidates, the rooms finished before, its stops by kind and the paths it drove, with a
+        legend (:meth:`render_figure`).
 
         Returns
         -------
@@ -443,7 +447,31 @@ class NBSEnv(gym.Env):
             return None
         if self.storey is None:
             raise gym.error.ResetNeeded("call reset() before render()")
-        from nbs_env.render import render_topdown
+        from nbs_env.render import draw
+
+        return draw(self.render_figure())
+
+    def render_figure(self) -> Figure:
+        """The picture :meth:`render` draws, as a matplotlib Figure (whatever the render mode).
+
+        Everything in it is the robot's own, in its map frame: the current room's V(t), RoI and
+        candidates, the finished rooms' models, each scan position marked by kind (the start, a
+        scan at an NVP, a door-frame scan, a search scan; the last one as the robot) and each path
+        it drove as it planned it (:attr:`nbs_env.storey.Storey.paths`). Its legend
+        (``figure.axes[0].get_legend()``) names every kind drawn (:func:`nbs_env.render.topdown_figure`).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+
+        Raises
+        ------
+        gymnasium.error.ResetNeeded
+            Called before :meth:`reset`.
+        """
+        if self.storey is None:
+            raise gym.error.ResetNeeded("call reset() before render_figure()")
+        from nbs_env.render import topdown_figure
 
         storey = self.storey
         view = storey.view()
@@ -457,7 +485,12 @@ class NBSEnv(gym.Env):
             f"SE sensed {last.structure_sensed_pct:.1f}%, path {storey.path_length:.1f} m"
             + (" (complete)" if storey.complete else "")
         )
-        return render_topdown(
+        searched = {search["scan"] for search in storey.wall_searches}
+        kinds = [
+            "start" if k == 0 else "door" if s.door else "search" if k in searched else "nvp"
+            for k, s in enumerate(storey.scans)
+        ]
+        return topdown_figure(
             grid=view.grid,
             roi=view.roi,
             se=view.se,
@@ -465,6 +498,7 @@ class NBSEnv(gym.Env):
             gains=gains,
             paths=storey.paths,
             stops=np.array([s.estimated_position[:2] for s in storey.scans]),
+            stop_kinds=kinds,
             rooms=storey.room_models(current=False),
             title=title,
         )

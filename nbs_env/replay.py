@@ -4,7 +4,7 @@
 on one sequence timeline, ``scan``, whose value is the number of scans taken so far: scan 1 is the
 first scan (after ``reset``), and a decision step that also crosses a door adds two entries. Call
 :meth:`RunRecorder.log_step` after ``reset`` and after every ``step``; :func:`view` opens a recording
-in the viewer::
+in the native viewer, :func:`serve_web` serves it to a browser (no display needed)::
 
     with RunRecorder("five_rooms.rrd", "five_rooms") as recorder:
         obs, info = env.reset(seed=0)
@@ -58,6 +58,7 @@ import subprocess
 import sys
 import uuid
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType, TracebackType
 from typing import TYPE_CHECKING, Any
@@ -73,7 +74,18 @@ if TYPE_CHECKING:
     from nbs_env.storey import Storey
     from scenes import Scene
 
-__all__ = ["APPLICATION_ID", "INSTALL_HINT", "TIMELINE", "NotARecordingError", "RunRecorder", "require_rerun", "view"]
+__all__ = [
+    "APPLICATION_ID",
+    "INSTALL_HINT",
+    "TIMELINE",
+    "NoViewerError",
+    "NotARecordingError",
+    "RunRecorder",
+    "check_recording",
+    "require_rerun",
+    "serve_web",
+    "view",
+]
 
 #: The application id of every recording (the viewer keeps one blueprint per application id).
 APPLICATION_ID = "nbs-env"
@@ -631,9 +643,100 @@ def _mesh_arrays(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return vertices, normals, colours
 
 
+#: rerun's default ports: its gRPC server (the recording's data) and the web viewer's HTTP server.
+GRPC_PORT = 9876
+WEB_PORT = 9090
+#: How long :func:`serve_web` waits for the web viewer to answer before it gives up, seconds.
+SERVE_TIMEOUT = 60.0
+
+
+class NoViewerError(RuntimeError):
+    """No viewer could start: no display for the native viewer, or rerun's process failed."""
+
+
+def check_recording(path: str | Path) -> Path:
+    """``path`` as a Path, once it is known to hold a rerun recording that rerun can read.
+
+    Raises
+    ------
+    FileNotFoundError
+        No file at ``path``.
+    NotARecordingError
+        The file is not a rerun recording, or rerun cannot read it (damaged, cut short, empty).
+    ImportError
+        rerun-sdk is not installed (the message gives the install command).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no recording at {path}: record one with nbs scan --record RUN.rrd")
+    with path.open("rb") as f:
+        magic = f.read(4)
+    # Every version of the .rrd format starts with "RRF" and a version character.
+    if not magic.startswith(b"RRF"):
+        raise NotARecordingError(f"{path} is not a rerun recording (.rrd): it starts with {magic!r}, not b'RRF'")
+    rr, _ = require_rerun()
+    # The viewer would open a damaged file on an empty screen (or its server serve nothing) and
+    # say why only in its log: rerun's own reader says it here. A finished recording's footer
+    # lists its recordings, so this reads little of a large file.
+    try:
+        with warnings.catch_warnings():
+            # A recording cut short has no footer; the warning says so before the read fails.
+            warnings.simplefilter("ignore")
+            recordings = list(rr.chunk.RrdReader(path).recordings())
+    except (RuntimeError, OSError, ValueError) as error:
+        raise NotARecordingError(f"{path} cannot be read as a rerun recording: {error}") from error
+    if not recordings:
+        raise NotARecordingError(f"{path} holds no recording")
+    return path
+
+
+def rerun_binary() -> Path:
+    """The viewer binary of the installed rerun-sdk (what ``python -m rerun_cli`` runs).
+
+    Run directly, not through ``python -m rerun_cli``: that wrapper exits 0 whatever the viewer
+    returns, so a viewer that failed to start would look like one the user closed.
+
+    Raises
+    ------
+    ImportError
+        rerun-sdk, or its viewer binary, is not installed.
+    """
+    import os
+
+    require_rerun()
+    try:
+        import rerun_cli
+    except ImportError as error:
+        raise ImportError(f"rerun-sdk's viewer (rerun_cli) is not installed: {INSTALL_HINT}") from error
+    override = os.environ.get("RERUN_CLI_PATH")  # as rerun_cli honours it
+    folder = Path(rerun_cli.__file__).parent
+    if override:
+        binary = Path(override)
+    elif sys.platform == "darwin" and (folder / "Rerun.app").exists():
+        binary = folder / "Rerun.app" / "Contents" / "MacOS" / "Rerun"
+    else:
+        binary = folder / ("rerun.exe" if sys.platform.startswith("win") else "rerun")
+    if not binary.is_file():
+        raise ImportError(f"rerun-sdk's viewer binary is missing at {binary}: reinstall it, {INSTALL_HINT}")
+    return binary
+
+
+def display_problem() -> str | None:
+    """Why a native window cannot open here, or None: on Linux and other X11 or Wayland systems,
+    neither ``DISPLAY`` nor ``WAYLAND_DISPLAY`` (nor ``WAYLAND_SOCKET``) is set. macOS and Windows
+    always have a desktop to try."""
+    import os
+
+    if sys.platform == "darwin" or sys.platform.startswith("win"):
+        return None
+    if any(os.environ.get(name) for name in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET")):
+        return None
+    return "no display to open rerun's viewer on (neither DISPLAY nor WAYLAND_DISPLAY is set)"
+
+
 def view(path: str | Path) -> int:
-    """Open a recording in rerun's viewer (the ``rerun`` binary shipped with rerun-sdk) and wait for
-    it to close.
+    """Open a recording in rerun's native viewer (the binary shipped with rerun-sdk) and wait for it
+    to close.
 
     Parameters
     ----------
@@ -643,26 +746,183 @@ def view(path: str | Path) -> int:
     Returns
     -------
     int
-        The viewer's exit code.
+        0: the viewer was closed (or stopped with Ctrl-C).
 
     Raises
     ------
-    FileNotFoundError
-        No file at ``path``.
-    NotARecordingError
-        The file is not a rerun recording.
-    ImportError
-        rerun-sdk is not installed (the message gives the install command).
+    FileNotFoundError, NotARecordingError, ImportError
+        As :func:`check_recording`.
+    NoViewerError
+        No display (:func:`display_problem`), or the viewer exited with an error (its own message
+        is on stderr before it); :func:`serve_web` needs no display.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no recording at {path}: record one with nbs_env.replay.RunRecorder")
-    with path.open("rb") as f:
-        magic = f.read(4)
-    # Every version of the .rrd format starts with "RRF" and a version character.
-    if not magic.startswith(b"RRF"):
-        raise NotARecordingError(f"{path} is not a rerun recording (.rrd): it starts with {magic!r}, not b'RRF'")
-    require_rerun()
-    # rerun_cli is the package of the viewer binary that rerun-sdk ships; running it through this
-    # interpreter finds the binary of the rerun-sdk installed here, not another one on PATH.
-    return subprocess.call([sys.executable, "-m", "rerun_cli", str(path)])
+    path = check_recording(path)
+    binary = rerun_binary()
+    problem = display_problem()
+    if problem is not None:
+        raise NoViewerError(problem)
+    process = subprocess.Popen([str(binary), str(path)])
+    try:
+        code = process.wait()
+    except KeyboardInterrupt:
+        # Ctrl-C reached the viewer too (one process group): it closes as the user asked.
+        _stop(process)
+        return 0
+    if code != 0:
+        raise NoViewerError(f"rerun's viewer exited with code {code}")
+    return 0
+
+
+def _free_port(host: str) -> int:
+    """A TCP port free on ``host`` now (the system picks it)."""
+    import socket
+
+    family, kind, proto, _, address = socket.getaddrinfo(host, 0, type=socket.SOCK_STREAM)[0]
+    with socket.socket(family, kind, proto) as sock:
+        sock.bind(address)
+        return int(sock.getsockname()[1])
+
+
+def _url_host(bind: str) -> str:
+    """The host a browser on this machine reaches a server bound to ``bind`` at."""
+    if bind in ("0.0.0.0", "::", ""):
+        return "127.0.0.1"
+    return f"[{bind}]" if ":" in bind else bind
+
+
+def web_viewer_url(host: str, web_port: int, grpc_port: int) -> str:
+    """The address to open in a browser: rerun's web viewer, told where the recording's server is
+    (as rerun itself prints it)."""
+    from urllib.parse import quote
+
+    proxy = f"rerun+http://{host}:{grpc_port}/proxy"
+    return f"http://{host}:{web_port}/?url={quote(proxy, safe='')}"
+
+
+def serve_web(
+    path: str | Path,
+    *,
+    port: int = GRPC_PORT,
+    web_port: int = WEB_PORT,
+    bind: str = "127.0.0.1",
+    on_ready: Callable[[str], None] | None = None,
+    timeout: float = SERVE_TIMEOUT,
+) -> int:
+    """Serve a recording to a browser with rerun's web viewer until Ctrl-C (or SIGTERM).
+
+    rerun's binary hosts the recording on a gRPC server and the web viewer over HTTP
+    (``rerun --serve-web``); no display is needed.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``.rrd`` file.
+    port : int
+        The gRPC server's port (0: a free one).
+    web_port : int
+        The web viewer's HTTP port (0: a free one).
+    bind : str
+        The address both servers listen on: ``127.0.0.1`` this machine only (forward both ports to
+        view from another, e.g. ``ssh -L``), ``0.0.0.0`` every interface.
+    on_ready : callable, optional
+        Called with the viewer's URL once it answers HTTP.
+    timeout : float
+        Seconds to wait for it to answer.
+
+    Returns
+    -------
+    int
+        0 once stopped by Ctrl-C or SIGTERM.
+
+    Raises
+    ------
+    FileNotFoundError, NotARecordingError, ImportError
+        As :func:`check_recording`.
+    NoViewerError
+        rerun's server exited (a port in use, an address it cannot bind) or did not answer within
+        ``timeout`` seconds; the message ends with its log's last lines.
+    """
+    import signal
+    import tempfile
+    import time
+    import urllib.request
+
+    path = check_recording(path)
+    binary = rerun_binary()
+    port = port or _free_port(bind)
+    web_port = web_port or _free_port(bind)
+    host = _url_host(bind)
+    url = web_viewer_url(host, web_port, port)
+    command = [str(binary), "--serve-web", "--bind", bind, "--port", str(port), "--web-viewer-port", str(web_port)]
+    # rerun's log (INFO lines, its first-run banner) goes to a file, shown when it fails: on the
+    # terminal it would bury the URL. A pipe would fill while nobody reads it.
+    with tempfile.TemporaryFile(mode="w+b") as log:
+        process = subprocess.Popen([*command, str(path)], stdout=log, stderr=subprocess.STDOUT)
+
+        def failure(what: str) -> NoViewerError:
+            log.seek(0)
+            return NoViewerError(what + _log_tail(log.read().decode(errors="replace")))
+
+        def terminate(signum: int, frame: object) -> None:
+            raise KeyboardInterrupt
+
+        # SIGTERM stops the server as Ctrl-C does; left to its default, it would orphan rerun's process.
+        previous = signal.signal(signal.SIGTERM, terminate) if _main_thread() else None
+        try:
+            deadline = time.monotonic() + timeout
+            while True:
+                if process.poll() is not None:
+                    raise failure(f"rerun's web viewer exited with code {process.returncode} before it served")
+                try:
+                    with urllib.request.urlopen(f"http://{host}:{web_port}/", timeout=1.0):
+                        break
+                except OSError:  # urllib's URLError included: not listening yet
+                    if time.monotonic() > deadline:
+                        _stop(process)
+                        raise failure(f"rerun's web viewer did not answer at {url} within {timeout:.0f} s") from None
+                    time.sleep(0.2)
+            if on_ready is not None:
+                on_ready(url)
+            code = process.wait()
+            raise failure(f"rerun's web viewer stopped with code {code}")
+        except KeyboardInterrupt:
+            _stop(process)
+            return 0
+        finally:
+            if previous is not None:
+                signal.signal(signal.SIGTERM, previous)
+            if process.poll() is None:
+                _stop(process)
+
+
+def _log_tail(text: str, lines: int = 3) -> str:
+    """The last warnings and errors of rerun's log (colour codes removed, INFO lines dropped), as
+    the end of an error message; empty when it said nothing."""
+    import re
+
+    said = [re.sub(r"\x1b\[[0-9;]*m", "", line).strip() for line in text.splitlines()]
+    said = [line for line in said if line and " INFO " not in line]
+    return "; rerun said:\n  " + "\n  ".join(said[-lines:]) if said else ""
+
+
+def _main_thread() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
+
+
+def _stop(process: subprocess.Popen, grace: float = 5.0) -> None:
+    """Stop rerun's process: it may have had Ctrl-C already (one process group); else SIGINT, which
+    it handles as Ctrl-C, then SIGKILL after ``grace`` seconds."""
+    import signal
+
+    if process.poll() is None:
+        try:
+            process.wait(timeout=0.5)
+        except subprocess.TimeoutExpired:
+            process.send_signal(signal.SIGINT if sys.platform != "win32" else signal.SIGTERM)
+    try:
+        process.wait(timeout=grace)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait()

@@ -47,7 +47,7 @@ from scenes.generator import generate_storey
 from scenes.geometry import point_is_free
 from scenes.labels import STRUCTURAL_CLASSES
 
-__all__ = ["STAGES", "ScanPoints", "ScanRecord", "StageTimes", "StepOutcome", "Storey", "resolve_scene"]
+__all__ = ["STAGES", "ScanPoints", "ScanRecord", "StageTimes", "StepOutcome", "Storey", "join_paths", "resolve_scene"]
 
 #: Stage names of a scan's ``times``, in the order a step runs them.
 STAGES = ("scan", "registration", "roi", "classification", "voxels", "planning")
@@ -105,6 +105,10 @@ class ScanRecord:
     #: and ICP's fitness; None for the first scan and without registration.
     registration_overlap: float | None = None
     registration_fitness: float | None = None
+    #: (p, 2) float: the polyline the robot drove from the scan before to this one, in its map
+    #: frame, as it planned it (its length is ``path_length`` less the scan before's); (0, 2) for
+    #: the first scan.
+    path: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 2)))
 
 
 @dataclass(frozen=True)
@@ -156,6 +160,35 @@ class StepOutcome:
     conversions: int = 0
     structural_voxels: int = 0
     mapped_gain: float = 0.0
+
+
+def join_paths(paths: list[np.ndarray]) -> np.ndarray:
+    """Consecutive drives as one polyline: each drive's first point dropped where it repeats the
+    last point of the drive before.
+
+    A drive after a door crossing given up starts at the robot's pose estimate after that crossing's
+    frame scan, which registration may have moved off the door's centre the drive before ended at:
+    the polyline then jumps there, as the robot's estimate did (the jump is no travel of its plan).
+
+    Parameters
+    ----------
+    paths : list of (p, 2) float
+        In the order driven; empty ones are skipped.
+
+    Returns
+    -------
+    (q, 2) float
+        (0, 2) when no drive has a point.
+    """
+    drives = [np.asarray(p, dtype=float).reshape(-1, 2) for p in paths]
+    drives = [p for p in drives if len(p)]
+    if not drives:
+        return np.zeros((0, 2))
+    joined = [drives[0]]
+    for p in drives[1:]:
+        same = np.allclose(joined[-1][-1], p[0], rtol=0.0, atol=1e-9)
+        joined.append(p[1:] if same else p)
+    return np.vstack(joined)
 
 
 def resolve_scene(
@@ -257,7 +290,11 @@ class Storey:
         (:class:`~nbs_env.planning.rooms.SearchStop`; ``"door"``: a scan toward a door of the room no route
         reaches, taken once no other door is left).
     paths : list of (p, 2) float
-        The planned paths driven.
+        The planned paths driven, in the robot's map frame: ``paths[j]`` is ``scans[j + 1].path``,
+        the drive to scan j + 1 (door crossings through their approach and the rooms on the way),
+        and a last entry when the episode ended after a drive that took no scan (a door crossing
+        whose frame scan measured no room beyond it). Their lengths add up to :attr:`path_length`
+        (but for a jump :func:`join_paths` keeps after such a crossing).
     scan_log : list of ScanPoints
         Every scan as measured, when ``config.keep_scans`` (else empty).
     complete : bool
@@ -286,6 +323,9 @@ class Storey:
         self.door_events: list[dict[str, Any]] = []
         self.room_ends: list[dict[str, Any]] = []
         self.paths: list[np.ndarray] = []
+        # Drives since the last scan, joined into the next scan's path (a crossing given up after
+        # its drive leaves one here).
+        self._driven: list[np.ndarray] = []
         self.complete = False
         self.new_room = True
         self.step_scans: list[tuple[np.ndarray, np.ndarray]] = []
@@ -427,7 +467,7 @@ class Storey:
         self._check_open()
         before = self._before()
         report = self.robot.move_to(index, count_conversions=self.count_conversions)
-        self.paths.append(report.path)
+        self._driven.append(report.path)
         self._record(report, door=False)
         self.advance()
         return self._outcome(before, report.conversions)
@@ -535,7 +575,7 @@ class Storey:
             report = robot.move_to(stop.nvp, count_conversions=self.count_conversions)
         else:
             report = robot.scan_from(stop.point, stop.path, stop.length, count_conversions=self.count_conversions)
-        self.paths.append(report.path)
+        self._driven.append(report.path)
         self._record(report, door=False)
         self.wall_searches.append({"scan": len(self.scans) - 1, "room": room, "kind": stop.kind})
 
@@ -551,17 +591,17 @@ class Storey:
                 for door in rooms.abandon_unreachable():
                     self._abandoned(door)
                 self.complete = True
+                self._end_drives()
                 return False
             if len(self.scans) >= self.config.max_scans:
+                self._end_drives()
                 return False
             door = rooms.doors[k]
-            start = robot.pose[:2, 3].copy()
             try:
                 report = self._cross_door(k)
             except UnreachableDoorError:
                 self._abandoned(door)
                 continue
-            self.paths.append(np.array([start, door.centre[:2]]))
             self.door_events.append(
                 {
                     "event": "crossed",
@@ -584,13 +624,15 @@ class Storey:
         """
         robot, rooms = self.robot, self.rooms
         door = rooms.doors[k]
-        length, reason = rooms.route_length(robot, door)
-        if length is None:
+        path, length, reason = rooms.route(robot, door)
+        if path is None or length is None:
             rooms.give_up(door, str(reason))
             raise UnreachableDoorError(f"door {k} at {door.centre[:2].round(2).tolist()} cannot be reached: {reason}")
         # The door leads out of the room it was found in: the robot enters the room beyond.
         into = door.outward
         robot.drive_to(door.centre[:2], float(np.arctan2(into[1], into[0])), length)
+        # Driven whatever comes of the frame scan: a crossing given up below still moved the robot.
+        self._driven.append(path)
         room, entrance = rooms.enter(door)
         robot.enter_room(room, entrance, exclude=[m.polygon for m in rooms.models])
         try:
@@ -615,8 +657,25 @@ class Storey:
             }
         )
 
+    def _take_driven(self) -> np.ndarray:
+        """(p, 2) float: the drives since the last scan as one polyline (:func:`join_paths`);
+        :attr:`_driven` is emptied."""
+        path = join_paths(self._driven)
+        self._driven = []
+        return path
+
+    def _end_drives(self) -> None:
+        """The episode ends: a drive that took no scan (a crossing given up) still goes on :attr:`paths`."""
+        if self._driven:
+            path = self._take_driven()
+            if len(path):
+                self.paths.append(path)
+
     def _record(self, report: StepReport, door: bool) -> None:
         robot = self.robot
+        path = self._take_driven()
+        if self.scans:
+            self.paths.append(path)
         self.step_scans.append((report.world_points, report.estimated_pose[:3, 3].copy()))
 
         meter = self.meter
@@ -660,6 +719,7 @@ class Storey:
                 estimated_pose=report.estimated_pose.copy(),
                 registration_overlap=None if reg is None else float(reg.overlap),
                 registration_fitness=None if reg is None else float(reg.fitness),
+                path=path,
             )
         )
         if self.config.keep_scans and report.scan is not None:

@@ -86,6 +86,13 @@ def test_a_door_with_no_room_measured_beyond_it_is_given_up_and_the_storey_goes_
     assert abandoned and "no room measured beyond it" in abandoned[0]["reason"], env.storey.door_events
     assert not _events(env, "crossed") and env.storey.complete
     assert all(s.room == 0 for s in env.storey.scans)  # room B was never scanned
+    # The drive to the door given up took no scan: it is the paths' last entry, and the paths add
+    # up to the travel counted.
+    storey = env.storey
+    assert len(storey.paths) == len(storey.scans)
+    np.testing.assert_allclose(storey.paths[-1][-1], abandoned[0]["centre"], atol=2e-3)
+    driven = sum(float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) for p in storey.paths)
+    assert driven == pytest.approx(storey.path_length, abs=1e-3)
 
 
 def test_a_scanner_that_sees_the_jambs_leaves_the_door_frame_it_scanned_from():

@@ -1,8 +1,10 @@
 """The ``nbs`` command line.
 
 Exit codes: 0 success; 1 a scene could not be loaded or built (the message says what and where),
-or ``nbs scan`` could not run it (a start inside a wall or outside the building); 2 a bad command
-line (unknown flag, bad value, unknown policy, a configuration value out of range).
+or ``nbs scan`` could not run it (a start inside a wall or outside the building), or ``nbs view``
+found no readable recording; 2 a bad command line (unknown flag, bad value, unknown policy, a
+configuration value out of range); 3 ``nbs view`` could start no viewer (no display, or rerun's
+viewer or web server failed).
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ from train.arguments import add_robot_arguments, add_scene_arguments, integer_fr
 
 EXIT_SCENE_ERROR = 1
 EXIT_USAGE = 2
+#: ``nbs view`` could start no viewer: no display for the native one, or rerun's process failed.
+EXIT_NO_VIEWER = 3
 #: The scan budget of ``nbs scan`` and ``nbs compare`` runs when ``--max-scans`` is not given (the
 #: presets' own budgets are the env's: 80 default, 40 fast).
 SCAN_BUDGET = 80
@@ -146,8 +150,24 @@ def build_parser() -> argparse.ArgumentParser:
     scan.add_argument("--quiet", action="store_true", help="no progress bar")
     add_robot_arguments(scan)
 
-    view = sub.add_parser("view", help="replay a run recorded with `nbs scan --record` in rerun's viewer")
+    view = sub.add_parser(
+        "view",
+        help="replay a run recorded with `nbs scan --record` in rerun's viewer",
+        description="Open a recording in rerun's viewer, or with --web serve it to a browser (no display "
+        "needed) until Ctrl-C. Exit codes: 0 closed or stopped; 1 no readable recording; 2 rerun-sdk "
+        "missing; 3 no viewer could start (no display: use --web; a port in use).",
+    )
     view.add_argument("recording", type=Path, help="a .rrd file")
+    view.add_argument(
+        "--web", action="store_true", help="serve rerun's web viewer over HTTP and print its URL; Ctrl-C stops it"
+    )
+    view.add_argument("--port", type=_port, help="with --web: the recording's gRPC port (default 9876; 0 free)")
+    view.add_argument("--web-port", type=_port, help="with --web: the web viewer's HTTP port (default 9090; 0 free)")
+    view.add_argument(
+        "--bind",
+        default=None,
+        help="with --web: the address to listen on (default 127.0.0.1, this machine only; 0.0.0.0 every interface)",
+    )
 
     sub.add_parser("train", help="train a masked PPO agent (see `nbs train --help`)", add_help=False)
 
@@ -526,18 +546,48 @@ def _scan(args: argparse.Namespace, policy, out: Path, cfg) -> int:
     return 0
 
 
+def _port(text: str) -> int:
+    """A TCP port, 0..65535 (0: a free one)."""
+    port = integer_from(0, "a port is a whole number")(text)
+    if port > 65535:
+        raise argparse.ArgumentTypeError(f"a port is a whole number <= 65535, got {text!r}")
+    return port
+
+
 def run_view(args: argparse.Namespace) -> int:
-    """``nbs view RUN.rrd``: open a recording in rerun's viewer."""
-    from nbs_env.replay import NotARecordingError, view
+    """``nbs view [--web] RUN.rrd``: open a recording in rerun's viewer, or serve it to a browser."""
+    from nbs_env.replay import GRPC_PORT, WEB_PORT, NotARecordingError, NoViewerError, serve_web, view
+
+    given = [name for name in ("port", "web_port", "bind") if getattr(args, name) is not None]
+    web_only = [f"--{name.replace('_', '-')}" for name in given]
+    if web_only and not args.web:
+        print(f"nbs view: error: {', '.join(web_only)} needs --web", file=sys.stderr)
+        return EXIT_USAGE
+
+    def ready(url: str) -> None:
+        print(f"serving {args.recording} with rerun's web viewer: open {url}", flush=True)
+        print("(Ctrl-C stops it)", flush=True)
 
     try:
-        return view(args.recording)
+        if not args.web:
+            return view(args.recording)
+        return serve_web(
+            args.recording,
+            port=GRPC_PORT if args.port is None else args.port,
+            web_port=WEB_PORT if args.web_port is None else args.web_port,
+            bind=args.bind or "127.0.0.1",
+            on_ready=ready,
+        )
     except ImportError as exc:
         print(f"nbs view: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except (FileNotFoundError, NotARecordingError) as exc:
         print(f"nbs view: error: {exc}", file=sys.stderr)
         return EXIT_SCENE_ERROR
+    except NoViewerError as exc:
+        hint = "" if args.web else f"; serve it to a browser instead: nbs view --web {args.recording}"
+        print(f"nbs view: error: {exc}{hint}", file=sys.stderr)
+        return EXIT_NO_VIEWER
 
 
 def main(argv: Sequence[str] | None = None) -> int:

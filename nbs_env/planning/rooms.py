@@ -19,9 +19,8 @@ configuration and plan) and never drives: the storey session moves the robot.
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass, field, replace
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 from shapely.geometry import Point, Polygon
@@ -29,7 +28,15 @@ from shapely.geometry import Point, Polygon
 from nbs_env.belief import RoomBelief, RoomModel
 from nbs_env.config import RobotConfig, RoomRules
 from nbs_env.perception.doors import detect_doors
-from nbs_env.planning.navigation import Candidates, Geodesic, Passage, TraversabilityMap, candidates, geodesic
+from nbs_env.planning.navigation import (
+    Candidates,
+    Geodesic,
+    Passage,
+    TraversabilityMap,
+    candidates,
+    geodesic,
+    path_to,
+)
 from nbs_env.planning.planner import (
     Plan,
     blocked_directions,
@@ -146,6 +153,22 @@ class SearchStop:
     point: np.ndarray
     path: np.ndarray = field(repr=False)
     length: float
+
+
+class _Approach(NamedTuple):
+    """The drive to stand under a door of the current room (:meth:`Rooms._approach`).
+
+    ``point``: where the last, straight leg through the opening starts (None: no approach, and
+    ``reason`` says why); ``length``: metres from the robot to the door's centre; ``tmap`` and
+    ``route``: the map and geodesic the path to ``point`` runs on (the relaxed map when the floor in
+    front of the frame is unseen).
+    """
+
+    point: np.ndarray | None
+    length: float | None
+    reason: str
+    tmap: TraversabilityMap | None = None
+    route: Geodesic | None = None
 
 
 class Rooms:
@@ -318,24 +341,56 @@ class Rooms:
         reason : str or None
             Why there is none (None when there is).
         """
+        _path, length, reason = self._route(robot, door, with_path=False)
+        return length, reason
+
+    def route(self, robot: RobotView, door: KnownDoor) -> tuple[np.ndarray | None, float | None, str | None]:
+        """The route :meth:`route_length` measures, as the polyline the robot drives to stand under
+        ``door``.
+
+        Returns
+        -------
+        path : (p, 2) float or None
+            From the robot's position estimate to the door's centre, in the robot's map frame: the
+            geodesic to the door's approach through this room's map, then straight through the
+            opening; through rooms already scanned, the straight legs between the doors on the way.
+            Its length is ``length``. None when no route is known.
+        length : float or None
+            Metres, as :meth:`route_length`.
+        reason : str or None
+            Why there is none (None when there is).
+        """
+        return self._route(robot, door, with_path=True)
+
+    def _route(
+        self, robot: RobotView, door: KnownDoor, with_path: bool
+    ) -> tuple[np.ndarray | None, float | None, str | None]:
         if door.found_in_room == self.current:
             found = self._approach(robot, door)
-            return (found[1], None) if found[0] is not None else (None, found[2])
+            if found.point is None:
+                return None, None, found.reason
+            path = None
+            if with_path:
+                # The polyline the cost adds up (_Approach.length): geodesic to the approach, then
+                # the straight last leg through the opening.
+                path = np.vstack([path_to(found.tmap, found.route, found.point), door.centre[:2]])
+            return path, found.length, None
         route = self._room_route(door.found_in_room)
         if route is None:
-            return None, "no route through the rooms crossed to the room it was found in"
-        legs = [robot.pose[:2, 3], *[d.centre[:2] for d in route], door.centre[:2]]
-        return float(sum(np.linalg.norm(b - a) for a, b in itertools.pairwise(legs))), None
+            return None, None, "no route through the rooms crossed to the room it was found in"
+        legs = np.array([robot.pose[:2, 3], *[d.centre[:2] for d in route], door.centre[:2]], dtype=float)
+        return legs if with_path else None, float(np.linalg.norm(np.diff(legs, axis=0), axis=1).sum()), None
 
-    def _approach(self, robot: RobotView, door: KnownDoor) -> tuple[np.ndarray | None, float | None, str]:
+    def _approach(self, robot: RobotView, door: KnownDoor) -> _Approach:
         """Where the robot starts its drive through ``door``, the travel to stand under the frame from
         here, and, when there is no approach, why.
 
         The approach is the free cell on the robot's side of the frame, within :data:`APPROACH_DEPTH`
         of it and in front of the opening (so that the last leg runs straight through it), that
-        minimises the geodesic to it plus that last leg."""
+        minimises the path to it (as :func:`~nbs_env.planning.navigation.path_to` draws it from the
+        robot's position) plus that last leg."""
         if robot.belief.grid is None or robot.belief.roi is None:
-            return None, None, "no map of the room"
+            return _Approach(None, None, "no map of the room")
         tmap, route = self.door_routes(robot)
         side = 1.0 if np.dot(robot.pose[:2, 3] - door.centre[:2], door.outward) > 0 else -1.0
         normal = side * np.asarray(door.outward, dtype=float)
@@ -348,7 +403,7 @@ class Rooms:
         points = door.centre[:2] + dd.reshape(-1, 1) * normal + ll.reshape(-1, 1) * along
         inside = tmap.contains(points)
         if not inside.any():
-            return None, None, "the floor in front of it lies outside the room's map"
+            return _Approach(None, None, "the floor in front of it lies outside the room's map")
         points = points[inside]
         cells = tmap.cell_of(points, "door approach")
         free = tmap.free[cells[:, 0], cells[:, 1]]
@@ -361,17 +416,24 @@ class Rooms:
             centres = tmap.centre_of(np.argwhere(np.ones(tmap.shape, dtype=bool))).reshape(*tmap.shape, 2)
             near = np.linalg.norm(centres - door.centre[:2], axis=2) <= APPROACH_DEPTH + door.width / 2
             relaxed = tmap.free | (near & ~tmap.obstacle & (tmap.clearance >= tmap.robot_radius))
-            distance = geodesic(replace(tmap, free=relaxed), robot.pose[:2, 3]).distances[cells[:, 0], cells[:, 1]]
+            tmap = replace(tmap, free=relaxed)
+            route = geodesic(tmap, robot.pose[:2, 3])
+            distance = route.distances[cells[:, 0], cells[:, 1]]
             free = relaxed[cells[:, 0], cells[:, 1]]
             ok = free & np.isfinite(distance)
             if not free.any():
-                return None, None, f"no free floor within {APPROACH_DEPTH} m in front of the frame"
+                return _Approach(None, None, f"no free floor within {APPROACH_DEPTH} m in front of the frame")
             if not ok.any():
-                return None, None, "the free floor in front of the frame is cut off from the robot"
+                return _Approach(None, None, "the free floor in front of the frame is cut off from the robot")
+        # The legs path_to adds to the geodesic between cell centres: from the robot to its cell's
+        # centre, and from the approach's cell centre to the approach, so that the travel measured
+        # is the polyline driven (as NVPs' path lengths are).
+        source = tmap.centre_of(np.array(route.source))[0]
+        ends = np.linalg.norm(points - tmap.centre_of(cells), axis=1) + float(np.linalg.norm(route.start_xy - source))
         last_leg = np.linalg.norm(points - door.centre[:2], axis=1)
-        cost = np.where(ok, distance + last_leg, np.inf)
+        cost = np.where(ok, distance + ends + last_leg, np.inf)
         k = int(np.argmin(cost))
-        return points[k], float(cost[k]), ""
+        return _Approach(points[k], float(cost[k]), "", tmap, route)
 
     def door_routes(self, robot: RobotView) -> tuple[TraversabilityMap, Geodesic]:
         """The floor the robot may cross to stand at a door, and the routes from where it is (kept
