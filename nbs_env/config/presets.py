@@ -23,30 +23,25 @@ __all__ = ["PRESETS", "config_paths", "make_config"]
 #: room, and NVPs in passages narrower than the lattice); ``"paper"`` the paper's literal robot (a
 #: room ends by its gain alone: no wall or door search; NVPs on the lattice only), which the
 #: paper's §5 comparison uses; ``"fast"`` the RL preset (the default robot with a
-#: 1° scanner, 10 cm voxels, perfect localisation, 1-3 room storeys, 40 scans). A preset changes the
+#: 1° scanner, 10 cm voxels, perfect localisation, 1-3 room storeys, 40 scans); ``"train"`` the
+#: training fidelity (``"fast"`` without the coverage meter, rewarded by the robot's own map). A preset changes the
 #: robot, never the evaluation: coverage is counted at the same sample spacing and radius whatever
 #: the preset, so that one cloud gives one figure.
+_FAST: dict[str, Any] = {
+    "robot.scanner.angular_step": 1.0,
+    "robot.odometry": {"sigma_xy_per_m": 0.0, "sigma_yaw_deg_per_m": 0.0, "sigma_tilt_deg": 0.0},
+    "robot.voxel_size": 0.1,
+    "robot.perfect_localisation": True,
+    "generator.rooms": (1, 3),
+    "max_scans": 40,
+}
 PRESETS: dict[str, dict[str, Any]] = {
     "default": {},
     "paper": {"rooms.wall_search.scans": 0, "robot.navigation.snap": False},
-    "fast": {
-        "robot.scanner.angular_step": 1.0,
-        "robot.odometry": {"sigma_xy_per_m": 0.0, "sigma_yaw_deg_per_m": 0.0, "sigma_tilt_deg": 0.0},
-        "robot.voxel_size": 0.1,
-        "robot.perfect_localisation": True,
-        "generator.rooms": (1, 3),
-        "max_scans": 40,
-    },
-    "train": {
-        "robot.scanner.angular_step": 1.0,
-        "robot.odometry": {"sigma_xy_per_m": 0.0, "sigma_yaw_deg_per_m": 0.0, "sigma_tilt_deg": 0.0},
-        "robot.voxel_size": 0.1,
-        "robot.perfect_localisation": True,
-        "generator.rooms": (1, 3),
-        "max_scans": 40,
-        "coverage_meter": False,
-        "reward.kind": "mapped",
-    },
+    "fast": _FAST,
+    # The training fidelity: the fast robot (its observations and decisions) without the ground-truth
+    # meter, which no decision reads; the reward is then the robot's own map.
+    "train": {**_FAST, "coverage_meter": False, "reward.kind": "mapped"},
 }
 
 
