@@ -43,6 +43,12 @@ def headless() -> dict[str, str]:
     return {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET")}
 
 
+def _ctrl_c_as_at_a_terminal() -> None:
+    """A child's SIGINT as a terminal's: pytest-xdist's workers ignore SIGINT, a child inherits that,
+    and Python then never turns it into KeyboardInterrupt (a user's shell gives the default)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def nbs(*args: str) -> list[str]:
     return [sys.executable, "-m", "train", *args]
 
@@ -110,6 +116,7 @@ def test_web_serves_the_recording_until_ctrl_c(recording, tmp_path):
             stdout=stdout,
             stderr=subprocess.PIPE,
             text=True,
+            preexec_fn=_ctrl_c_as_at_a_terminal,
         )
     try:
         deadline = time.monotonic() + STARTUP
