@@ -761,7 +761,7 @@ def view(path: str | Path) -> int:
     problem = display_problem()
     if problem is not None:
         raise NoViewerError(problem)
-    process = subprocess.Popen([str(binary), str(path)])
+    process = subprocess.Popen([str(binary), str(path)], preexec_fn=_die_with_parent)
     try:
         code = process.wait()
     except KeyboardInterrupt:
@@ -857,7 +857,9 @@ def serve_web(
     # rerun's log (INFO lines, its first-run banner) goes to a file, shown when it fails: on the
     # terminal it would bury the URL. A pipe would fill while nobody reads it.
     with tempfile.TemporaryFile(mode="w+b") as log:
-        process = subprocess.Popen([*command, str(path)], stdout=log, stderr=subprocess.STDOUT)
+        process = subprocess.Popen(
+            [*command, str(path)], stdout=log, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent
+        )
 
         def failure(what: str) -> NoViewerError:
             log.seek(0)
@@ -909,6 +911,16 @@ def _main_thread() -> bool:
     import threading
 
     return threading.current_thread() is threading.main_thread()
+
+
+def _die_with_parent() -> None:
+    """In rerun's process before it starts: on Linux, end it when its parent dies, so that a killed
+    ``nbs view`` (SIGKILL, a closed session) leaves no server behind holding ports and a core."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+        import signal
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # 1: PR_SET_PDEATHSIG
 
 
 def _stop(process: subprocess.Popen, grace: float = 5.0) -> None:

@@ -106,8 +106,8 @@ def test_a_web_port_in_use_exits_3_with_rerun_s_reason(recording, capsys):
     assert "nbs view --web" not in err  # no hint to do what was done
 
 
-def test_web_serves_the_recording_until_ctrl_c(recording, tmp_path):
-    out = tmp_path / "stdout.txt"
+def _serving(recording: Path, out: Path) -> tuple[subprocess.Popen, str]:
+    """``nbs view --web`` started, once it prints the URL: the process and the URL."""
     with out.open("w") as stdout:
         process = subprocess.Popen(
             nbs("view", "--web", "--port", "0", "--web-port", "0", str(recording)),
@@ -118,15 +118,36 @@ def test_web_serves_the_recording_until_ctrl_c(recording, tmp_path):
             text=True,
             preexec_fn=_ctrl_c_as_at_a_terminal,
         )
+    deadline = time.monotonic() + STARTUP
+    while True:
+        if process.poll() is not None or time.monotonic() > deadline:
+            process.kill()
+            raise AssertionError(f"no URL printed within {STARTUP} s: {process.communicate()[1]}")
+        found = re.search(r"open (http://\S+)", out.read_text())
+        if found:
+            return process, found.group(1)
+        time.sleep(0.2)
+
+
+def test_a_killed_viewer_leaves_no_server(recording, tmp_path):
+    """SIGKILL to nbs view --web (no chance to stop rerun itself): rerun's server ends with it."""
+    process, url = _serving(recording, tmp_path / "stdout.txt")
+    process.kill()
+    process.communicate()
+    deadline = time.monotonic() + 15
+    while True:
+        try:
+            urllib.request.urlopen(url, timeout=1).close()
+        except OSError:
+            break
+        assert time.monotonic() < deadline, "rerun's server outlived its killed parent"
+        time.sleep(0.3)
+
+
+def test_web_serves_the_recording_until_ctrl_c(recording, tmp_path):
+    out = tmp_path / "stdout.txt"
+    process, url = _serving(recording, out)
     try:
-        deadline = time.monotonic() + STARTUP
-        url = None
-        while url is None:
-            assert process.poll() is None, process.communicate()[1]
-            assert time.monotonic() < deadline, f"no URL printed within {STARTUP} s"
-            found = re.search(r"open (http://\S+)", out.read_text())
-            url = found.group(1) if found else None
-            time.sleep(0.2)
         # Printed once the web viewer answers: its page is served, and the recording's server listens.
         with urllib.request.urlopen(url, timeout=10) as page:
             assert page.status == 200 and b"<html" in page.read().lower()
