@@ -113,7 +113,8 @@ class QualityReport:
     Attributes
     ----------
     density : (n,) float
-        Points per m² around each sample, over all scans (``QualityConfig.density_radius``).
+        Points per m² around each sample, over all scans (``QualityConfig.density_radius``), at the
+        instrument's density (the meter's ``density_weight``).
     incidence : (n,) float
         The smallest incidence angle (degrees from the normal) each sample was seen at; NaN when no
         point was attributed to it.
@@ -154,16 +155,32 @@ class CoverageMeter:
         Count only the SE surface that faces the building's interior, decided by geometry
         (:func:`scenes.interior.interior_samples`): never the far sides of walls or the undersides
         of slabs, and the same whether or not the file names its rooms.
+    density_weight : float
+        Instrument points each added point stands for in the density (:meth:`quality`): a scanner
+        preset's ``(simulated step / instrument step)²``
+        (:attr:`~nbs_env.config.ScannerConfig.density_weight`), so that the density is the real
+        instrument's. Coverage, incidence and range do not depend on it.
     """
 
-    def __init__(self, scene: Scene, spacing: float = 0.05, radius: float = 0.05, interior_only: bool = True) -> None:
+    def __init__(
+        self,
+        scene: Scene,
+        spacing: float = 0.05,
+        radius: float = 0.05,
+        interior_only: bool = True,
+        density_weight: float = 1.0,
+    ) -> None:
+        if not (np.isfinite(density_weight) and density_weight > 0):
+            raise ValueError(f"density_weight must be a finite number > 0, got {density_weight}")
+        self.density_weight = float(density_weight)
         self.samples = interior_samples(scene, spacing) if interior_only else scene.structure_samples(spacing)
         self.spacing = float(spacing)
         self.radius = radius
         self.sensed = np.zeros(len(self.samples), dtype=bool)
         self.room_ids = sorted({int(r) for r in self.samples.rooms})
         self.normals = np.asarray(scene.mesh.face_normals, dtype=float)[self.samples.faces].reshape(-1, 3)
-        # Per scan: (sample indices, points attributed, incidence degrees, range m, samples newly sensed).
+        # Per scan: (sample indices, points attributed (times density_weight), incidence degrees, range m,
+        # samples newly sensed).
         self.observations: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         self._tree: cKDTree | None = None
         self._columns: _SampleColumns | None = None
@@ -202,7 +219,7 @@ class CoverageMeter:
         """Note one scan's quality figures; ``nearest`` holds each attributed point's sample."""
         count = np.bincount(nearest, minlength=len(self.samples))
         index = np.flatnonzero(count)
-        count = count[index]
+        count = count[index] * self.density_weight
         ray = origin - self.samples.points[index]
         rng = np.linalg.norm(ray, axis=1)
         cos = np.abs(np.einsum("ij,ij->i", ray, self.normals[index])) / np.maximum(rng, 1e-9)
@@ -210,7 +227,7 @@ class CoverageMeter:
         self.observations.append(
             (
                 index.astype(np.int32),
-                count.astype(np.int32),
+                count.astype(np.float32),
                 incidence.astype(np.float32),
                 rng.astype(np.float32),
                 newly.astype(np.int32),

@@ -471,14 +471,15 @@ class _Points:
 
 class _Stations:
     """The episode's scans as the report's clock and placement need them, (k, ...) arrays: the
-    estimated ``poses`` (4, 4), ``rooms`` (the robot's number), ``acquisition`` seconds and the
-    acquisition ``start`` and ``end``, GPS seconds."""
+    estimated ``poses`` (4, 4), ``rooms`` (the robot's number), ``acquisition`` seconds (the scan's,
+    without the station's set-up) and the acquisition ``start`` and ``end``, GPS seconds."""
 
     def __init__(self, env: NBSEnv, run_started: float) -> None:
         records = env.storey.scans
+        setup = env.storey.config.robot.scanner.setup_time
         self.poses = np.stack([np.asarray(r.estimated_pose, dtype=float) for r in records])
         self.rooms = np.array([int(r.room) for r in records], dtype=np.int64)
-        self.acquisition = np.array([float(r.acquisition_time) for r in records])
+        self.acquisition = np.array([float(r.acquisition_time) - setup for r in records])
         self.times = _station_times(env, run_started)
         self.start = np.array([t[0] for t in self.times])
         self.end = np.array([t[1] for t in self.times])
@@ -1013,13 +1014,15 @@ def write_samples(path: str | Path, env: NBSEnv) -> Path:
 
 def _station_times(env: NBSEnv, start: float) -> list[tuple[float, float]]:
     """Each scan's acquisition start and end on the simulated clock, GPS seconds from ``start``
-    (Unix time): the processing and acquisition of the scans before it and the travel to it."""
+    (Unix time): the processing and acquisition of the scans before it, the travel to it and its
+    station's set-up."""
     config = env.storey.config
+    setup = config.robot.scanner.setup_time
     clock, out = 0.0, []
     gps = start - _GPS_EPOCH_UNIX + _GPS_LEAP_SECONDS
     for record in env.storey.scans:
-        begin = clock + record.path_length / config.travel_speed
-        out.append((gps + begin, gps + begin + record.acquisition_time))
+        begin = clock + record.path_length / config.travel_speed + setup
+        out.append((gps + begin, gps + begin + record.acquisition_time - setup))
         clock += record.processing_time + record.acquisition_time
     return out
 

@@ -311,7 +311,14 @@ class Storey:
         self.robot = Robot(scene, config.robot, rng)
         self.rooms = Rooms(config.robot, config.rooms)
         self.meter = (
-            CoverageMeter(scene, config.coverage_spacing, config.coverage_radius) if config.coverage_meter else None
+            CoverageMeter(
+                scene,
+                config.coverage_spacing,
+                config.coverage_radius,
+                density_weight=config.robot.scanner.density_weight,
+            )
+            if config.coverage_meter
+            else None
         )
         # The robot's own account of the surface it sensed (reward.kind="mapped"): its Structure
         # voxels, summed over the rooms' grids as each scan changed them.

@@ -144,13 +144,15 @@ def test_e57_records_are_structured_scans_of_the_preset(run):
         turn = (azimuth - (-180.0 + cols * 360.0 / scanner.n_cols) + 180.0) % 360.0 - 180.0
         assert np.abs(turn).max() < 0.01
         assert record["intensity"].min() >= 1 and record["intensity"].std() > 0
-        # Poses as metrics.json has them; acquisitions in order, each lasting the station time.
+        # Poses as metrics.json has them; acquisitions in order.
         rotation, translation = run.poses[k]
         np.testing.assert_allclose(translation, steps[k]["estimated_position"], atol=1e-9)
         np.testing.assert_allclose(rotation, steps[k]["estimated_rotation"], atol=1e-9)
         start = float(_text(node, "e57:acquisitionStart/e57:dateTimeValue"))
         end = float(_text(node, "e57:acquisitionEnd/e57:dateTimeValue"))
-        assert end - start == pytest.approx(scanner.station_time) and start >= previous_end
+        # The scan lasts its station time and begins after the station's set-up.
+        assert scanner.setup_time > 0
+        assert end - start == pytest.approx(scanner.station_time) and start >= previous_end + scanner.setup_time
         previous_end = end
 
 

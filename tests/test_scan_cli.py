@@ -556,7 +556,8 @@ def test_door_frame_scans_belong_to_the_room_entered():
 @pytest.mark.parametrize("spec", ["vz400", "rtc360", "focus:1/8", "blk360:fast+"])
 def test_nbs_scan_with_each_scanner_preset_times_its_stations(tmp_path, spec):
     """Each preset drives a run (a steep -60° field with a 0.5 m minimum range once left the robot no
-    way off its first stop), and the acquisition time is the preset's station time per scan."""
+        way off its first stop), and the acquisition time is the preset's station time per scan: its set-up
+    and its scan."""
     from nbs_env.config.scanners import SCANNERS, scanner_config
 
     out = tmp_path / "report"
@@ -568,8 +569,9 @@ def test_nbs_scan_with_each_scanner_preset_times_its_stations(tmp_path, spec):
     name, setting = expected.preset.split(":")
     assert m["scanner"] == {"name": name, "setting": setting, "model": SCANNERS[name].title}
     assert m["scans"] == 3 and m["path_length_m"] > 0  # the robot moved
-    assert m["acquisition_time_s"] == pytest.approx(3 * expected.station_time)
-    assert f"3 stations at {expected.station_time:g} s" in stdout.getvalue()
+    assert expected.setup_time > 0
+    assert m["acquisition_time_s"] == pytest.approx(3 * (expected.setup_time + expected.station_time))
+    assert f"3 stations: {expected.station_time:g} s scan + {expected.setup_time:g} s set-up" in stdout.getvalue()
 
 
 @pytest.mark.parametrize(

@@ -394,10 +394,14 @@ def scan_summary(metrics: dict, out: Path, files: Sequence[str]) -> str:
         state = "no"
     reg = metrics["registration_error"]
     scanner = metrics["config"]["robot"]["scanner"]
+    setup = scanner.get("setup_time") or 0.0
+    set_up = f" + {setup:g} s set-up" if setup else ""
     if scanner.get("station_time") is not None:
-        acquisition = f" ({metrics['scans']} stations at {scanner['station_time']:g} s, the scanner preset's)"
+        acquisition = (
+            f" ({metrics['scans']} stations: {scanner['station_time']:g} s scan{set_up}, the scanner preset's)"
+        )
     else:
-        acquisition = f" (points at {scanner['points_per_second']:,.0f} per s)"
+        acquisition = f" (points at {scanner['points_per_second']:,.0f} per s{set_up} a station)"
     quality = metrics["quality"]
     reach = metrics["registrability"]
     overlap = (

@@ -21,7 +21,7 @@ __all__ = ["PRESETS", "config_paths", "make_config"]
 #: Named configurations, as dotted overrides of ``EnvConfig()``: ``"default"`` is the best robot
 #: the project knows (the paper's method with the searches for doors no scan faced, three scans a
 #: room, and NVPs in passages narrower than the lattice); ``"paper"`` the paper's literal robot (a
-#: room ends by its gain alone: no wall or door search; NVPs on the lattice only), which the
+#: room ends by its gain alone: no wall or door search; NVPs on the lattice only; thin rays), which the
 #: paper's §5 comparison uses; ``"fast"`` the RL preset (the default robot with a
 #: 1° scanner, 10 cm voxels, perfect localisation, 1-3 room storeys, 40 scans); ``"train"`` the
 #: training fidelity (``"fast"`` without the coverage meter, rewarded by the robot's own map). A preset changes the
@@ -37,7 +37,8 @@ _FAST: dict[str, Any] = {
 }
 PRESETS: dict[str, dict[str, Any]] = {
     "default": {},
-    "paper": {"rooms.wall_search.scans": 0, "robot.navigation.snap": False},
+    # The paper's scanner casts thin rays (no beam footprint, so no mixed pixels).
+    "paper": {"rooms.wall_search.scans": 0, "robot.navigation.snap": False, "robot.scanner.beam_divergence": 0.0},
     "fast": _FAST,
     # The training fidelity: the fast robot (its observations and decisions) without the ground-truth
     # meter, which no decision reads; the reward is then the robot's own map.

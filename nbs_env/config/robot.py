@@ -43,15 +43,48 @@ class ScannerConfig(Config):
     min_range, max_range : float
         Returns outside [min_range, max_range] metres are dropped.
     range_noise : float
-        Standard deviation of the Gaussian range noise in metres.
+        Standard deviation of the Gaussian range noise in metres, at ``noise_range`` on a surface seen
+        head-on. How it changes with range and incidence: ``noise_exponent``.
+    noise_floor : float
+        The part of the noise that does not depend on the returned signal (clock, quantisation), in
+        metres; counted as at most ``range_noise`` (so that ``range_noise=0`` turns the noise off).
+    noise_range : float
+        The range at which the datasheet states ``range_noise``, metres.
+    noise_exponent : float
+        How the rest of the noise grows as the returned power P falls, P ∝ cos(incidence) / range²
+        (one reflectance for every surface):
+        ``σ² = noise_floor² + (range_noise² - noise_floor²) · (P(noise_range, 0°) / P)^(2 · noise_exponent)``.
+        0 (METHOD's constant σ), 0.5 (a shot-noise-limited receiver: σ grows with range over
+        sqrt(cos)), 1 (σ ∝ 1/P). Incidence is counted up to 85° from the normal.
+    beam_divergence : float
+        Full angle of the laser beam, radians. A beam whose footprint straddles a depth
+        discontinuity returns a **mixed pixel**: its range is the power-weighted mean of the surfaces
+        in the footprint (within ``echo_separation``), a point floating between them. 0 turns mixed
+        pixels off (METHOD's ideal thin ray).
+    beam_diameter : float
+        Diameter of the beam at the exit window, metres; the footprint at range R is
+        ``beam_diameter + beam_divergence · R``.
+    echo_separation : float or None
+        Surfaces farther apart along the beam than this (metres) return separate echoes, of which the
+        scanner keeps the strongest (a pulsed scanner: c·τ/2 of its pulse length τ); nearer ones blend
+        into one. None: every footprint blends (a phase-based scanner).
+    instrument_step : float or None
+        The real instrument's angular step at its resolution setting, degrees: each simulated return
+        stands for
+        ``(angular_step / instrument_step)²`` of the instrument's, so that the scan-quality density
+        (:meth:`nbs_env.evaluation.CoverageMeter.quality`) is the instrument's. None: the simulated
+        pattern is the instrument's.
+    setup_time : float
+        Seconds a station spends before the scan starts (the base stops and settles, the tilt is read),
+        counted in every scan's acquisition time.
     height : float
         Optical centre above the floor the robot stands on, in metres.
     points_per_second : float
         Acquisition rate, for the simulated acquisition time when ``station_time`` is None.
     station_time : float or None
-        Seconds a station takes on the real instrument at its chosen resolution and quality setting
-        (a scanner preset's datasheet figure, :mod:`nbs_env.config.scanners`). None: the acquisition time
-        is the returned points over ``points_per_second``, the time the simulated pattern alone
+        Seconds the scan itself takes on the real instrument at its chosen resolution and quality
+        setting (a scanner preset's figure, :mod:`nbs_env.config.scanners`), without ``setup_time``.
+        None: the returned points over ``points_per_second``, the time the simulated pattern alone
         would take.
     preset : str or None
         The scanner preset (``"NAME:SETTING"``) the datasheet values came from
@@ -64,6 +97,15 @@ class ScannerConfig(Config):
     min_range: float = 1.5
     max_range: float = 350.0
     range_noise: float = 0.005
+    noise_floor: float = 0.0
+    noise_range: float = 10.0
+    noise_exponent: float = 0.0
+    # The VZ-400's 0.3 mrad beam and 5 ns pulse (HELIOS++'s riegl_vz400 [S2]): c·τ/2 = 0.75 m.
+    beam_divergence: float = 0.0003
+    beam_diameter: float = 0.0
+    echo_separation: float | None = 0.75
+    instrument_step: float | None = None
+    setup_time: float = 0.0
     height: float = 1.5
     points_per_second: float = 122_000.0
     station_time: float | None = None
@@ -77,6 +119,12 @@ class ScannerConfig(Config):
             min_range=self.min_range,
             max_range=self.max_range,
             range_noise=self.range_noise,
+            noise_floor=self.noise_floor,
+            noise_range=self.noise_range,
+            noise_exponent=self.noise_exponent,
+            beam_divergence=self.beam_divergence,
+            beam_diameter=self.beam_diameter,
+            setup_time=self.setup_time,
             height=self.height,
             points_per_second=self.points_per_second,
         )
@@ -91,6 +139,22 @@ class ScannerConfig(Config):
             f"min_range ({self.min_range} m) must be below max_range ({self.max_range} m)",
         )
         _require(self.range_noise >= 0, f"range_noise must be >= 0, got {self.range_noise}")
+        _require(self.noise_floor >= 0, f"noise_floor must be >= 0 m, got {self.noise_floor}")
+        _require(self.noise_range > 0, f"noise_range must be > 0 m, got {self.noise_range}")
+        _require(0 <= self.noise_exponent <= 2, f"noise_exponent must be in [0, 2], got {self.noise_exponent}")
+        _require(
+            0 <= self.beam_divergence <= 0.05, f"beam_divergence must be in [0, 0.05] rad, got {self.beam_divergence}"
+        )
+        _require(0 <= self.beam_diameter <= 0.1, f"beam_diameter must be in [0, 0.1] m, got {self.beam_diameter}")
+        if self.echo_separation is not None:
+            _finite(echo_separation=self.echo_separation)
+            _require(self.echo_separation > 0, f"echo_separation must be > 0 m or None, got {self.echo_separation}")
+        if self.instrument_step is not None:
+            _finite(instrument_step=self.instrument_step)
+            _require(
+                self.instrument_step > 0, f"instrument_step must be > 0 degrees or None, got {self.instrument_step}"
+            )
+        _require(self.setup_time >= 0, f"setup_time must be >= 0 seconds, got {self.setup_time}")
         _require(self.points_per_second > 0, f"points_per_second must be > 0, got {self.points_per_second}")
         if self.station_time is not None:
             _finite(station_time=self.station_time)
@@ -117,6 +181,18 @@ class ScannerConfig(Config):
     @property
     def n_rays(self) -> int:
         return self.n_rows * self.n_cols
+
+    @property
+    def density_weight(self) -> float:
+        """Instrument returns each simulated return stands for: ``(angular_step / instrument_step)²``, else 1."""
+        if self.instrument_step is None:
+            return 1.0
+        return (self.angular_step / self.instrument_step) ** 2
+
+    @property
+    def mixed_pixels(self) -> bool:
+        """Whether beams have a footprint (mixed pixels at depth discontinuities)."""
+        return self.beam_divergence > 0 or self.beam_diameter > 0
 
 
 @dataclass(frozen=True)

@@ -3,19 +3,23 @@
 ``scanner_config("rtc360:6mm")`` gives a :class:`~nbs_env.config.ScannerConfig` with the Leica RTC360's
 field of view, ranges, range noise and measurement rate, and the ``station_time`` of its 6 mm setting.
 
-The station time and the simulated pattern are decoupled
---------------------------------------------------------
+The station time, the density and the simulated pattern
+-------------------------------------------------------
 A real instrument's resolution settings are far finer than anything the simulator can cast: the RTC360's
 3 mm setting is a 0.017° step, about 180 M directions per station (``MAX_RAYS`` refuses more than 50 M,
-and the env casts ~0.1-0.2 M). So a preset sets two different things:
+and the env casts ~0.1-0.2 M). So a preset sets three things:
 
-- ``station_time``: the seconds one station takes on the **real** instrument at the named setting, which
-  :attr:`~nbs_env.sensing.scanner.Scan.acquisition_time` reports for every scan;
+- ``station_time``: the seconds the scan takes on the **real** instrument at the named setting, and
+  ``setup_time``, the seconds before it ([A], below); :attr:`~nbs_env.sensing.scanner.Scan.acquisition_time`
+  reports their sum for every scan;
+- ``instrument_step``: the setting's step, so that each simulated return counts for
+  ``(angular_step / instrument_step)²`` of the instrument's in the scan-quality density (a stated
+  subsampling, measured in ``tests/test_scanner.py``): "dense %" is the instrument's;
 - ``angular_step``: the step of the **simulated** cast, ``simulated_step`` if given, else the env default
-  (``ScannerConfig().angular_step``, 0.5°). The simulated point density is that of this coarser pattern,
-  never that of the named setting.
+  (``ScannerConfig().angular_step``, 0.5°). The clouds written hold this pattern's points.
 
-Field of view, range limits, range noise and rate are the instrument's and apply to the simulated cast.
+Field of view, range limits, the range noise model (σ by range and incidence), the beam (its footprint
+makes mixed pixels at depth edges) and rate are the instrument's and apply to the simulated cast.
 
 Conventions
 -----------
@@ -31,7 +35,10 @@ are scan only, without imaging.
 
 Provenance marks: **[S]** found in a stored copy of the vendor's own text; **[S2]** found in a stored
 secondary source that quotes the vendor; **[R]** not found in a stored copy, from the published datasheet
-as recalled (a reviewer should check it); **[D]** derived here, as above.
+as recalled (a reviewer should check it); **[D]** derived here, as above; **[A]** an assumption, no
+source found: the 10 s set-up of every preset (a robot-borne scanner reads its tilt instead of being
+levelled), the RTC360's beam (taken as the BLK360 G2's) and the Leica scanners' 0.75 m echo
+separation (taken as the VZ-400's).
 
 The presets
 -----------
@@ -58,11 +65,12 @@ focus      FARO Focus S 350    -60..+90 [R]   0.6-350 [R]  0.0003 [R]    976,000
                                                                                       (steps [R], times [D]
                                                                                       at quality 1x;
                                                                                       default 1/4)
-blk360     Leica BLK360 G2     -45..+90 [R]   0.5-45       0.004 [S2]    680,000 [S]  fast+: 0.143°, 13 s;
+blk360     Leica BLK360 G2     -45..+90 [R]   0.5-45       0.004 [S2]    680,000 [S]  fast+: 0.143°, 7 s;
                                               ([R]-[S2])                              dense: 0.0688°, 30 s;
-                                                                                      dense+: 0.0344°, 75 s
-                                                                                      (spacings [S2], times
-                                                                                      [S]; default dense+)
+                                                                                      dense+: 0.0437°, 75 s
+                                                                                      (spacings [S2], dense+
+                                                                                      [D]; times [S];
+                                                                                      default dense+)
 =========  ==================  =============  ===========  ============  ===========  =====================
 
 Which figure is σ, and caveats
@@ -91,10 +99,23 @@ Which figure is σ, and caveats
 - **BLK360 G2** (the 2022 model, not the G1). σ = 4 mm is its range accuracy at 10 m [S2] (7 mm at
   20 m [R]); the datasheet gives no separate range-noise figure that was found. Leica's text gives four
   settings taking 7, 13, 30 or 75 s at 680,000 points/s, and 20 s for a full dome *with* photospheres
-  [S]; a stored secondary source names three of them by density: Dense+ 6 mm, Dense 12 mm, Fast+ 25 mm
-  at 10 m [S2]. The times are matched to the densities here in order (finer takes longer) and read as
-  scan only (13 s plus imaging = the 20 s) — both readings are ours. The 7 s "Fast" setting is left
-  out: no stored source gives its density. The 45 m maximum range is [S2]; 0.5 m minimum [R].
+  [S]; a stored secondary source names three densities: Dense+ 6 mm, Dense 12 mm, Fast+ 25 mm at 10 m
+  [S2]. The times follow 360° x 270° of directions over the step squared at 680,000 points/s: 25 mm
+  gives 7.0 s and 12 mm 30.2 s, so Fast+ is the 7 s setting and Dense the 30 s one. 6 mm would take
+  121 s, more than any stated time, so Dense+ keeps the 75 s [S] and its step is derived from it [D]
+  (0.0437°, 7.6 mm at 10 m). The 13 s setting, whose density no stored source names, is left out. The
+  45 m maximum range is [S2]; 0.5 m minimum [R]. Beam 0.4 mrad, 2.25 mm at the window, single-return
+  waveform digitising [S2].
+
+Noise models and beams
+----------------------
+σ grows with range and incidence where a datasheet states σ at two ranges: the signal-dependent part
+follows the returned power, ``noise_exponent`` 0.5, and the floor is fitted so that both figures hold
+(RTC360: 0.36 mm floor; BLK360 G2: 2.24 mm). The Focus's single figure keeps no floor (0.15 mm at 5 m
+head-on, 0.6 mm at 20 m). The VZ-400's single figure is at 100 m; extrapolated down it would give a
+TOF scanner sub-millimetre noise indoors, so it stays constant. Beams [S2] unless marked: VZ-400
+0.3 mrad (HELIOS++), its 5 ns pulse separating echoes 0.75 m apart; Focus S 350 0.3 mrad, 2.12 mm
+at the window, phase-based (every straddling footprint blends); RTC360 [A] as the BLK360 G2.
 
 Sources
 -------
@@ -140,6 +161,20 @@ def _ceil_tenth(seconds: float) -> float:
 def _rate_bound_time(step: float, elevation_min: float, elevation_max: float, rate: float) -> float:
     """Seconds to measure every direction of the full field at ``step`` at ``rate`` points per second."""
     return _ceil_tenth(_directions(step, elevation_min, elevation_max) / rate)
+
+
+# Seconds a robot-borne station spends before its scan [A]: the base stops and its vibration settles,
+# the scanner reads its tilt (every preset measures it: the VZ-400's inclination sensors, the RTC360's
+# and the BLK360's inertial units, the Focus's dual-axis compensator) instead of being levelled by
+# hand. No stored source gives such a time for any of the four.
+_SETUP_TIME = 10.0
+
+# The noise floor of a datasheet that gives σ at two ranges, R1 < R2, with the shot-noise model
+# (``noise_exponent`` 0.5, σ² = floor² + s² · (R / R1)²): floor² = (4 σ1² - σ2²) / 3 when R2 = 2 R1.
+
+
+def _floor_from_two_ranges(sigma_1: float, sigma_2: float) -> float:
+    return math.sqrt((4.0 * sigma_1**2 - sigma_2**2) / 3.0)
 
 
 # RIEGL VZ-400 figures used by the derivation of its station times [R]: high-speed mode's effective
@@ -209,6 +244,15 @@ class ScannerModel:
         The documents the figures come from, with their provenance.
     vendor : str
         The manufacturer as its data sheets name it (an E57 record's ``sensorVendor``).
+    noise_floor, noise_range, noise_exponent : float
+        The noise model (:class:`~nbs_env.config.ScannerConfig`): ``range_noise`` is σ at
+        ``noise_range`` head-on; ``noise_exponent`` 0.5 where two ranges' figures fix the floor.
+    beam_divergence, beam_diameter : float
+        The beam's full angle (rad) and exit diameter (m): the footprint of the mixed pixels.
+    echo_separation : float or None
+        Echoes farther apart than this (m) are told apart (pulsed: c·τ/2); None blends all (phase).
+    setup_time : float
+        Seconds a station spends before its scan (the base stops and settles, the tilt is read).
     """
 
     name: str
@@ -223,6 +267,13 @@ class ScannerModel:
     default_setting: str
     sources: tuple[str, ...]
     vendor: str = ""
+    noise_floor: float = 0.0
+    noise_range: float = 10.0
+    noise_exponent: float = 0.0
+    beam_divergence: float = 0.0
+    beam_diameter: float = 0.0
+    echo_separation: float | None = None
+    setup_time: float = 0.0
 
     def __post_init__(self) -> None:
         # A malformed table fails at import rather than when a run first asks for the preset.
@@ -270,6 +321,12 @@ def _vz400() -> ScannerModel:
         min_range=1.5,
         max_range=350.0,
         range_noise=0.003,
+        # One figure (at 100 m) and none nearer: σ is kept constant rather than extrapolated down.
+        noise_floor=0.003,
+        noise_range=100.0,
+        beam_divergence=0.0003,
+        echo_separation=0.75,
+        setup_time=_SETUP_TIME,
         points_per_second=_VZ400_RATE,
         settings=tuple(
             ResolutionSetting(
@@ -313,6 +370,12 @@ def _rtc360() -> ScannerModel:
         min_range=0.5,
         max_range=130.0,
         range_noise=0.0004,
+        noise_floor=_floor_from_two_ranges(0.0004, 0.0005),
+        noise_exponent=0.5,
+        beam_divergence=0.0004,
+        beam_diameter=0.00225,
+        echo_separation=0.75,
+        setup_time=_SETUP_TIME,
         points_per_second=rate,
         settings=tuple(
             ResolutionSetting(
@@ -368,6 +431,11 @@ def _focus() -> ScannerModel:
         min_range=0.6,
         max_range=350.0,
         range_noise=0.0003,
+        noise_exponent=0.5,
+        beam_divergence=0.0003,
+        beam_diameter=0.00212,
+        echo_separation=None,
+        setup_time=_SETUP_TIME,
         points_per_second=rate,
         settings=tuple(settings),
         default_setting="1/4",
@@ -385,12 +453,22 @@ def _focus() -> ScannerModel:
 
 
 def _blk360() -> ScannerModel:
-    # Leica's four times (7, 13, 30, 75 s) matched in order to the three densities a stored secondary
-    # source names; the 7 s setting, whose density no stored source gives, is left out.
+    # Leica's times (7, 13, 30, 75 s at 680,000 points/s [S]) fit 360° x 270° over the step squared at
+    # that rate: the 25 mm (Fast+) and 12 mm (Dense) spacings [S2] give 7.0 and 30.2 s. The 6 mm a
+    # secondary source gives Dense+ would take 121 s that way, so Dense+ keeps Leica's 75 s and its
+    # step is derived from it [D]: 0.0437°, 7.6 mm at 10 m. The 13 s setting, whose spacing no stored
+    # source names, is left out.
+    dense_plus = math.degrees(math.atan(_blk360_spacing(75.0) / 10.0))
     settings = (
-        ("dense+", 0.006, 75.0),
-        ("dense", 0.012, 30.0),
-        ("fast+", 0.025, 13.0),
+        (
+            "dense+",
+            dense_plus,
+            75.0,
+            f"{10_000 * math.tan(math.radians(dense_plus)):.1f} mm at 10 m [D] from "
+            "75 s [S] at 680,000 points/s over 360° x 270° (a stored secondary source's 6 mm would take 121 s)",
+        ),
+        ("dense", step_for_spacing(0.012), 30.0, "12 mm at 10 m [S2]; 30 s scan only [S] (30.2 s by the rate)"),
+        ("fast+", step_for_spacing(0.025), 7.0, "25 mm at 10 m [S2]; 7 s scan only [S] (7.0 s by the rate)"),
     )
     return ScannerModel(
         name="blk360",
@@ -401,16 +479,14 @@ def _blk360() -> ScannerModel:
         min_range=0.5,
         max_range=45.0,
         range_noise=0.004,
+        noise_floor=_floor_from_two_ranges(0.004, 0.007),
+        noise_exponent=0.5,
+        beam_divergence=0.0004,
+        beam_diameter=0.00225,
+        echo_separation=0.75,
+        setup_time=_SETUP_TIME,
         points_per_second=680_000.0,
-        settings=tuple(
-            ResolutionSetting(
-                name,
-                step_for_spacing(s),
-                t,
-                f"{1000 * s:g} mm at 10 m [S2]; {t:g} s scan only [S] (matched to the density in order)",
-            )
-            for name, s, t in settings
-        ),
+        settings=tuple(ResolutionSetting(name, step, t, note) for name, step, t, note in settings),
         default_setting="dense+",
         sources=(
             "Leica BLK360 (G2, 2022) product text as reproduced by a reseller's site (GitHub React file, index "
@@ -426,6 +502,17 @@ def _blk360() -> ScannerModel:
             "4 mm at 10 m, 7 mm at 20 m; 3D point accuracy 6 mm at 10 m, 8 mm at 20 m.",
         ),
     )
+
+
+def _blk360_seconds(step: float) -> float:
+    """Seconds of a BLK360 G2 scan at ``step`` degrees by the rule its four stated times follow:
+    360° x 270° of directions over the step squared, at 680,000 points/s [D]."""
+    return 360.0 * 270.0 / step**2 / 680_000.0
+
+
+def _blk360_spacing(seconds: float) -> float:
+    """Spacing at 10 m (metres) of the BLK360 G2 setting that takes ``seconds`` by that rule [D]."""
+    return 10.0 * math.tan(math.radians(math.sqrt(360.0 * 270.0 / (seconds * 680_000.0))))
 
 
 #: The presets by name.
@@ -476,6 +563,14 @@ def scanner_config(spec: str, *, simulated_step: float | None = None, height: fl
         min_range=model.min_range,
         max_range=model.max_range,
         range_noise=model.range_noise,
+        noise_floor=model.noise_floor,
+        noise_range=model.noise_range,
+        noise_exponent=model.noise_exponent,
+        beam_divergence=model.beam_divergence,
+        beam_diameter=model.beam_diameter,
+        echo_separation=model.echo_separation,
+        instrument_step=setting.angular_step,
+        setup_time=model.setup_time,
         height=height,
         points_per_second=model.points_per_second,
         station_time=setting.station_time,
