@@ -33,6 +33,7 @@ from nbs_env.config import Config, _integer, _require
 from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import ROOM_FEATURES, CandidateColumn, candidate_table_of
 from policies.base import mask_of
+from scenes.jsonio import read_json
 
 __all__ = [
     "BUNDLED",
@@ -313,7 +314,8 @@ def load_checkpoint(path: str | Path):
     if not path.is_file():
         raise ModelFileError(f"{path}: no such checkpoint (a folder with policy.json and policy.pt)")
     try:
-        document = json.loads(path.read_text())
+        # Nesting is bounded: a thousand levels would end in a RecursionError in the decoder.
+        document = read_json(path.read_text())
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ModelFileError(f"{path}: not a JSON checkpoint description ({exc})") from None
     if not isinstance(document, dict) or document.get("format") != CHECKPOINT_FORMAT:

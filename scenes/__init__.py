@@ -28,6 +28,7 @@ from scenes.errors import (
     PlanGeometryError,
     SceneError,
     SceneFileError,
+    StoreySizeError,
     StoreyValidationError,
     UnknownSceneError,
     UnsupportedFormatError,
@@ -57,6 +58,7 @@ __all__ = [
     "Scene",
     "SceneError",
     "SceneFileError",
+    "StoreySizeError",
     "StoreyValidationError",
     "StructureSamples",
     "SurfaceClass",
@@ -86,6 +88,7 @@ def load_scene(spec: str | Path | FloorPlan, **options: Any) -> Scene:
         - ``validate=True``: validate plan-based storeys (reachability, free start, closed);
         - for ``generated:SEED``: any :class:`GeneratorConfig` field, e.g. ``rooms=5``;
         - for meshes: ``y_up=True`` converts y-up coordinates (glTF convention) to z-up;
+          ``units="mm"`` (or ``"cm"``, ``"ft"``, ``"in"``; default ``"m"``) scales the file to metres;
         - for IFC: ``storey`` (name or index), ``class_map`` (IFC class → SurfaceClass overrides),
           ``doors`` (``"open"``, the default: frames only; ``"closed"``: doors as drawn).
 
@@ -98,10 +101,13 @@ def load_scene(spec: str | Path | FloorPlan, **options: Any) -> Scene:
     SceneError
         A subclass naming the source and the problem: :class:`UnknownSceneError`,
         :class:`SceneFileError`, :class:`UnsupportedFormatError`, :class:`InvalidMeshError`,
+        :class:`StoreySizeError` (larger than :mod:`scenes.limits` allows: a file in millimetres?),
         :class:`MissingStructureError`, :class:`FloorPlanError`, :class:`PlanGeometryError`,
         :class:`StoreyValidationError`, :class:`IfcError` or :class:`MissingDependencyError`.
     TypeError
         An option that the chosen kind of source does not take.
+    ValueError
+        A ``units`` that is none of :data:`scenes.limits.UNITS`.
     """
     start = options.pop("start", None)
     scene = _load(spec, options)

@@ -44,6 +44,11 @@ class InvalidMeshError(SceneError, ValueError):
     """An empty mesh, non-finite vertices, or label arrays that do not match the faces."""
 
 
+class StoreySizeError(SceneError, ValueError):
+    """A storey beyond the limits of :mod:`scenes.limits`: too wide, too high or too many faces. Most
+    often a file drawn in millimetres or centimetres read as metres; the message names the likely unit."""
+
+
 class MissingStructureError(SceneError, ValueError):
     """A scene with no floor or no wall faces: there is nothing structural to scan."""
 

@@ -61,6 +61,7 @@ from shapely.geometry.polygon import orient
 
 from scenes.errors import FloorPlanError, PlanGeometryError, SceneFileError
 from scenes.geometry import STOREY_CLEARANCE
+from scenes.jsonio import read_json
 from scenes.model import Door, Room, Scene, SurfaceClass
 from scenes.validation import validate_plan_scene
 
@@ -356,7 +357,8 @@ def load_plan(path: str | Path) -> FloorPlan:
     SceneFileError
         The file is missing or unreadable.
     FloorPlanError
-        Invalid JSON (with line and column) or a schema violation (with the field path).
+        Invalid JSON (with line and column; nesting deeper than :data:`scenes.jsonio.MAX_JSON_DEPTH`
+        included) or a schema violation (with the field path).
     """
     path = Path(path)
     try:
@@ -368,7 +370,8 @@ def load_plan(path: str | Path) -> FloorPlan:
     except OSError as exc:
         raise SceneFileError(str(path), f"cannot read: {exc.strerror or exc}") from None
     try:
-        data = json.loads(text, parse_constant=_reject_constant)
+        # Nesting is bounded: a thousand levels would end in a RecursionError in the decoder.
+        data = read_json(text, parse_constant=_reject_constant)
     except json.JSONDecodeError as exc:
         raise FloorPlanError(str(path), f"invalid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
     except ValueError as exc:

@@ -44,9 +44,15 @@ number, negative for none), renumbered like the room tokens.
 
 Axes and units
 --------------
-Coordinates are metres with z up. Files authored y up (the glTF convention, Blender's glTF
-exporter) load with ``y_up=True``, which rotates +90 degrees about x: ``(x, y, z) -> (x, -z, y)``.
-Files written by :func:`export_scene` are z up.
+Coordinates are metres with z up. A file in another unit loads with ``units`` (``"cm"``, ``"mm"``,
+``"ft"``, ``"in"``; :data:`scenes.limits.UNITS`), which scales it to metres. A storey beyond
+:mod:`scenes.limits` (500 m across, 50 m high: what a storey in millimetres read as metres is) is
+refused with a :class:`~scenes.errors.StoreySizeError` that names the likely unit. Files authored y up
+(the glTF convention, Blender's glTF exporter) load with ``y_up=True``, which rotates +90 degrees
+about x: ``(x, y, z) -> (x, -z, y)``. Files written by :func:`export_scene` are z up (and metres).
+
+Sizes a file declares (a PLY header's counts, a glTF buffer's length, an accessor's count) are checked
+against the bytes it has before it is parsed (:mod:`scenes.headers`).
 
 Ground truth
 ------------
@@ -69,7 +75,9 @@ import shapely
 import trimesh
 
 from scenes.errors import InvalidMeshError, MissingStructureError, SceneFileError, UnsupportedFormatError
+from scenes.headers import check_gltf_layout, check_ply_header
 from scenes.interior import with_derived_rooms
+from scenes.limits import MAX_FACES, check_face_count, check_storey_size, unit_scale
 from scenes.model import Room, Scene, SurfaceClass
 
 __all__ = [
@@ -151,7 +159,7 @@ def _classify(candidates: Sequence[str | None]) -> tuple[SurfaceClass | None, in
 
 
 # ---------------------------------------------------------------------------------------- loading
-def load_mesh_scene(path: str | Path, *, y_up: bool = False, name: str | None = None) -> Scene:
+def load_mesh_scene(path: str | Path, *, y_up: bool = False, units: str = "m", name: str | None = None) -> Scene:
     """Load a labelled mesh file as a :class:`~scenes.model.Scene`.
 
     Parameters
@@ -160,6 +168,9 @@ def load_mesh_scene(path: str | Path, *, y_up: bool = False, name: str | None = 
         An ``.obj``, ``.glb``, ``.gltf`` or ``.ply`` file labelled as the module docstring describes.
     y_up : bool
         The file's up axis is +y; rotate to z up with ``(x, y, z) -> (x, -z, y)``.
+    units : str
+        The unit of the file's coordinates, one of :data:`scenes.limits.UNITS` (``"m"``, ``"cm"``,
+        ``"mm"``, ``"ft"``, ``"in"``); the mesh is scaled to metres.
     name : str, optional
         Name of the scene; defaults to the path. Error messages always name the file.
 
@@ -177,15 +188,22 @@ def load_mesh_scene(path: str | Path, *, y_up: bool = False, name: str | None = 
     UnsupportedFormatError
         The extension is none of :data:`SUPPORTED_EXTENSIONS`.
     InvalidMeshError
-        The file cannot be parsed, holds no faces, has NaN or infinite vertices, or bad labels.
+        The file cannot be parsed, declares more data than it holds, holds no faces, has NaN or
+        infinite vertices, or bad labels.
+    StoreySizeError
+        The storey is larger than :mod:`scenes.limits` allows (the message suggests a unit) or has
+        too many faces.
     MissingStructureError
         No floor or no wall faces.
+    ValueError
+        ``units`` is not one of :data:`scenes.limits.UNITS`.
 
     Warns
     -----
     UnlabelledPartsWarning
         Once, listing every part whose name has no class prefix (loaded as CLUTTER).
     """
+    scale = unit_scale(units)
     path = Path(path)
     source = str(path)
     ext = path.suffix.lower()
@@ -202,11 +220,14 @@ def load_mesh_scene(path: str | Path, *, y_up: bool = False, name: str | None = 
     except OSError as exc:
         raise SceneFileError(source, f"cannot read the file: {exc.strerror or exc}") from exc
 
+    # What the file declares is checked against its bytes before trimesh allocates from it.
     if ext == ".obj":
         vertices, faces, labels, rooms, unlabelled = _read_obj(source, data)
     elif ext == ".ply":
+        check_ply_header(source, data)
         vertices, faces, labels, rooms, unlabelled = _read_ply(source, path)
     else:
+        check_gltf_layout(source, path, data)
         vertices, faces, labels, rooms, unlabelled = _read_gltf(source, path, ext)
 
     if unlabelled:
@@ -229,9 +250,13 @@ def load_mesh_scene(path: str | Path, *, y_up: bool = False, name: str | None = 
         )
     if y_up:
         vertices = vertices[:, [0, 2, 1]] * np.array([1.0, -1.0, 1.0])
+    vertices = vertices * scale
 
     # Drop vertices no face uses so that bounds describe the surfaces only.
     used, inverse = np.unique(faces.reshape(-1), return_inverse=True)
+    # Before the room outlines: shapely fails deep inside on 1e300, and a file in millimetres would
+    # reach the grids at a thousand times its size. Here the message can suggest the units option.
+    check_storey_size(source, vertices[used], len(faces), units=units)
     mesh = trimesh.Trimesh(vertices[used], inverse.reshape(-1, 3), process=False, validate=False)
     labels = labels.astype(np.uint8)
     _require_structure(source, labels, hint=_STRUCTURE_HINT[ext])
@@ -301,12 +326,19 @@ def _read_obj(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
                     raise InvalidMeshError(source, f"line {lineno}: bad vertex reference {ref!r}") from None
                 if i == 0:
                     raise InvalidMeshError(source, f"line {lineno}: vertex indices start at 1, got 0")
-                # Negative indices count back from the latest vertex.
+                # A file of n bytes has fewer than n vertices: a larger index (which may not even fit
+                # an int64) refers to none. Negative indices count back from the latest vertex.
+                if i > len(data) or -i > len(coords):
+                    raise InvalidMeshError(
+                        source, f"line {lineno}: vertex index {ref.split('/', 1)[0]} refers to no vertex of the file"
+                    )
                 idx.append(i - 1 if i > 0 else len(coords) + i)
             part = parts.setdefault((obj, group), len(parts))
             for k in range(1, len(idx) - 1):
                 tris.append((idx[0], idx[k], idx[k + 1]))
                 tri_part.append(part)
+            if len(tris) > MAX_FACES:  # refused while the lists are still small
+                check_face_count(source, len(tris))
         elif key == "o":
             # A new object ends the group: a group left over from the previous object must not
             # label this one.

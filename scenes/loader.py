@@ -106,7 +106,7 @@ def load_source(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene:
     if suffix in MESH_EXTENSIONS:
         from scenes.importers import load_mesh_scene
 
-        return load_mesh_scene(path, **_take(options, ("y_up", "name"), "mesh file"))
+        return load_mesh_scene(path, **_take(options, ("y_up", "units", "name"), "mesh file"))
     from scenes.ifc import load_ifc_scene
 
     return load_ifc_scene(path, **_take(options, ("storey", "class_map", "name", "doors"), "IFC file"))

@@ -15,6 +15,7 @@ import trimesh
 from scenes.errors import InvalidMeshError, MissingStructureError
 from scenes.geometry import auto_start
 from scenes.labels import STRUCTURAL_CLASSES, SurfaceClass
+from scenes.limits import check_storey_size
 
 __all__ = [
     "STRUCTURAL_CLASSES",
@@ -136,6 +137,8 @@ class Scene:
     ------
     InvalidMeshError
         Empty mesh, NaN or infinite vertices, or label arrays whose shape does not match the faces.
+    StoreySizeError
+        Larger than :mod:`scenes.limits` allows: too wide, too high or too many faces.
     MissingStructureError
         No floor or no wall faces.
     """
@@ -161,6 +164,8 @@ class Scene:
             bad = int(np.count_nonzero(~np.isfinite(mesh.vertices).all(axis=1)))
             raise InvalidMeshError(name, f"{bad} vertices are NaN or infinite")
         n_faces = len(mesh.faces)
+        # Before anything is sized from the bounds: a file in millimetres would ask for hundreds of GiB.
+        check_storey_size(name, mesh.vertices, n_faces)
         labels = np.asarray(face_labels)
         if labels.shape != (n_faces,):
             raise InvalidMeshError(name, f"face_labels has shape {labels.shape}, expected ({n_faces},)")

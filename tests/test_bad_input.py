@@ -34,6 +34,8 @@ CASES = [
     ("scan --scene office --policy ppo:reference --wall-search 0", EXIT_USAGE, "pass --wall-search 3"),
     ("scan --scene office --y-up", EXIT_USAGE, "--y-up applies to labelled meshes"),
     ("scan --scene office --storey 0", EXIT_USAGE, "--storey applies to .ifc files only"),
+    ("scan --scene office --units mm", EXIT_USAGE, "--units applies to labelled meshes"),
+    ("scan --scene office --units yd", EXIT_USAGE, "--units: invalid choice: 'yd'"),
     ("scan --scene office --start nan,1", EXIT_USAGE, "expected finite X,Y"),
     ("scan --scene office --policy nope", EXIT_USAGE, "unknown policy"),
     ("scan --scene office --policy greedy:x", EXIT_USAGE, "greedy takes NEAR, the share of the best gain"),
@@ -55,6 +57,7 @@ CASES = [
     ("scenes show office --out topnoext", EXIT_USAGE, "a picture file ends in one of"),
     ("scenes info office --y-up", EXIT_USAGE, "--y-up applies to labelled meshes"),
     ("scenes info five_rooms --storey 0", EXIT_USAGE, "--storey applies to .ifc files only"),
+    ("scenes info office --units cm", EXIT_USAGE, "IFC files carry their own units, floor plans are metres"),
     ("scenes show five_rooms --storey Erdgeschoss --out t.png", EXIT_USAGE, "--storey applies to .ifc files"),
     # nbs compare
     ("compare --scenes office --policies greedy --seeds -1 --out c", EXIT_USAGE, "seeds are integers >= 0"),
@@ -65,6 +68,7 @@ CASES = [
     ("compare --scenes generated:5-2 --policies greedy --out c", EXIT_USAGE, "generated:A-B"),
     ("compare --scenes office --policies nope --out c", EXIT_USAGE, "unknown policy"),
     ("compare --scenes office --policies greedy --storey 0 --out c", EXIT_USAGE, "--storey applies to .ifc files"),
+    ("compare --scenes office --policies greedy --units mm --out c", EXIT_USAGE, "--units applies to labelled meshes"),
     ("compare --scenes office --policies greedy --voxel 5 --out c", EXIT_USAGE, "voxel_size must be within"),
     ("compare --scenes office --policies greedy --set robot=1 --out c", EXIT_USAGE, "robot must be a JSON object"),
     # nbs train (its checks live in TrainConfig)
@@ -77,6 +81,7 @@ CASES = [
     ("train --ent-coef nan --out t", EXIT_USAGE, "ent_coef must be a finite number"),
     ("train --wall-search -1 --out t", EXIT_USAGE, "expected an integer >= 0"),
     ("train --storey 0 --out t", EXIT_USAGE, "--storey applies to .ifc files only"),
+    ("train --units mm --out t", EXIT_USAGE, "--units applies to labelled meshes"),
     ("train --scanner rtc360:9mm --out t", EXIT_USAGE, "has no setting '9mm'"),
     ("train --completion never --out t", EXIT_USAGE, "--completion: invalid choice: 'never'"),
     ("train --max-episode-steps 0 --out t", EXIT_USAGE, "max_episode_steps must be an integer >= 1"),
@@ -181,3 +186,46 @@ def test_compare_on_a_roomless_mesh_writes_its_table(tmp_path, capsys):
     assert "roomless.glb" in table
     total = next(line for line in table.splitlines() if "roomless.glb" in line and "| total |" in line)
     assert "–" not in total.split("|")[-4], total  # the share of the oracle's coverage is there
+
+
+def test_a_mesh_in_millimetres_is_refused_with_the_unit_to_pass(tmp_path, monkeypatch, capsys):
+    """Read as metres, a 10 m x 8 m room drawn in millimetres once made the scan ask for 381 GiB; now
+    nbs scan and nbs scenes say which --units to pass, in one line, and with it the storey loads."""
+    import trimesh
+
+    from scenes import load_scene
+    from train.arguments import config_from_arguments
+    from train.cli import build_parser
+
+    sc = trimesh.Scene()
+    for name, (x, y, z) in {"floor": (10, 8, 0.01), "wall": (0.1, 8, 2.5)}.items():
+        box = trimesh.creation.box(extents=(x, y, z))
+        box.apply_translation((x / 2, y / 2, z / 2))
+        sc.add_geometry(box, node_name=name, geom_name=name)
+    metres = tmp_path / "room_m.glb"
+    sc.export(metres)
+    sc.apply_scale(1000.0)
+    path = tmp_path / "room_mm.glb"
+    sc.export(path)
+    monkeypatch.chdir(tmp_path)
+    for command in (f"scan --scene {path} --quiet --out scan", f"scenes info {path}"):
+        code, err = run_cli(command, capsys)
+        assert code == EXIT_SCENE_ERROR, err
+        assert "the storey is 10,000 m across" in err and "pass --units mm" in err, err
+        assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "scan").exists()
+    code, _ = run_cli(f"scenes info {path} --units mm", capsys)
+    assert code == 0
+    # nbs scan hands --units to the storey's loader through the configuration.
+    args = build_parser().parse_args(["scan", "--scene", str(path), "--units", "mm"])
+    _, overrides = config_from_arguments(args, "default")
+    assert overrides["scene_options"] == {"units": "mm"}
+    scene = load_scene(str(path), **overrides["scene_options"])
+    assert scene.bounds == pytest.approx(load_scene(str(metres)).bounds)
+
+
+def test_the_unit_names_are_the_loaders():
+    from scenes.limits import UNITS
+    from train.arguments import UNIT_NAMES
+
+    assert tuple(UNITS) == UNIT_NAMES

@@ -14,6 +14,7 @@ from scenes.errors import (
     MissingStructureError,
     SceneError,
     SceneFileError,
+    StoreySizeError,
     UnsupportedFormatError,
 )
 from scenes.importers import (
@@ -512,6 +513,9 @@ def test_garbage_bytes(tmp_path, ext):
         ("v 0 0 zero\nf 1 1 1\n", "non-numeric"),
         ("v 0 0 0\no floor\nf 1 2\n", "line 3: a face needs 3"),
         ("v 0 0 0\no floor\nf 0 1 1\n", "start at 1"),
+        # Beyond an int64 (it was an OverflowError) and before the first vertex: the line is named.
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\no floor\nf 1 2 99999999999999999999\n", "line 5: vertex index 9{20} refers to no"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\no floor\nf 1 2 -9\n", "line 5: vertex index -9 refers to no vertex"),
         ("v 0 0\n", "line 1: a vertex needs"),
     ],
 )
@@ -521,7 +525,7 @@ def test_malformed_obj(tmp_path, text, match):
 
 
 def test_errors_are_scene_errors():
-    for cls in (SceneFileError, UnsupportedFormatError, InvalidMeshError, MissingStructureError):
+    for cls in (SceneFileError, UnsupportedFormatError, InvalidMeshError, MissingStructureError, StoreySizeError):
         assert issubclass(cls, SceneError)
 
 
@@ -544,3 +548,187 @@ def test_export_keeps_large_coordinates(tmp_path, ext, exact):
 
         assert np.allclose(ordered(loaded.mesh.triangles), ordered(original.mesh.triangles), atol=0.5)
         assert not np.array_equal(ordered(loaded.mesh.triangles), ordered(original.mesh.triangles))
+
+
+# ------------------------------------------------------------------- units and the largest storey
+def room_in(unit_per_metre: float) -> dict[str, trimesh.Trimesh]:
+    """A 10 m x 8 m x 2.5 m room drawn in a unit with ``unit_per_metre`` units to the metre."""
+    parts = box_room(0.0, 10.0, 0.0, 8.0, h=2.5)
+    for m in parts.values():
+        m.apply_scale(unit_per_metre)
+    return parts
+
+
+def glb_of(parts: dict[str, trimesh.Trimesh], path: Path, transforms: dict[str, np.ndarray] | None = None) -> Path:
+    sc = trimesh.Scene()
+    for name, mesh in parts.items():
+        sc.add_geometry(mesh, node_name=name, geom_name=name, transform=(transforms or {}).get(name))
+    sc.export(path)
+    return path
+
+
+@pytest.mark.parametrize(("unit", "per_metre"), [("mm", 1000.0), ("cm", 100.0), ("in", 1 / 0.0254), ("ft", 1 / 0.3048)])
+@pytest.mark.parametrize("ext", [".obj", ".glb"])
+def test_units_scale_the_file_to_the_metre_one(tmp_path, unit, per_metre, ext):
+    from scenes import load_scene
+
+    def saved(name, parts):
+        return (
+            write(tmp_path, name + ".obj", obj_text(parts))
+            if ext == ".obj"
+            else glb_of(parts, tmp_path / f"{name}.glb")
+        )
+
+    metres = load_mesh_scene(saved("m", room_in(1.0)))
+    scaled = load_scene(str(saved(unit, room_in(per_metre))), units=unit)
+    assert np.allclose(scaled.mesh.vertices, metres.mesh.vertices, atol=1e-5)
+    assert scaled.structural_area() == pytest.approx(metres.structural_area(), rel=1e-6)
+    assert [r.area for r in scaled.rooms] == pytest.approx([r.area for r in metres.rooms], rel=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("per_metre", "across", "word", "unit"),
+    [
+        (1000.0, "10,000", "millimetres", "mm"),
+        (100.0, "1,000", "centimetres", "cm"),
+        (1 / 0.0254, "394", "inches", "in"),
+    ],
+)
+@pytest.mark.parametrize("ext", [".obj", ".glb"])
+def test_a_storey_in_another_unit_read_as_metres_is_refused_naming_the_unit(
+    tmp_path, per_metre, across, word, unit, ext
+):
+    # Read as metres, a millimetre storey once made later stages ask for 381 GiB.
+    p = tmp_path / f"room{ext}"
+    if ext == ".obj":
+        p.write_text(obj_text(room_in(per_metre)))
+    else:
+        glb_of(room_in(per_metre), p)
+    with pytest.raises(
+        StoreySizeError,
+        match=rf"room{ext}: the storey is {across} m across .* is the file in {word}\? pass --units {unit} ",
+    ):
+        load_mesh_scene(p)
+
+
+@pytest.mark.parametrize("ext", [".obj", ".glb"])
+def test_coordinates_beyond_any_storey_are_refused_before_the_room_outlines(tmp_path, ext):
+    # 1e300 is finite: it once reached shapely, which failed deep inside (or loaded a storey 1e300 m wide).
+    if ext == ".obj":
+        p = write(tmp_path, "far.obj", obj_text(box_room()).replace("v 0 0 0\n", "v 1e300 0 0\n", 1))
+    else:
+        far = np.eye(4)
+        far[0, 3] = 1e300
+        p = glb_of(box_room(), tmp_path / "far.glb", {"wall_n": far})
+    with pytest.raises(StoreySizeError, match=rf"far{ext}: the storey is 1e\+300 m across .*coordinates broken"):
+        load_mesh_scene(p)
+
+
+@pytest.mark.parametrize("ext", [".obj", ".ply"])
+def test_more_faces_than_the_limit_are_refused(tmp_path, monkeypatch, ext):
+    import scenes.limits
+
+    monkeypatch.setattr(scenes.limits, "MAX_FACES", 20)  # the box room has 24
+    if ext == ".obj":
+        p = write(tmp_path, "many.obj", obj_text(box_room()))
+    else:
+        p = tmp_path / "many.ply"
+        merged = trimesh.util.concatenate(list(box_room().values()))
+        merged.face_attributes["label"] = np.full(len(merged.faces), int(W), np.int32)
+        merged.export(p, include_attributes=True)
+    with pytest.raises(StoreySizeError, match=rf"many{ext}: the mesh has 24 faces \(the most nbs-env loads is 20\)"):
+        load_mesh_scene(p)
+
+
+PLY_LIAR_HEADER = (
+    "ply\nformat {encoding} 1.0\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\n"
+    "element face 2000000000\nproperty list uchar int vertex_indices\nproperty uchar label\nend_header\n"
+)
+
+
+@pytest.mark.parametrize("encoding", ["binary_little_endian", "ascii"])
+def test_ply_header_declaring_more_than_the_file_holds(tmp_path, encoding):
+    # 2e9 faces in 960 bytes: the counts are checked against the bytes before trimesh allocates.
+    header = PLY_LIAR_HEADER.format(encoding=encoding).encode()
+    p = tmp_path / "liar.ply"
+    p.write_bytes(header + b"0 0 0\n" * ((960 - len(header)) // 6))
+    with pytest.raises(
+        InvalidMeshError,
+        match=r"liar\.ply: the PLY header declares 8 vertex and 2,000,000,000 face records, .*truncated",
+    ):
+        load_mesh_scene(p)
+
+
+def _edit_glb(data: bytes, edit) -> bytes:
+    """A GLB with its JSON chunk edited by ``edit(document)``, the lengths rewritten to match."""
+    import json
+    import struct
+
+    (json_length,) = struct.unpack_from("<I", data, 12)
+    document = json.loads(data[20 : 20 + json_length])
+    text = edit(document) if callable(edit) else None
+    raw = (text if isinstance(text, str) else json.dumps(document)).encode()
+    raw += b" " * (-len(raw) % 4)
+    body = struct.pack("<II", len(raw), 0x4E4F534A) + raw + data[20 + json_length :]
+    return data[:8] + struct.pack("<I", 12 + len(body)) + body
+
+
+def _without_view(document):
+    del document["accessors"][0]["bufferView"]
+    document["accessors"][0]["count"] = 10**10
+
+
+@pytest.mark.parametrize(
+    ("edit", "match"),
+    [
+        (
+            lambda d: d["buffers"][0].update(byteLength=10**12),
+            r"buffers\[0\]\.byteLength declares 1,000,000,000,000 bytes",
+        ),
+        (lambda d: d["bufferViews"][0].update(byteLength=10**12), r"bufferViews\[0\] ends at byte 1,000,000,000,000"),
+        (lambda d: d["accessors"][0].update(count=10**10), r"accessors\[0\] declares 10,000,000,000 elements, which"),
+        (_without_view, r"accessors\[0\]\.count declares 10,000,000,000 elements with no bufferView"),
+        (lambda d: d["accessors"][0].update(count=-1), r"accessors\[0\]\.count must be an integer >= 0"),
+        (lambda d: json_nested(5000), r"invalid glTF JSON: nested deeper than 64 levels"),
+    ],
+    ids=["buffer", "view", "accessor", "accessor-without-data", "negative-count", "deep-json"],
+)
+def test_glb_declaring_more_than_it_holds(tmp_path, edit, match):
+    # An accessor of 1e10 elements without data once made trimesh allocate 37 GiB of zeros.
+    p = tmp_path / "liar.glb"
+    p.write_bytes(_edit_glb(glb_of(box_room(), tmp_path / "ok.glb").read_bytes(), edit))
+    with pytest.raises(InvalidMeshError, match=rf"liar\.glb: {match}"):
+        load_mesh_scene(p)
+
+
+def json_nested(depth: int) -> str:
+    return '{"asset": {"version": "2.0"}, "extras": ' + "[" * depth + "]" * depth + "}"
+
+
+def test_glb_and_gltf_lengths_are_checked_against_the_file(tmp_path):
+    import json
+    import struct
+
+    data = glb_of(box_room(), tmp_path / "ok.glb").read_bytes()
+    truncated = tmp_path / "truncated.glb"
+    truncated.write_bytes(data[:-100])
+    with pytest.raises(InvalidMeshError, match=rf"the GLB header declares {len(data):,} bytes, but the file has"):
+        load_mesh_scene(truncated)
+    chunk = tmp_path / "chunk.glb"
+    chunk.write_bytes(data[:12] + struct.pack("<I", 10**9) + data[16:])
+    with pytest.raises(InvalidMeshError, match="GLB chunk 0 declares 1,000,000,000 bytes"):
+        load_mesh_scene(chunk)
+    # A .gltf and its side file: the buffer may not claim more than the side file holds.
+    sc = trimesh.Scene()
+    for name, mesh in box_room().items():
+        sc.add_geometry(mesh, node_name=name, geom_name=name)
+    files = sc.export(file_type="gltf")
+    for name, content in files.items():
+        (tmp_path / name).write_bytes(content)
+    gltf = tmp_path / "model.gltf"
+    assert load_mesh_scene(gltf).structural_area() == pytest.approx(box_areas()[F] * 2 + box_areas()[W])
+    document = json.loads(gltf.read_text())
+    document["buffers"][0]["byteLength"] = 10**12
+    gltf.write_text(json.dumps(document))
+    with pytest.raises(InvalidMeshError, match=r"model\.gltf: buffers\[0\]\.byteLength declares 1,000,000,000,000"):
+        load_mesh_scene(gltf)

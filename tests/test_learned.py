@@ -256,6 +256,15 @@ def test_bad_checkpoints_raise_clear_errors(tmp_path):
         LearnedPolicy(evil)
 
 
+def test_a_checkpoint_description_nested_thousands_deep_is_refused(tmp_path):
+    # json.loads raised a RecursionError; the bounded reader says where the nesting goes too deep.
+    (tmp_path / "policy.json").write_text('{"format": "nbs-policy", "network": ' + "[" * 5000 + "]" * 5000 + "}")
+    with pytest.raises(
+        ModelFileError, match=r"policy\.json: not a JSON checkpoint description \(nested deeper than 64"
+    ):
+        LearnedPolicy(tmp_path)
+
+
 def test_a_policy_requires_the_room_rules_it_was_trained_with(tmp_path):
     """The reference checkpoint was trained with the default robot's room rules (3 search scans a
     room among them): a grid without --wall-search runs every policy with them, one that sets

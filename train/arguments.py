@@ -73,6 +73,13 @@ WALL_SEARCH_HELP = (
     "method, as --preset paper)"
 )
 IFC_DOORS_HELP = "IFC doors open (frames only, the default) or closed (as drawn); IFC files only"
+#: :data:`scenes.limits.UNITS`' names, written out so that ``--help`` loads no scene code
+#: (tests/test_bad_input.py checks them against the units).
+UNIT_NAMES = ("m", "cm", "mm", "ft", "in")
+UNITS_HELP = (
+    "the unit of the mesh coordinates, scaled to metres (default m); labelled meshes only: IFC files carry "
+    "their own units and floor plans are metres"
+)
 #: The flag that sets a configuration path, for messages that name what a user typed.
 FLAGS = {
     "rooms.wall_search.scans": "--wall-search",
@@ -131,12 +138,13 @@ def _scanner_help() -> str:
 
 
 def add_scene_arguments(parser: argparse.ArgumentParser | Any) -> None:
-    """``--storey``, ``--ifc-doors`` and ``--y-up``: how a building file is read."""
+    """``--storey``, ``--ifc-doors``, ``--y-up`` and ``--units``: how a building file is read."""
     parser.add_argument("--storey", type=storey_name, default=None, help="IFC storey name or index (IFC files only)")
     parser.add_argument("--ifc-doors", choices=("open", "closed"), default=None, help=IFC_DOORS_HELP)
     parser.add_argument(
         "--y-up", action="store_true", help="mesh coordinates are y-up (glTF convention); labelled meshes only"
     )
+    parser.add_argument("--units", choices=UNIT_NAMES, default=None, help=UNITS_HELP)
 
 
 def add_robot_arguments(parser: argparse.ArgumentParser, presets: Sequence[str] = PRESET_NAMES) -> None:
@@ -175,7 +183,8 @@ def add_robot_arguments(parser: argparse.ArgumentParser, presets: Sequence[str] 
 
 
 def scene_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The ``load_scene`` options of ``--storey``, ``--ifc-doors`` and ``--y-up`` (only those given)."""
+    """The ``load_scene`` options of ``--storey``, ``--ifc-doors``, ``--y-up`` and ``--units`` (only those
+    given)."""
     options: dict[str, Any] = {}
     if getattr(args, "storey", None) is not None:
         options["storey"] = args.storey
@@ -183,6 +192,8 @@ def scene_options(args: argparse.Namespace) -> dict[str, Any]:
         options["doors"] = args.ifc_doors
     if getattr(args, "y_up", False):
         options["y_up"] = True
+    if getattr(args, "units", None) is not None:
+        options["units"] = args.units
     return options
 
 
@@ -297,8 +308,11 @@ def adopt_requirements(overrides: dict[str, Any], requirements: dict[str, tuple[
 MESH_SUFFIXES = (".obj", ".glb", ".gltf", ".ply")
 
 
-def scene_option_error(scene: str, storey: object, y_up: bool, ifc_doors: object = None) -> str | None:
-    """Why ``--storey``, ``--ifc-doors`` or ``--y-up`` does not apply to ``scene`` (None when they do).
+def scene_option_error(
+    scene: str, storey: object, y_up: bool, ifc_doors: object = None, units: object = None
+) -> str | None:
+    """Why ``--storey``, ``--ifc-doors``, ``--y-up`` or ``--units`` does not apply to ``scene`` (None when
+    they do).
 
     A corpus entry (``corpus:NAME``) carries its own options; only IFC's apply to it."""
     suffix = Path(scene).suffix.lower()
@@ -309,6 +323,11 @@ def scene_option_error(scene: str, storey: object, y_up: bool, ifc_doors: object
         return f"--ifc-doors applies to .ifc files only, not to scene {scene!r}"
     if y_up and suffix not in MESH_SUFFIXES:
         return f"--y-up applies to labelled meshes ({', '.join(MESH_SUFFIXES)}) only, not to scene {scene!r}"
+    if units is not None and suffix not in MESH_SUFFIXES:
+        return (
+            f"--units applies to labelled meshes ({', '.join(MESH_SUFFIXES)}) only, not to scene {scene!r} "
+            "(IFC files carry their own units, floor plans are metres)"
+        )
     return None
 
 

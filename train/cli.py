@@ -261,6 +261,8 @@ def _load(args: argparse.Namespace):
         opts["doors"] = args.ifc_doors
     if args.y_up:
         opts["y_up"] = True
+    if args.units is not None:
+        opts["units"] = args.units
     return load_scene(args.scene, **opts)
 
 
@@ -292,7 +294,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"{name:12s} {len(scene.rooms)} rooms, {len(scene.doors)} doors, {floor:6.1f} m² of floor")
         return 0
     if args.action in ("show", "info"):
-        problem = scene_option_error(args.scene, args.storey, args.y_up, args.ifc_doors)
+        problem = scene_option_error(args.scene, args.storey, args.y_up, args.ifc_doors, args.units)
         if problem is not None:
             print(f"nbs scenes {args.action}: error: {problem}", file=sys.stderr)
             return EXIT_USAGE
@@ -401,7 +403,7 @@ def scan_summary(metrics: dict, out: Path, files: Sequence[str]) -> str:
             f" ({metrics['scans']} stations: {scanner['station_time']:g} s scan{set_up}, the scanner preset's)"
         )
     else:
-        acquisition = f" (points at {scanner['points_per_second']:,.0f} per s{set_up} a station)"
+        acquisition = f" (points at {scanner['points_per_second']:,.0f} per s{set_up and set_up + ' a station'})"
     quality = metrics["quality"]
     reach = metrics["registrability"]
     overlap = (
@@ -437,7 +439,7 @@ def run_scan(args: argparse.Namespace) -> int:
     """``nbs scan``: run one episode with a policy and write its report."""
     from scenes.errors import SceneError
 
-    problem = scene_option_error(args.scene, args.storey, args.y_up, args.ifc_doors)
+    problem = scene_option_error(args.scene, args.storey, args.y_up, args.ifc_doors, args.units)
     if problem is not None:
         return _scan_error(problem, EXIT_USAGE)
     from nbs_env.config import make_config

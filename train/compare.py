@@ -853,7 +853,9 @@ def grid(
         raise CompareError(f"seeds are integers >= 0, got {seeds!r}")
     options = overrides.get("scene_options", {})
     for scene in scene_list:
-        problem = scene_option_error(scene, options.get("storey"), bool(options.get("y_up")), options.get("doors"))
+        problem = scene_option_error(
+            scene, options.get("storey"), bool(options.get("y_up")), options.get("doors"), options.get("units")
+        )
         if problem is not None:
             raise CompareError(problem)
     specs = [

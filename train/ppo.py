@@ -968,7 +968,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         print(f"nbs train: error: --cell-size: expected A-B in metres, got {args.cell_size!r}", file=sys.stderr)
         return 2
-    problem = scene_option_error("generated", args.storey, args.y_up, args.ifc_doors)
+    problem = scene_option_error("generated", args.storey, args.y_up, args.ifc_doors, args.units)
     if problem is not None:
         print(f"nbs train: error: {problem} (nbs train scans generated storeys)", file=sys.stderr)
         return 2

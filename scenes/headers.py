@@ -1,0 +1,247 @@
+"""What a mesh file says about its own size, checked against the bytes it holds before a parser trusts it.
+
+trimesh sizes its arrays from a file's declarations: a PLY header's element counts, a glTF accessor's
+``count``. A 960-byte PLY whose header declares 2·10^9 faces, or a GLB accessor of 10^10 elements with
+no data behind it, makes it allocate tens of GiB, or fail with an ``AssertionError`` that names nothing.
+These checks read the declarations with the standard library (a PLY header is ASCII up to
+``end_header``; a GLB is a 12-byte header and length-prefixed chunks, its layout JSON) and refuse a file
+whose declarations need more bytes than it has, with an :class:`~scenes.errors.InvalidMeshError` that
+says which declaration and how many bytes.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import json
+import struct
+from pathlib import Path
+from typing import Any
+from urllib.parse import unquote
+
+from scenes.errors import InvalidMeshError
+from scenes.jsonio import read_json
+from scenes.limits import MAX_FACES, check_face_count
+
+__all__ = ["check_gltf_layout", "check_ply_header"]
+
+# ------------------------------------------------------------------------------------------ PLY
+#: Bytes of a binary PLY scalar, by every type name the format allows.
+_PLY_TYPES = {
+    "char": 1, "uchar": 1, "int8": 1, "uint8": 1,
+    "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
+    "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4,
+    "double": 8, "float64": 8,
+}  # fmt: skip
+_PLY_FORMATS = ("ascii", "binary_little_endian", "binary_big_endian")
+#: Where a header must have ended: real headers are a few hundred bytes.
+_PLY_HEADER_MAX = 1 << 16
+
+
+def check_ply_header(source: str, data: bytes) -> None:
+    """Refuse a PLY file whose header declares more records than the bytes after it can hold.
+
+    Each record of an element takes at least: in a binary file, the bytes of its scalar properties
+    and of each list's count (a list may be empty); in an ASCII file, two characters per property (a
+    digit and a separator). The face count is checked against :data:`~scenes.limits.MAX_FACES` too.
+
+    Raises
+    ------
+    InvalidMeshError
+        No ``end_header`` near the start, an unknown format or property type, or counts that need
+        more bytes than follow the header.
+    StoreySizeError
+        More faces declared than :data:`~scenes.limits.MAX_FACES`.
+    """
+    end = data.find(b"end_header", 0, _PLY_HEADER_MAX)
+    if not data.startswith(b"ply") or end < 0:
+        raise InvalidMeshError(source, "not a PLY file: no 'ply' ... 'end_header' header at its start")
+    newline = data.find(b"\n", end)
+    body = len(data) - newline - 1 if newline >= 0 else 0
+    # Keywords are ASCII; a comment in another encoding must not stop the check.
+    lines = data[:end].decode("ascii", errors="replace").splitlines()
+    encoding = None
+    elements: list[list] = []  # [name, declared count, least bytes of a binary record, properties]
+    for lineno, line in enumerate(lines, start=1):
+        words = line.split()
+        if words[:1] == ["format"]:
+            encoding = words[1] if len(words) > 1 else ""
+            if encoding not in _PLY_FORMATS:
+                raise InvalidMeshError(source, f"PLY header line {lineno}: unknown format {encoding!r}")
+        elif words[:1] == ["element"]:
+            if len(words) != 3 or not words[2].isdigit():
+                raise InvalidMeshError(source, f"PLY header line {lineno}: expected 'element NAME COUNT', got {line!r}")
+            elements.append([words[1], int(words[2]), 0, 0])
+        elif words[:1] == ["property"] and elements:
+            # A list takes its count's bytes at least (it may be empty); a scalar its own.
+            kind = words[2] if len(words) == 5 and words[1] == "list" else words[1] if len(words) == 3 else None
+            if kind not in _PLY_TYPES:
+                raise InvalidMeshError(source, f"PLY header line {lineno}: bad property {line!r}")
+            elements[-1][2] += _PLY_TYPES[kind]
+            elements[-1][3] += 1
+    if encoding is None:
+        raise InvalidMeshError(source, "the PLY header has no 'format' line")
+    need = 0
+    for k, (_, count, binary_bytes, properties) in enumerate(elements):
+        least = 2 * properties if encoding == "ascii" else binary_bytes
+        need += count * max(least, 1)  # a record takes a byte at least (an ASCII newline)
+        if need > body:
+            declared = " and ".join(f"{c:,} {n}" for n, c, _, _ in elements[: k + 1])
+            raise InvalidMeshError(
+                source,
+                f"the PLY header declares {declared} records, at least {need:,} bytes, but {body:,} bytes "
+                "follow the header: the file is truncated or its header is wrong",
+            )
+    # The bytes are there: a storey too large to load, told before trimesh reads it.
+    check_face_count(source, sum(count for name, count, _, _ in elements if name == "face"))
+
+
+# ------------------------------------------------------------------------------------- glTF/GLB
+_GLB_MAGIC = b"glTF"
+_CHUNK_JSON = 0x4E4F534A
+_CHUNK_BIN = 0x004E4942
+#: Bytes of a glTF accessor component, by ``componentType``.
+_COMPONENT_BYTES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
+#: Components of an accessor element, by ``type``.
+_TYPE_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+#: Most elements an accessor without data may declare (it is zeros or sparse): the indices of the
+#: largest storey, three per face.
+_MAX_EMPTY_ACCESSOR = 3 * MAX_FACES
+
+
+def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
+    """Refuse a GLB or glTF file whose declared sizes exceed the bytes it has.
+
+    Checked: the GLB header's length and every chunk's length against the file; every buffer's
+    ``byteLength`` against the bytes behind it (the GLB's BIN chunk, a ``data:`` URI, a side file);
+    every bufferView within its buffer; every accessor within its bufferView, or, without one, at
+    most three elements per face of the largest storey. The JSON is read with bounded nesting.
+
+    Raises
+    ------
+    InvalidMeshError
+        Naming the declaration (``accessors[3].count``) and the bytes it needs and has.
+    """
+    if path.suffix.lower() == ".glb":
+        text, bin_length = _glb_chunks(source, data)
+    else:
+        text, bin_length = data, None
+    try:
+        doc = read_json(text.decode("utf-8-sig"))
+    except UnicodeDecodeError:
+        raise InvalidMeshError(source, "the glTF JSON is not UTF-8 text") from None
+    except json.JSONDecodeError as exc:
+        raise InvalidMeshError(source, f"invalid glTF JSON: {exc}") from None
+    if not isinstance(doc, dict):
+        raise InvalidMeshError(source, "the glTF JSON is not an object")
+    buffers = _items(source, doc, "buffers")
+    views = _items(source, doc, "bufferViews")
+    buffer_length = []
+    for i, buffer in enumerate(buffers):
+        declared = _natural(source, buffer, "byteLength", f"buffers[{i}]")
+        have = _buffer_bytes(source, path, buffer, i, bin_length)
+        if have is not None and declared > have:
+            raise InvalidMeshError(
+                source, f"buffers[{i}].byteLength declares {declared:,} bytes, but the file holds {have:,}"
+            )
+        buffer_length.append(declared)
+    view_length = []
+    for i, view in enumerate(views):
+        where = f"bufferViews[{i}]"
+        buffer = _natural(source, view, "buffer", where)
+        if buffer >= len(buffer_length):
+            raise InvalidMeshError(source, f"{where}.buffer is {buffer}, but there are {len(buffer_length)} buffers")
+        length = _natural(source, view, "byteLength", where)
+        end = _natural(source, view, "byteOffset", where, 0) + length
+        if end > buffer_length[buffer]:
+            raise InvalidMeshError(
+                source, f"{where} ends at byte {end:,} of buffers[{buffer}], which has {buffer_length[buffer]:,}"
+            )
+        view_length.append((length, view.get("byteStride")))
+    for i, accessor in enumerate(_items(source, doc, "accessors")):
+        where = f"accessors[{i}]"
+        count = _natural(source, accessor, "count", where)
+        component, kind = accessor.get("componentType"), accessor.get("type")
+        size = _COMPONENT_BYTES.get(component, 0) if isinstance(component, int) else 0
+        size *= _TYPE_COMPONENTS.get(kind, 0) if isinstance(kind, str) else 0
+        if size == 0:
+            raise InvalidMeshError(source, f"{where}: unknown componentType or type")
+        if "bufferView" not in accessor:
+            if count > _MAX_EMPTY_ACCESSOR:
+                raise InvalidMeshError(
+                    source,
+                    f"{where}.count declares {count:,} elements with no bufferView behind them "
+                    f"(at most {_MAX_EMPTY_ACCESSOR:,}, three per face of the largest storey)",
+                )
+            continue
+        view = _natural(source, accessor, "bufferView", where)
+        if view >= len(view_length):
+            raise InvalidMeshError(source, f"{where}.bufferView is {view}, but there are {len(view_length)}")
+        length, stride = view_length[view]
+        stride = stride if isinstance(stride, int) and not isinstance(stride, bool) and stride > 0 else size
+        need = _natural(source, accessor, "byteOffset", where, 0) + max(count - 1, 0) * stride + size
+        if need > length:
+            raise InvalidMeshError(
+                source,
+                f"{where} declares {count:,} elements, which need {need:,} bytes, but bufferViews[{view}] "
+                f"has {length:,}",
+            )
+
+
+def _glb_chunks(source: str, data: bytes) -> tuple[bytes, int]:
+    """The JSON chunk of a GLB and the length of its BIN chunk (0 without one)."""
+    if len(data) < 20 or data[:4] != _GLB_MAGIC:
+        raise InvalidMeshError(source, "not a GLB file: it does not start with the 'glTF' magic")
+    (length,) = struct.unpack_from("<I", data, 8)
+    if length > len(data):
+        raise InvalidMeshError(
+            source, f"the GLB header declares {length:,} bytes, but the file has {len(data):,}: it is truncated"
+        )
+    chunks = []
+    offset = 12
+    while offset + 8 <= length:
+        chunk_length, chunk_type = struct.unpack_from("<II", data, offset)
+        if offset + 8 + chunk_length > length:
+            raise InvalidMeshError(
+                source,
+                f"GLB chunk {len(chunks)} declares {chunk_length:,} bytes, but {length - offset - 8:,} follow it",
+            )
+        chunks.append((chunk_type, data[offset + 8 : offset + 8 + chunk_length]))
+        offset += 8 + chunk_length
+    if not chunks or chunks[0][0] != _CHUNK_JSON:
+        raise InvalidMeshError(source, "the GLB file's first chunk is not its JSON")
+    return chunks[0][1], sum(len(c) for t, c in chunks[1:2] if t == _CHUNK_BIN)
+
+
+def _buffer_bytes(source: str, path: Path, buffer: dict, index: int, bin_length: int | None) -> int | None:
+    """Bytes behind a buffer; None where it cannot be told here (a side file that is missing: the
+    parser reports it)."""
+    uri = buffer.get("uri")
+    if uri is None:
+        if bin_length is None or index != 0:
+            raise InvalidMeshError(source, f"buffers[{index}] has no uri and no GLB BIN chunk to hold it")
+        return bin_length
+    if not isinstance(uri, str):
+        raise InvalidMeshError(source, f"buffers[{index}].uri is not a string")
+    if uri.startswith("data:"):
+        try:
+            return len(base64.b64decode(uri.partition(",")[2], validate=False))
+        except (binascii.Error, ValueError):
+            raise InvalidMeshError(source, f"buffers[{index}].uri is not base64 data") from None
+    side = path.parent / unquote(uri)
+    return side.stat().st_size if side.is_file() else None
+
+
+def _items(source: str, doc: dict, key: str) -> list[dict]:
+    items = doc.get(key, [])
+    if not isinstance(items, list) or not all(isinstance(x, dict) for x in items):
+        raise InvalidMeshError(source, f"the glTF {key!r} is not a list of objects")
+    return items
+
+
+def _natural(source: str, obj: dict, key: str, where: str, default: int | None = None) -> int:
+    """``obj[key]`` as an integer >= 0 (``default`` when absent and a default is given)."""
+    value: Any = obj.get(key, default)
+    if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+        raise InvalidMeshError(source, f"{where}.{key} must be an integer >= 0, got {value!r}")
+    return value
