@@ -14,8 +14,8 @@ machine's trajectories to the recorded ones, for a machine whose run of an uncha
 Positions are compared to 1 cm: the fast preset's robot localises perfectly, so every stop is a
 lattice point or a door centre, and a different decision moves a stop by half a metre or more.
 The pinned robot is the fast preset's without the searches for doors no scan faced and with its
-NVPs on the lattice alone (the paper's method, as ``--preset paper`` runs it), so that the
-recordings pin the greedy's own decisions.
+NVPs on the lattice alone, casting thin rays (the paper's method, as ``--preset paper`` runs it), so
+that the recordings pin the greedy's own decisions.
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ CASES = (("generated:1", 0, 8), ("five_rooms", 0, 8))
 
 def stops(scene: str, seed: int, steps: int) -> list[list[float]]:
     """The estimated xy of every scan of the first ``steps`` greedy steps (door-frame scans included)."""
-    paper = {"rooms.wall_search.scans": 0, "robot.navigation.snap": False}
+    paper = {"rooms.wall_search.scans": 0, "robot.navigation.snap": False, "robot.scanner.beam_divergence": 0.0}
     env = NBSEnv(make_config("fast", scene=scene, max_scans=40, **paper))
     env.reset(seed=seed)
     storey = env.storey

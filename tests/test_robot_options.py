@@ -41,8 +41,8 @@ def test_scan_and_compare_of_an_ifc_storey_record_the_same_robot(tmp_path, capsy
     check_robot(metrics["config"])
     assert metrics["config"]["scene_options"] == {"storey": "EG"}
     assert any(e["event"] == "crossed" for e in metrics["door_events"])  # both rooms were scanned
-    # Every station took the RTC360's 22.9 s, not the simulated pattern's points over the rate.
-    assert metrics["acquisition_time_s"] == pytest.approx(22.9 * metrics["scans"])
+    # Every station took the RTC360's 22.9 s after its 10 s set-up, not the simulated pattern's points over the rate.
+    assert metrics["acquisition_time_s"] == pytest.approx((10.0 + 22.9) * metrics["scans"])
 
     out = tmp_path / "compare"
     args = ["compare", "--scenes", str(IFC), "--policies", "greedy", "--storey", "EG", *ROBOT, "--out", str(out)]

@@ -307,3 +307,11 @@ def test_the_instrument_density_is_measured_not_assumed(box_room):
     # Per sample the two densities agree within a quarter for nine samples in ten.
     both = (fine > 0) & (coarse > 0)
     assert np.mean(np.abs(coarse[both] / fine[both] - 1) < 0.25) > 0.9
+
+
+@pytest.mark.parametrize("z", [0.0, 3.0])
+def test_a_scanner_on_a_surface_scans(box_room, z):
+    """A scanner whose centre lies on the floor or the ceiling (the oracle's positions may) gets
+    returns at range 0: the footprints of the beams there have nothing to straddle."""
+    scan = Scanner(box_room, ScannerConfig(range_noise=0.0, min_range=0.0)).scan(pose_from_xyz_rpy(3.0, 2.0, z))
+    assert len(scan) > 1000 and scan.truth.ranges.min() == 0.0

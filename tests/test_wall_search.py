@@ -139,10 +139,12 @@ def test_bad_wall_search_config_raises(field, value):
 def test_the_search_is_on_by_default_and_off_at_the_paper_preset():
     assert RoomRules().wall_search.scans == 3 and make_config("fast").rooms.wall_search.scans == 3
     assert make_config("paper").rooms.wall_search.scans == 0
-    # The same hardware and stages; the paper's NVPs lie on the lattice alone.
+    # The same hardware and stages; the paper's NVPs lie on the lattice alone, and its scanner casts thin rays.
     paper, default = make_config("paper").robot, make_config("default").robot
     assert not paper.navigation.snap and default.navigation.snap
-    assert paper == replace(default, navigation=replace(default.navigation, snap=False))
+    assert paper.scanner.beam_divergence == 0.0 < default.scanner.beam_divergence
+    thin = replace(default.scanner, beam_divergence=0.0)
+    assert paper == replace(default, navigation=replace(default.navigation, snap=False), scanner=thin)
     with pytest.raises(ConfigError, match="scans"):
         WallSearchConfig(scans=-1)
 

@@ -154,7 +154,8 @@ def _edge_rays(t_hit: np.ndarray, n_rows: int, n_cols: int, jump: float) -> np.n
         for k in range(n_cols):
             j = i * n_cols + k
             t = t_hit[j]
-            if not np.isfinite(t):
+            # A beam starting on a surface (range 0) has no footprint to straddle anything.
+            if not np.isfinite(t) or t <= 0.0:
                 continue
             left = t_hit[i * n_cols + (k - 1) % n_cols]
             right = t_hit[i * n_cols + (k + 1) % n_cols]
@@ -242,7 +243,7 @@ def _blend_footprints(
             r[q + 1] = t_rim[row]
             w[q + 1] = abs(sub[row, 3] * n_rim[row, 0] + sub[row, 4] * n_rim[row, 1] + sub[row, 5] * n_rim[row, 2])
         for q in range(5):
-            if not np.isfinite(r[q]) or r[q] > max_range:
+            if not np.isfinite(r[q]) or r[q] > max_range or r[q] <= 0.0:
                 r[q], w[q] = np.inf, 0.0
             else:
                 w[q] /= r[q] * r[q]
