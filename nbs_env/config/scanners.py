@@ -177,6 +177,11 @@ def _floor_from_two_ranges(sigma_1: float, sigma_2: float) -> float:
     return math.sqrt((4.0 * sigma_1**2 - sigma_2**2) / 3.0)
 
 
+# The BLK360 G2's beam [S2]: 0.4 mrad, 2.25 mm at the window, single-return waveform digitising; its
+# echo separation is taken as the VZ-400's 0.75 m (a few-ns pulse) [A].
+_BLK360_G2_BEAM = {"beam_divergence": 0.0004, "beam_diameter": 0.00225, "echo_separation": 0.75}
+
+
 # RIEGL VZ-400 figures used by the derivation of its station times [R]: high-speed mode's effective
 # rate, the line scan's top speed, the head's top rotation speed. HELIOS++ has the last two as well.
 _VZ400_RATE = 122_000.0
@@ -372,9 +377,8 @@ def _rtc360() -> ScannerModel:
         range_noise=0.0004,
         noise_floor=_floor_from_two_ranges(0.0004, 0.0005),
         noise_exponent=0.5,
-        beam_divergence=0.0004,
-        beam_diameter=0.00225,
-        echo_separation=0.75,
+        # No stored source gives the RTC360's beam: the BLK360 G2's is taken [A].
+        **_BLK360_G2_BEAM,
         setup_time=_SETUP_TIME,
         points_per_second=rate,
         settings=tuple(
@@ -481,9 +485,7 @@ def _blk360() -> ScannerModel:
         range_noise=0.004,
         noise_floor=_floor_from_two_ranges(0.004, 0.007),
         noise_exponent=0.5,
-        beam_divergence=0.0004,
-        beam_diameter=0.00225,
-        echo_separation=0.75,
+        **_BLK360_G2_BEAM,
         setup_time=_SETUP_TIME,
         points_per_second=680_000.0,
         settings=tuple(ResolutionSetting(name, step, t, note) for name, step, t, note in settings),
