@@ -22,6 +22,9 @@
 ``topdown.png``   the env's top-down picture of the end of the episode
 ================  ====================================================================================
 
+Each file is written whole or not at all (:mod:`nbs_env.atomic`): under a temporary name in the
+folder, flushed to the disk and renamed, so that a full disk or a signal leaves the previous file.
+
 Every point is placed with the robot's own pose estimates. The working copies are the rooms' voxel
 means (:attr:`nbs_env.belief.RoomModel.points`), about half the measured points of ``five_rooms`` at
 the fast preset's 1° pattern; the E57 and ``write_report(full_cloud=True)`` hold every one.
@@ -77,6 +80,7 @@ other than the writers: the Rust ``e57`` crate, LASzip.
 
 from __future__ import annotations
 
+import io
 import json
 import time
 import uuid
@@ -88,6 +92,7 @@ import numpy as np
 import trimesh
 from shapely.geometry import MultiPolygon, Polygon
 
+from nbs_env.atomic import replacing, write_bytes, write_text
 from nbs_env.belief import RoomModel
 from nbs_env.report import metrics_dict, quaternion_wxyz
 
@@ -226,9 +231,7 @@ def write_points_ply(path: str | Path, points: np.ndarray, labels: np.ndarray | 
     if lab is not None:
         header.append("property uchar label")
     header.append("end_header")
-    with open(path, "wb") as f:
-        f.write(("\n".join(header) + "\n").encode("ascii"))
-        f.write(record.tobytes())
+    write_bytes(path, ("\n".join(header) + "\n").encode("ascii") + record.tobytes())
     return path
 
 
@@ -346,7 +349,7 @@ def write_model_obj(path: str | Path, rooms: list[RoomModel]) -> Path:
         text = scene.export(file_type="obj", header="nbs_env structural model")
     else:
         text = "# nbs_env structural model: no faces\n"
-    path.write_text(text if isinstance(text, str) else text.decode())
+    write_text(path, text if isinstance(text, str) else text.decode())
     return path
 
 
@@ -685,10 +688,6 @@ def write_e57(
     node API through ``pye57.libe57``: pye57's ``write_scan_raw`` writes placeholder temperature,
     humidity and pressure (0) and its own description, and no sensor fields.
     """
-    from pye57 import libe57
-
-    from nbs_env import __version__
-
     path = Path(path)
     names = names or [f"scan_{k:03d}" for k in range(len(scans))]
     for label, given in (("names", names), ("times", times), ("intensity", intensity)):
@@ -699,8 +698,28 @@ def write_e57(
             if np.shape(values) != (len(scan.points),):
                 raise ValueError(f"scan {k}: intensity must have shape ({len(scan.points)},), got {np.shape(values)}")
     sensor = _sensor(scanner)
-    if path.exists():
-        path.unlink()  # libE57 refuses to open an existing file for writing
+    # Under a temporary name, renamed onto ``path`` once whole (nbs_env.atomic): a failure or a
+    # signal leaves the previous file (and libE57 opens no existing file for writing).
+    with replacing(path) as temporary:
+        _write_e57_file(temporary, scans, names, times, intensity, scanner, sensor, created)
+    return path
+
+
+def _write_e57_file(
+    path: Path,
+    scans: list[ScanPoints],
+    names: list[str],
+    times: list[tuple[float, float]] | None,
+    intensity: list[np.ndarray] | None,
+    scanner: ScannerConfig | None,
+    sensor: dict[str, str],
+    created: float | None,
+) -> None:
+    """:func:`write_e57`'s records, checked, into the new file ``path``."""
+    from pye57 import libe57
+
+    from nbs_env import __version__
+
     imf = libe57.ImageFile(str(path), "w")
     try:
 
@@ -826,7 +845,6 @@ def write_e57(
         path.unlink(missing_ok=True)
         raise
     imf.close()
-    return path
 
 
 def classify_points(room: RoomModel, distance: float = 0.10) -> np.ndarray:
@@ -984,7 +1002,8 @@ def write_las(
     if normals is not None:
         rounded = np.rint(np.asarray(normals, dtype=np.float64) * _NORMAL_STEPS) / _NORMAL_STEPS
         las.NormalX, las.NormalY, las.NormalZ = (rounded[:, i].astype(np.float32) for i in range(3))
-    las.write(str(path))
+    with replacing(path) as temporary:  # the suffix (.laz or .las) tells laspy to compress or not
+        las.write(str(temporary))
     return path
 
 
@@ -997,10 +1016,14 @@ def write_samples(path: str | Path, env: NBSEnv) -> Path:
     (n,) float32 (shortest range, metres; NaN when never seen); see
     :meth:`nbs_env.evaluation.CoverageMeter.quality`. Ground truth: for evaluation only.
     """
+    path = Path(path)
+    if path.suffix != ".npz":  # as numpy names the file it writes
+        path = path.with_name(path.name + ".npz")
     meter = env.storey.meter
     quality = meter.quality(env.storey.config.quality)
+    buffer = io.BytesIO()  # written whole by write_bytes, as every file of the report
     np.savez_compressed(
-        Path(path),
+        buffer,
         points=meter.samples.points.astype(np.float32),
         labels=meter.samples.labels.astype(np.uint8),
         rooms=meter.samples.rooms.astype(np.int32),
@@ -1009,7 +1032,8 @@ def write_samples(path: str | Path, env: NBSEnv) -> Path:
         incidence=quality.incidence.astype(np.float32),
         range=quality.range.astype(np.float32),
     )
-    return Path(path)
+    write_bytes(path, buffer.getbuffer())
+    return path
 
 
 def _station_times(env: NBSEnv, start: float) -> list[tuple[float, float]]:
@@ -1046,7 +1070,8 @@ def write_report(
         After an episode. Its top-down picture is drawn as with ``render_mode="rgb_array"``
         whatever the env's render mode.
     out_dir : str or Path
-        Created if missing; existing report files are overwritten.
+        Created if missing; existing report files are overwritten. Each file is written whole or
+        not at all (:mod:`nbs_env.atomic`): a full disk or a signal leaves the previous file.
     scene_name, policy, seed, policy_times
         As for :func:`nbs_env.report.metrics_dict`.
     run_started : float, optional
@@ -1084,7 +1109,7 @@ def write_report(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     metrics = metrics_dict(env.storey, scene_name, policy, seed, policy_times)
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=1) + "\n")
+    write_text(out / "metrics.json", json.dumps(metrics, indent=1) + "\n")
 
     scanner = env.storey.config.robot.scanner
     stations = _Stations(env, run_started)
@@ -1124,5 +1149,6 @@ def write_report(
         image = env.render()
     finally:
         env.render_mode = mode
-    plt.imsave(out / "topdown.png", np.asarray(image))
+    with replacing(out / "topdown.png") as temporary:
+        plt.imsave(temporary, np.asarray(image))
     return metrics

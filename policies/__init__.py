@@ -116,6 +116,11 @@ def _information_gain(seed: int | None, option: str | None = None):
     from policies.baselines.information_gain import FORMULATIONS, InformationGainPolicy
 
     formulation, plus, mode = (option or "").partition("+")
+    if plus and not (formulation and mode):  # "information_gain:+controlled", "information_gain:x+"
+        raise UnknownPolicyError(
+            f"information_gain:{option}: an empty part around '+'; write information_gain:FORMULATION+controlled "
+            f"(formulations: {', '.join(FORMULATIONS)})"
+        )
     controlled = _controlled("information_gain", mode) if plus else False
     if formulation and formulation not in FORMULATIONS:
         known = ", ".join(FORMULATIONS)
@@ -171,12 +176,18 @@ def make_policy(name: str, seed: int | None = None) -> Policy:
     Raises
     ------
     UnknownPolicyError
-        An unknown name, or an option the policy does not take.
+        An unknown name, an option the policy does not take, or an empty option after the colon.
     ModelFileError
         ``ppo:PATH`` with a missing, corrupt or mismatched checkpoint.
     """
-    base, _, option = str(name).partition(":")
+    base, colon, option = str(name).partition(":")
     if base not in POLICIES:
         raise UnknownPolicyError(f"unknown policy {name!r}; policies: {', '.join(POLICIES)}")
+    # "information_gain:" was read as no option at all: a colon promises one, and a blank one is a slip
+    # (a shell variable that expanded to nothing), not a choice of the default.
+    if colon and not option.strip():
+        raise UnknownPolicyError(
+            f"policy {name!r}: the option after the colon is empty; name one ({base}:OPTION) or leave out the colon"
+        )
     # A constructor's own errors (a bug, a bad checkpoint) pass through as they are.
     return POLICIES[base](seed, option or None)

@@ -32,10 +32,11 @@ class Policy(Protocol):
         True`` for its own maps) and its parameters (the greedy's ``stop``). Applied to each of its
         runs (:func:`config_for`); empty for most.
     requires : Mapping[str, Any]
-        The storey's room rules the policy was made for (a learned policy: those it was trained
-        with, e.g. ``{"rooms.wall_search.scans": 3}``). A run whose configuration differs is
-        refused, and policies that require different values are not compared in one grid
-        (:func:`agreed_requirements`); empty for most.
+        The configuration the policy was made for: the storey's room rules (a learned policy: those
+        it was trained with, e.g. ``{"rooms.wall_search.scans": 3}``) and, for a learned policy, how
+        its observations were made (``{"robot.voxel_size": 0.1, "observation.cell": 0.2, ...}``). A run
+        whose configuration differs is refused, and policies that require different values are not
+        compared in one grid (:func:`agreed_requirements`); empty for most.
     """
 
     name: str
@@ -117,7 +118,10 @@ def config_for(config: EnvConfig, policy: Policy) -> EnvConfig:
     Raises
     ------
     ConfigError
-        The configuration differs from :attr:`Policy.requires`; the message names the field.
+        The configuration differs from :attr:`Policy.requires`; the message names the field. Or the
+        policy's own ``check_config(config)``, where it has one, refuses the configuration (a learned
+        policy whose network reads another observation window or candidate count,
+        :meth:`policies.LearnedPolicy.check_config`).
     """
     out = make_config(config, **dict(policy.config_overrides)) if policy.config_overrides else config
     tree = json_form(out.to_dict())
@@ -127,6 +131,10 @@ def config_for(config: EnvConfig, policy: Policy) -> EnvConfig:
             node = node[part]
         if node != json_form(value):
             raise ConfigError(f"{policy.name} requires {path}={value!r} (it was trained so); this run has {node!r}")
+    # Optional, not part of the Protocol: most policies read any observation; a network reads one shape.
+    check = getattr(policy, "check_config", None)
+    if callable(check):
+        check(out)
     return out
 
 

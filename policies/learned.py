@@ -25,31 +25,52 @@ import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from nbs_env.config import Config, _integer, _require
 from nbs_env.errors import ConfigError, ModelFileError
-from nbs_env.observation import ROOM_FEATURES, CandidateColumn, candidate_table_of
+from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES, CandidateColumn, candidate_table_of
 from policies.base import mask_of
 from scenes.jsonio import read_json
+
+if TYPE_CHECKING:
+    from nbs_env.config import EnvConfig
 
 __all__ = [
     "BUNDLED",
     "CHECKPOINT_FORMAT",
+    "INPUT_FIELDS",
+    "MAX_PARAMETERS",
     "LearnedPolicy",
     "NetworkConfig",
     "build_network",
     "load_checkpoint",
     "resolve_checkpoint",
     "save_checkpoint",
+    "trained_inputs",
     "trained_rules",
 ]
 
 CHECKPOINT_FORMAT = "nbs-policy"
 CHECKPOINT_VERSION = 1
 N_LABELS = 6
+#: The most parameters a network description may ask for, checked before any tensor is allocated: a
+#: ``policy.json`` is data from elsewhere, and ``hidden: 1000000000`` once made torch try to allocate
+#: 360 GB. The networks this project trains have about 10^5 (``ppo:reference`` 98,122); 10^8 float32
+#: parameters are 400 MB of weights, three times that with Adam's moments in training, a thousand
+#: times the default network and still within one machine's memory.
+MAX_PARAMETERS = 10**8
+#: The most cells of the voxel window a network may read (64 times the default 64 x 64 x 16): its
+#: one-hot input takes 24 bytes a cell, 100 MB an observation at this bound, and the parameter count
+#: does not grow with the window (the encoder pools it to a fixed size), so it is bounded apart.
+MAX_VOXEL_CELLS = 2**22
+#: Bounds of the other fields of a network description: what no network of this shape comes near
+#: (the defaults are 64 and 5), so that a description's numbers are sized before they are used.
+_FIELD_LIMITS = {"candidates": 4096, "features": 64, "actions": 4097, "grid_dim": 65536, "hidden": 65536}
+_AXIS_LIMIT = 1024
+_CHANNEL_LIMIT = 4096
 #: Candidate columns the scorer also reads relative to their step's largest value.
 _RELATIVE = (int(CandidateColumn.PREDICTED_GAIN), int(CandidateColumn.PATH_LENGTH))
 
@@ -91,6 +112,41 @@ def trained_rules(document: dict[str, Any]) -> dict[str, Any]:
     if isinstance(value, int) and not isinstance(value, bool):
         return {"rooms.wall_search.scans": value}
     return {}
+
+
+#: The configuration fields that made the observations a network was trained on, besides the shape its
+#: description records: the window's cell and placement. A network fed a window of other cells reads other
+#: numbers. The voxel size of the map the window pools is not among them: a cell pools the labels of the
+#: voxels in it whatever their size, and a policy trained on 10 cm voxels decides on the default robot's
+#: 5 cm ones within 0.1 point of its figures there (docs/training.md, "The training fidelity").
+INPUT_FIELDS = ("observation.cell", "observation.below_floor")
+
+
+def trained_inputs(document: dict[str, Any]) -> dict[str, Any]:
+    """How the observations a checkpoint's network was trained on were made, as dotted configuration
+    names: the :data:`INPUT_FIELDS` its training configuration records.
+
+    Parameters
+    ----------
+    document : dict
+        A ``policy.json``.
+
+    Returns
+    -------
+    dict
+        ``{"observation.cell": 0.2, ...}`` for those of :data:`INPUT_FIELDS` that
+        ``training.config`` records as numbers; empty for a checkpoint that records no configuration.
+    """
+    training = document.get("training") if isinstance(document.get("training"), dict) else {}
+    config = training.get("config") if isinstance(training.get("config"), dict) else {}
+    out: dict[str, Any] = {}
+    for path in INPUT_FIELDS:
+        node: Any = config
+        for part in path.split("."):
+            node = node.get(part) if isinstance(node, dict) else None
+        if isinstance(node, (int, float)) and not isinstance(node, bool):
+            out[path] = node
+    return out
 
 
 def resolve_checkpoint(spec: str | Path) -> Path:
@@ -154,7 +210,9 @@ class NetworkConfig(Config):
     hidden: int = 64
 
     def __post_init__(self) -> None:
-        for name in ("voxel_shape", "channels"):
+        # Types and ranges first, then the sizes they imply: a description read from a file is
+        # checked whole before build_network allocates anything from it.
+        for name, most in (("voxel_shape", _AXIS_LIMIT), ("channels", _CHANNEL_LIMIT)):
             value = getattr(self, name)
             _require(
                 isinstance(value, tuple)
@@ -162,8 +220,16 @@ class NetworkConfig(Config):
                 and all(isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in value),
                 f"{name} must be three integers >= 1, got {value!r}",
             )
-        for name in ("candidates", "features", "actions", "grid_dim", "hidden"):
+            _require(all(v <= most for v in value), f"{name} must be three integers <= {most}, got {value!r}")
+        cells = self.voxel_shape[0] * self.voxel_shape[1] * self.voxel_shape[2]
+        _require(
+            cells <= MAX_VOXEL_CELLS,
+            f"voxel_shape {self.voxel_shape!r} has {cells:,} cells, at most {MAX_VOXEL_CELLS:,} (the window's one-hot "
+            "input takes 24 bytes a cell)",
+        )
+        for name, most in _FIELD_LIMITS.items():
             _integer(self, name, 1)
+            _require(getattr(self, name) <= most, f"{name} must be an integer <= {most}, got {getattr(self, name)!r}")
         _require(
             self.room_features in (0, len(ROOM_FEATURES)),
             f"room_features must be 0 or {len(ROOM_FEATURES)} (the room vector), got {self.room_features!r}",
@@ -172,6 +238,24 @@ class NetworkConfig(Config):
             self.actions in (self.candidates, self.candidates + 1),
             f"actions must be candidates ({self.candidates}) or candidates + 1, got {self.actions}",
         )
+        _require(
+            self.parameters <= MAX_PARAMETERS,
+            f"the network described has {self.parameters:,} parameters, at most {MAX_PARAMETERS:,} "
+            f"({4 * self.parameters / 2**30:,.1f} GiB of float32 weights)",
+        )
+
+    @property
+    def parameters(self) -> int:
+        """The number of the network's parameters (weights and biases), counted from the description
+        as :func:`build_network` lays the layers out, without building it."""
+        c1, c2, c3 = self.channels
+        g, h, r = self.grid_dim, self.hidden, self.room_features
+        conv = (N_LABELS * c1 + c1 * c2 + c2 * c3) * 27 + c1 + c2 + c3  # three 3x3x3 kernels, with biases
+        encoder = conv + c3 * 32 * g + g  # the 4 x 4 x 2 pooled grid into g
+        scorer = (g + self.features + 2 + r) * h + h + h * h + h + h + 1
+        if self.actions > self.candidates:  # the "room done" head
+            scorer += (g + r + 3) * h + h + h + 1
+        return encoder + scorer
 
     @property
     def latent_dim(self) -> int:
@@ -264,6 +348,19 @@ def build_network(config: NetworkConfig):
     return VoxelEncoder(), CandidateScorer()
 
 
+def _cells(shape: tuple[int, ...]) -> str:
+    """``(64, 64, 16)`` as ``64 x 64 x 16``."""
+    return " x ".join(str(n) for n in shape)
+
+
+def _json_kind(value: Any) -> str:
+    """What JSON calls ``value``'s type, for messages about a file: null, a list, a string."""
+    if value is None:
+        return "null"
+    names = {bool: "a boolean", list: "a list", str: "a string", int: "a number", float: "a number"}
+    return names.get(type(value), type(value).__name__)
+
+
 def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
@@ -324,6 +421,8 @@ def load_checkpoint(path: str | Path):
         raise ModelFileError(f"{path}: version {document.get('version')!r}, this nbs-env reads {CHECKPOINT_VERSION}")
     try:
         network = document["network"]
+        if not isinstance(network, dict):
+            raise TypeError(f"network must be a JSON object of NetworkConfig's fields, got {_json_kind(network)}")
         config = NetworkConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in network.items()})
         weights = path.parent / str(document["weights"])
         layout = str(document.get("input_layout", "xyz"))
@@ -381,8 +480,53 @@ class LearnedPolicy:
         self.config_overrides: dict[str, Any] = (
             {"rooms.completion": "policy"} if self.config.actions > self.config.candidates else {}
         )
-        #: The room rules it was trained with (:func:`trained_rules`).
-        self.requires: dict[str, Any] = trained_rules(self.document)
+        #: The room rules it was trained with (:func:`trained_rules`) and how its observations were made
+        #: (:func:`trained_inputs`): a run adopts them where its command line sets nothing, and is refused
+        #: where it sets another value (:func:`policies.config_for`).
+        self.requires: dict[str, Any] = {**trained_rules(self.document), **trained_inputs(self.document)}
+
+    def check_config(self, config: EnvConfig) -> None:
+        """Refuse a run whose observation or actions the network was not made for: called by
+        :func:`policies.config_for` when the policy is given an env's configuration, before the env is
+        built, so that a mismatch is named at once rather than met at the first step.
+
+        Parameters
+        ----------
+        config : EnvConfig
+            The run's configuration, with :attr:`config_overrides` applied.
+
+        Raises
+        ------
+        ConfigError
+            The observation window (``observation.shape``), the candidate count
+            (``robot.navigation.max_candidates``), the candidate table's columns or the number of
+            actions (K, or K + 1 with ``rooms.completion="policy"``) differ from the network's; the
+            message names both values.
+        """
+        net = self.config
+        shape = tuple(config.observation.shape)
+        if shape != tuple(net.voxel_shape):
+            raise ConfigError(
+                f"{self.name} reads a {_cells(net.voxel_shape)} voxel window (its network's voxel_shape), "
+                f"this run's observation.shape is {_cells(shape)}"
+            )
+        k = config.robot.navigation.max_candidates
+        if k != net.candidates:
+            raise ConfigError(
+                f"{self.name} scores {net.candidates} candidates (its network's candidates), this run's "
+                f"robot.navigation.max_candidates is {k}"
+            )
+        if len(CANDIDATE_FEATURES) != net.features:
+            raise ConfigError(
+                f"{self.name} reads {net.features} columns a candidate (its network's features), this nbs-env's "
+                f"observation has {len(CANDIDATE_FEATURES)}"
+            )
+        actions = k + (config.rooms.completion == "policy")
+        if actions != net.actions:
+            raise ConfigError(
+                f"{self.name} has {net.actions} actions (its network's actions), this run has {actions} "
+                f"(rooms.completion={config.rooms.completion!r})"
+            )
 
     def reset(self) -> None:
         """A learned policy keeps no episode state."""

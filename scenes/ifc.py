@@ -201,7 +201,9 @@ def load_ifc_scene(
         An IFC file (any schema ifcopenshell reads: IFC2X3, IFC4, IFC4X3).
     storey : str or int, optional
         ``Name`` or ``LongName`` of the storey, or its index in the storeys sorted by elevation
-        (negative counts from the top). Default: the storey nearest elevation 0.
+        (negative counts from the top). Default: the storey nearest elevation 0. A string names a
+        storey first: ``"1"`` is the storey named ``1`` where there is one, else the index 1 (the
+        command line's ``--storey`` passes its text so); an int is always an index.
     class_map : mapping, optional
         Entries merged over :data:`DEFAULT_CLASS_MAP` (IFC class or ``Class.PREDEFINEDTYPE`` ->
         SurfaceClass, or None to leave such elements out).
@@ -361,10 +363,18 @@ def _select_storey(source: str, storeys: list[_Storey], storey: str | int | None
     if isinstance(storey, bool) or not isinstance(storey, (str, int, np.integer)):
         raise IfcError(source, f"storey must be a name or an index, got {storey!r}; storeys: {listing}")
     if isinstance(storey, str):
+        # A name that matches exactly wins; only then is text that reads as an integer an index, so that
+        # "--storey 1" reaches a storey named "1" and the second storey of a file that names none so.
         for i, s in enumerate(storeys):
             if storey in (s.name, s.long_name):
                 return i
-        raise IfcError(source, f"no storey named {storey!r}; storeys: {listing}")
+        try:
+            index = int(storey)
+        except ValueError:
+            raise IfcError(source, f"no storey named {storey!r}; storeys: {listing}") from None
+        if not -len(storeys) <= index < len(storeys):
+            raise IfcError(source, f"no storey named {storey!r}, and index {index} is out of range; storeys: {listing}")
+        return index % len(storeys)
     n = len(storeys)
     if not -n <= int(storey) < n:
         raise IfcError(source, f"storey index {storey} is out of range; storeys: {listing}")

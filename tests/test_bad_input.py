@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -42,6 +43,10 @@ CASES = [
     ("scan --scene office --policy greedy:stop=1.5", EXIT_USAGE, "stop=FRACTION, the completion fraction"),
     ("scan --scene office --policy random:x", EXIT_USAGE, "takes no option"),
     ("scan --scene office --policy information_gain:psychic", EXIT_USAGE, "unknown formulation"),
+    ("scan --scene office --policy information_gain:", EXIT_USAGE, "the option after the colon is empty"),
+    ("scan --scene office --policy greedy:", EXIT_USAGE, "the option after the colon is empty"),
+    ("scan --scene office --policy information_gain:+controlled", EXIT_USAGE, "an empty part around '+'"),
+    ("scan --scene office --policy information_gain:rear_side_voxel+", EXIT_USAGE, "an empty part around '+'"),
     ("scan --scene nowhere", EXIT_SCENE_ERROR, "no bundled scene"),
     # nbs scenes
     ("scenes generate --seed=-1 --out p.json", EXIT_USAGE, "a seed is an integer >= 0"),
@@ -66,11 +71,19 @@ CASES = [
     ("compare --scenes office --policies greedy --max-scans 0 --out c", EXIT_USAGE, "expected an integer >= 1"),
     ("compare --scenes office --policies greedy --wall-search x --out c", EXIT_USAGE, "expected an integer"),
     ("compare --scenes generated:5-2 --policies greedy --out c", EXIT_USAGE, "generated:A-B"),
+    # A range is bounded before its seeds are listed: this one was a MemoryError.
+    ("compare --scenes generated:0-100000000000 --policies greedy --out c", EXIT_USAGE, "at most 100,000"),
+    ("compare --scenes office --policies information_gain: --out c", EXIT_USAGE, "the option after the colon"),
     ("compare --scenes office --policies nope --out c", EXIT_USAGE, "unknown policy"),
     ("compare --scenes office --policies greedy --storey 0 --out c", EXIT_USAGE, "--storey applies to .ifc files"),
     ("compare --scenes office --policies greedy --units mm --out c", EXIT_USAGE, "--units applies to labelled meshes"),
     ("compare --scenes office --policies greedy --voxel 5 --out c", EXIT_USAGE, "voxel_size must be within"),
     ("compare --scenes office --policies greedy --set robot=1 --out c", EXIT_USAGE, "robot must be a JSON object"),
+    # a run counted twice would weigh twice in the table's means
+    ("compare --scenes office --policies greedy --seeds 0,0,0 --out c", EXIT_USAGE, "--seeds names 0 (3 times)"),
+    ("compare --scenes office --policies greedy --seeds 1,01 --out c", EXIT_USAGE, "--seeds names 1 (2 times)"),
+    ("compare --scenes office --policies random,greedy,random --out c", EXIT_USAGE, "--policies names random (2"),
+    ("compare --scenes generated:1-3,generated:2 --policies greedy --out c", EXIT_USAGE, "generated:2 (2 times)"),
     # nbs train (its checks live in TrainConfig)
     ("train --envs 0 --out t", EXIT_USAGE, "envs must be an integer >= 1"),
     ("train --n-steps 0 --out t", EXIT_USAGE, "n_steps must be an integer >= 1"),
@@ -96,12 +109,20 @@ CASES = [
     ("train --bc-teacher random --out t", EXIT_USAGE, "bc_teacher must name a greedy"),
     ("train --bc-teacher greedy:stop=2 --out t", EXIT_USAGE, "bc_teacher: greedy takes"),
     ("train --bc-teacher nope --out t", EXIT_USAGE, "bc_teacher: unknown policy 'nope'"),
+    # What the options make a run claim is sized before anything is built (23.8 GiB asked of numpy once).
+    ("train --n-steps 100000000 --out t", EXIT_USAGE, "--n-steps 100000000 x --envs 2 asks for rollouts of"),
+    ("train --bc-steps 100000000 --out t", EXIT_USAGE, "lower --bc-steps or --envs"),
+    ("train --backend ray --address nohost --out t", EXIT_USAGE, "--address 'nohost': expected HOST:PORT"),
 ]
 
 
 def run_cli(args: str, capsys) -> tuple[int, str]:
+    return run_cli_list(args.split(), capsys)
+
+
+def run_cli_list(args: list[str], capsys) -> tuple[int, str]:
     try:
-        code = main(args.split())
+        code = main(args)
     except SystemExit as exc:  # argparse's own usage errors
         code = exc.code
     return code, capsys.readouterr().err
@@ -140,6 +161,96 @@ def test_compare_refuses_an_unwritable_out_before_running(tmp_path, monkeypatch,
     for out in (blocker, blocker / "below"):
         code, err = run_cli(f"compare --scenes office --policies greedy --out {out} --quiet", capsys)
         assert code == EXIT_USAGE and f"--out {out}" in err
+
+
+def _report(folder: Path) -> Path:
+    """A folder an earlier ``nbs scan`` left: its metrics.json."""
+    folder.mkdir()
+    (folder / "metrics.json").write_text('{"old": true}')
+    return folder
+
+
+#: (arguments after ``scan --scene l_room``, a piece of the message): outputs that once were found
+#: bad only after the scan (a folder or a path under /proc for --record: rerun's RuntimeError), were
+#: quietly made (a recording's missing folders), or were written over (an earlier report, ``--out ''``
+#: as the working folder).
+OUTPUTS = [
+    ("--record {tmp}", "--record {tmp}: is a folder; name a file in it (e.g. {tmp}/run.rrd)"),
+    ("--record /proc/r.rrd", "--record /proc/r.rrd: cannot make a file in /proc"),
+    ("--record {tmp}/no/dir/r.rrd", "--record {tmp}/no/dir/r.rrd: its folder {tmp}/no/dir does not exist"),
+    ("--record {tmp}/old.rrd", "--record {tmp}/old.rrd: exists; pass --force to overwrite it"),
+    ("--out {tmp}/no/report", "--out {tmp}/no/report: its folder {tmp}/no does not exist"),
+    ("--out /proc/report", "--out /proc/report: cannot make a file in /proc"),
+    ("--out {tmp}/report.txt", "--out {tmp}/report.txt: exists and is not a folder"),
+    ("--out {tmp}/old", "--out {tmp}/old: is not empty (it holds metrics.json); pass --force to overwrite it"),
+]
+
+
+@pytest.mark.parametrize(("args", "message"), OUTPUTS, ids=[a for a, _ in OUTPUTS])
+def test_scan_checks_its_outputs_before_it_scans(tmp_path, monkeypatch, capsys, args, message):
+    import train.cli
+
+    if "/proc" in args and not Path("/proc/self").is_dir():
+        pytest.skip("no /proc here")
+    if args.startswith("--record"):
+        pytest.importorskip("rerun")
+    monkeypatch.setattr(train.cli, "_scan", lambda *a: pytest.fail("the scan started although an output is bad"))
+    monkeypatch.chdir(tmp_path)
+    _report(tmp_path / "old")
+    (tmp_path / "old.rrd").write_bytes(b"an earlier recording")
+    (tmp_path / "report.txt").write_text("")
+    before = sorted(tmp_path.rglob("*"))
+    args = args.format(tmp=tmp_path)
+    code, err = run_cli(f"scan --scene l_room --preset fast --max-scans 3 --no-steps --quiet {args}", capsys)
+    assert code == EXIT_USAGE and err.startswith(f"nbs scan: error: {message.format(tmp=tmp_path)}"), err
+    assert len(err.strip().splitlines()) == 1, err
+    assert sorted(tmp_path.rglob("*")) == before  # nothing made, nothing written over
+    assert (tmp_path / "old" / "metrics.json").read_text() == '{"old": true}'
+
+
+@pytest.mark.parametrize("command", ["scan --scene l_room --out", "compare --scenes l_room --policies greedy --out"])
+def test_an_empty_out_is_no_folder(tmp_path, monkeypatch, capsys, command):
+    """``--out ''`` once became Path('.'), the working folder."""
+    monkeypatch.chdir(tmp_path)
+    code, err = run_cli_list([*command.split(), ""], capsys)
+    assert code == EXIT_USAGE and "argument --out: an empty path names no file or folder" in err, err
+    assert not any(tmp_path.iterdir())
+
+
+def test_scan_force_writes_over_an_earlier_report(tmp_path, monkeypatch, capsys):
+    import train.cli
+
+    ran = []
+    monkeypatch.setattr(train.cli, "_scan", lambda args, policy, out, config, stop: ran.append(out) or 0)
+    old = _report(tmp_path / "old")
+    (tmp_path / "old.rrd").write_bytes(b"an earlier recording")
+    code, err = run_cli(f"scan --scene l_room --out {old} --record {tmp_path / 'old.rrd'} --force --quiet", capsys)
+    assert code == 0 and ran == [old], err
+
+
+def test_compare_refuses_an_earlier_comparison_without_resume_or_force(tmp_path, monkeypatch, capsys):
+    import train.compare
+
+    class StartedError(Exception):
+        pass
+
+    def started(*args, **kwargs):
+        raise StartedError
+
+    monkeypatch.setattr(train.compare, "run_one", lambda *a: pytest.fail("a run started"))
+    out = _report(tmp_path / "grid")
+    command = f"compare --scenes l_room --policies greedy --out {out} --quiet"
+    code, err = run_cli(command, capsys)
+    assert code == EXIT_USAGE, err
+    assert err.strip() == (
+        f"nbs compare: error: --out {out}: is not empty (it holds metrics.json); pass --resume to continue that "
+        "comparison, or --force to write over it, or choose another folder"
+    )
+    # With either flag the grid starts.
+    monkeypatch.setattr(train.compare, "run_grid", started)
+    for flag in ("--resume", "--force"):
+        with pytest.raises(StartedError):
+            main([*command.split(), flag])
 
 
 def test_compare_writes_each_run_as_it_finishes_and_keeps_them_when_the_summary_fails(tmp_path, monkeypatch, capsys):
@@ -229,3 +340,41 @@ def test_the_unit_names_are_the_loaders():
     from train.arguments import UNIT_NAMES
 
     assert tuple(UNITS) == UNIT_NAMES
+
+
+def test_a_storey_named_like_an_index_wins_over_the_index():
+    """--storey 1 was always read as the index 1, even where a storey is named "1": the option keeps
+    the text, a name that matches exactly wins, and only then is an integer an index (its help says so)."""
+    from scenes import IfcError
+    from scenes.ifc import _select_storey, _Storey
+    from train.arguments import STOREY_HELP
+    from train.cli import build_parser
+
+    for command in (["scenes", "info", "x.ifc"], ["scan", "--scene", "x.ifc"]):
+        assert build_parser().parse_args([*command, "--storey", "1"]).storey == "1"
+    assert "a storey named exactly as given wins over the index" in STOREY_HELP
+    storeys = [_Storey(None, "1", "", 0.0), _Storey(None, "OG", "Level 2", 3.0)]
+    assert _select_storey("x.ifc", storeys, "1") == 0  # the name, not the index 1
+    assert _select_storey("x.ifc", storeys, "Level 2") == 1
+    assert _select_storey("x.ifc", storeys, "-1") == 1  # no storey of that name: the index
+    assert _select_storey("x.ifc", storeys, 1) == 1  # an int (the Python API) is always an index
+    with pytest.raises(IfcError, match=r"no storey named '5', and index 5 is out of range; storeys: 0: '1'"):
+        _select_storey("x.ifc", storeys, "5")
+    with pytest.raises(IfcError, match=r"no storey named 'EG'"):
+        _select_storey("x.ifc", storeys, "EG")
+
+
+def test_an_ifc_storey_named_1_is_the_one_storey_1_loads(tmp_path, capsys):
+    """tests/data/two_rooms.ifc with its ground storey (index 0) renamed "1": --storey 1 loads it, where
+    the index 1, the upper storey without walls, is refused."""
+    pytest.importorskip("ifcopenshell")
+    from pathlib import Path
+
+    text = (Path(__file__).parent / "data" / "two_rooms.ifc").read_text()
+    path = tmp_path / "named_1.ifc"
+    path.write_text(text.replace("$,'EG',$", "$,'1',$", 1))
+    assert main(["scenes", "info", str(path), "--storey", "1"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["name"].endswith("#1") and len(info["rooms"]) == 2
+    code, err = run_cli(f"scenes info {path} --storey OG", capsys)
+    assert code == EXIT_SCENE_ERROR and "no wall faces" in err

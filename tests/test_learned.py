@@ -256,6 +256,115 @@ def test_bad_checkpoints_raise_clear_errors(tmp_path):
         LearnedPolicy(evil)
 
 
+def _saved(folder: Path, config: NetworkConfig | None = None) -> Path:
+    """A checkpoint of a random network of ``config`` (the default one) in ``folder``: its policy.json."""
+    config = config or NetworkConfig()
+    encoder, scorer = build_network(config)
+    state = {f"encoder.{k}": v for k, v in encoder.state_dict().items()}
+    state.update({f"scorer.{k}": v for k, v in scorer.state_dict().items()})
+    return save_checkpoint(folder, config, state)
+
+
+def test_the_parameter_count_is_the_built_network_s():
+    """The count the description's bound is checked on is what build_network builds, head or not."""
+    for config in (NetworkConfig(), NetworkConfig(actions=65, room_features=5, hidden=32, channels=(4, 8, 16))):
+        encoder, scorer = build_network(config)
+        built = sum(p.numel() for p in [*encoder.parameters(), *scorer.parameters()])
+        assert config.parameters == built
+
+
+def test_a_network_description_is_sized_before_anything_is_built(tmp_path, monkeypatch, capsys):
+    """A policy.json is data from elsewhere: a hidden size of 10^9 once made torch try to allocate
+    360 GB. Its fields' types and ranges, and the parameter count they imply (at most MAX_PARAMETERS),
+    are checked before build_network is called: here it fails the test if it is."""
+    import policies.learned as learned
+    from train.cli import EXIT_SCENE_ERROR, main
+
+    path = _saved(tmp_path / "big")
+    document = json.loads(path.read_text())
+
+    def never(config):
+        raise AssertionError(f"a network was built from {config}")
+
+    monkeypatch.setattr(learned, "build_network", never)
+    for changes, message in (
+        ({"hidden": 10**9}, r"hidden must be an integer <= 65536, got 1000000000"),
+        ({"hidden": 60000, "grid_dim": 60000}, r"has 7,\d{3},\d{3},\d{3} parameters, at most 100,000,000"),
+        ({"channels": [4096, 4096, 4096]}, r"parameters, at most 100,000,000 \(.* GiB of float32 weights\)"),
+        ({"voxel_shape": [1024, 1024, 1024]}, r"has 1,073,741,824 cells, at most 4,194,304"),
+        ({"voxel_shape": [64, 64, 10**6]}, r"voxel_shape must be three integers <= 1024"),
+        ({"candidates": 10**7, "actions": 10**7}, r"candidates must be an integer <= 4096"),
+        ({"hidden": "64"}, r"hidden must be an integer >= 1, got '64'"),
+        ({"hidden": 64.0}, r"hidden must be an integer >= 1, got 64\.0"),
+    ):
+        path.write_text(json.dumps({**document, "network": {**document["network"], **changes}}))
+        with pytest.raises(ModelFileError, match=r"policy\.json: malformed checkpoint description \(.*" + message):
+            LearnedPolicy(path)
+    # On the command line: one line naming the file and the count, before any scan.
+    path.write_text(json.dumps({**document, "network": {**document["network"], "hidden": 60000, "grid_dim": 60000}}))
+    code = main(["scan", "--scene", "office", "--policy", f"ppo:{path.parent}", "--out", str(tmp_path / "s")])
+    err = capsys.readouterr().err
+    assert code == EXIT_SCENE_ERROR and "parameters, at most 100,000,000" in err and str(path) in err, err
+    assert len(err.strip().splitlines()) == 1 and not (tmp_path / "s").exists()
+
+
+@pytest.mark.parametrize(("value", "kind"), [(None, "null"), ([64, 64, 16], "a list"), ("64", "a string")])
+def test_a_checkpoint_whose_network_is_not_an_object_is_refused(tmp_path, value, kind):
+    # Each was an AttributeError ('NoneType' object has no attribute 'items').
+    path = _saved(tmp_path)
+    document = json.loads(path.read_text())
+    path.write_text(json.dumps({**document, "network": value}))
+    with pytest.raises(
+        ModelFileError,
+        match=rf"policy\.json: malformed checkpoint description \(network must be a JSON object of NetworkConfig's "
+        rf"fields, got {kind}\)",
+    ):
+        LearnedPolicy(path)
+
+
+def test_a_checkpoint_made_for_another_env_is_refused_when_given_one(tmp_path, capsys):
+    """A network reads one observation window of cells of the size it was trained with, one candidate
+    count and one number of actions: a run that differs is refused when the policy is given
+    its configuration (policies.config_for), naming both values, before any scan, where it once ran
+    (or failed at its first step)."""
+    from nbs_env.errors import ConfigError
+    from policies import config_for
+    from train.cli import EXIT_USAGE, main
+
+    policy = LearnedPolicy(_saved(tmp_path / "plain"))  # K = 64, no "room done", no training record
+    assert config_for(make_config("fast"), policy).observation.shape == (64, 64, 16)
+    for overrides, message in (
+        ({"observation.shape": (32, 32, 8)}, r"reads a 64 x 64 x 16 voxel window .*observation\.shape is 32 x 32 x 8"),
+        ({"robot.navigation.max_candidates": 32}, r"scores 64 candidates .*max_candidates is 32"),
+        ({"rooms.completion": "policy"}, r"has 64 actions .*this run has 65 \(rooms\.completion='policy'\)"),
+    ):
+        with pytest.raises(ConfigError, match=message):
+            config_for(make_config("fast", **overrides), policy)
+    # The reference's window pools 0.2 m cells (its record says so): another cell is another input, but
+    # the voxels the cells pool may be the default robot's 5 cm as well as the 10 cm it was trained on.
+    reference = make_policy("ppo:reference")
+    assert reference.requires["observation.cell"] == 0.2 and "robot.voxel_size" not in reference.requires
+    assert config_for(make_config("default"), reference).robot.voxel_size == 0.05
+    with pytest.raises(ConfigError, match=r"requires observation\.cell=0\.2 \(it was trained so\); this run has 0\.1"):
+        config_for(make_config("default", **{"observation.cell": 0.1}), reference)
+    # On the command line: refused before the scan starts, naming the option, both values and the file.
+    out = tmp_path / "s"
+    for args, message in (
+        (
+            ["--policy", "ppo:reference", "--set", "observation.cell=0.1"],
+            "requires observation.cell=0.2 (it was trained so), but",
+        ),
+        (
+            ["--policy", f"ppo:{tmp_path / 'plain'}", "--set", "robot.navigation.max_candidates=32"],
+            "scores 64 candidates (its network's candidates), this run's robot.navigation.max_candidates is 32",
+        ),
+    ):
+        code = main(["scan", "--scene", "l_room", "--preset", "fast", "--max-scans", "1", *args, "--out", str(out)])
+        err = capsys.readouterr().err
+        assert code == EXIT_USAGE and message in err and len(err.strip().splitlines()) == 1, err
+        assert not out.exists()
+
+
 def test_a_checkpoint_description_nested_thousands_deep_is_refused(tmp_path):
     # json.loads raised a RecursionError; the bounded reader says where the nesting goes too deep.
     (tmp_path / "policy.json").write_text('{"format": "nbs-policy", "network": ' + "[" * 5000 + "]" * 5000 + "}")

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "MAX_RUNS",
     "add_robot_arguments",
     "add_scene_arguments",
     "adopt_requirements",
@@ -23,13 +24,32 @@ __all__ = [
 ]
 
 
-def parse_range(text: str) -> tuple[int, int]:
+#: The most values a range option may span, and the most runs one grid may hold: ``generated:A-B``
+#: is expanded into one scene per seed, and ``generated:0-100000000000`` once ran out of memory building
+#: the list. 100,000 runs of the fastest preset take days on a workstation, far beyond any study here
+#: (the test storeys are 20, the corpus 20), while the list of them takes a few megabytes.
+MAX_RUNS = 100_000
+
+
+def parse_range(text: str, most: int = MAX_RUNS) -> tuple[int, int]:
     """``"A-B"`` → ``(A, B)`` and ``"A"`` → ``(A, A)``, for integers 0 <= A <= B.
+
+    Parameters
+    ----------
+    text : str
+        ``"A-B"`` or ``"A"``.
+    most : int
+        The most values the range may span (``B - A + 1``), checked before anything is made of it
+        (default :data:`MAX_RUNS`).
+
+    Returns
+    -------
+    (int, int)
 
     Raises
     ------
     ValueError
-        Anything else, with a message that quotes ``text``.
+        Anything else, or a range of more than ``most`` values, with a message that quotes ``text``.
     """
     lo, sep, hi = str(text).strip().partition("-")
     try:
@@ -39,6 +59,8 @@ def parse_range(text: str) -> tuple[int, int]:
         raise ValueError(f"expected N or A-B with integers 0 <= A <= B, got {text!r}") from None
     if a < 0 or b < a:
         raise ValueError(f"expected N or A-B with integers 0 <= A <= B, got {text!r}")
+    if b - a + 1 > most:
+        raise ValueError(f"{text!r} spans {b - a + 1:,} values, at most {most:,}")
     return a, b
 
 
@@ -71,6 +93,11 @@ WALL_SEARCH_HELP = (
     "search scans per room (rooms.wall_search.scans): before a room ends, scan from where most of its "
     "wall that no scan faced is seen, so that doors there can be found (default: the preset's, 3; 0: the paper's "
     "method, as --preset paper)"
+)
+STOREY_HELP = (
+    "the IFC storey, by name (Name or LongName) or index in the storeys sorted by elevation (0 the lowest, -1 the "
+    "highest); a storey named exactly as given wins over the index, so --storey 1 is the storey named '1' where "
+    "there is one (IFC files only)"
 )
 IFC_DOORS_HELP = "IFC doors open (frames only, the default) or closed (as drawn); IFC files only"
 #: :data:`scenes.limits.UNITS`' names, written out so that ``--help`` loads no scene code
@@ -115,9 +142,19 @@ def integer_from(least: int, what: str = "expected an integer"):
     return parse
 
 
-def storey_name(text: str) -> str | int:
-    """``--storey``: an index when it is an integer, else a name."""
-    return int(text) if text.lstrip("-").isdigit() else text
+def storey_name(text: str) -> str:
+    """``--storey``: the text as typed. Whether ``"1"`` is a name or an index is the file's to say: a
+    storey named exactly so wins, else an integer is an index (:func:`scenes.ifc.load_ifc_scene`), so
+    the option keeps the text rather than deciding here without the file's storeys.
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        An empty name.
+    """
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a storey name or index, got an empty string")
+    return text
 
 
 def _assignment(text: str) -> tuple[str, Any]:
@@ -139,7 +176,13 @@ def _scanner_help() -> str:
 
 def add_scene_arguments(parser: argparse.ArgumentParser | Any) -> None:
     """``--storey``, ``--ifc-doors``, ``--y-up`` and ``--units``: how a building file is read."""
-    parser.add_argument("--storey", type=storey_name, default=None, help="IFC storey name or index (IFC files only)")
+    parser.add_argument(
+        "--storey",
+        type=storey_name,
+        default=None,
+        metavar="NAME|INDEX",
+        help=STOREY_HELP,
+    )
     parser.add_argument("--ifc-doors", choices=("open", "closed"), default=None, help=IFC_DOORS_HELP)
     parser.add_argument(
         "--y-up", action="store_true", help="mesh coordinates are y-up (glTF convention); labelled meshes only"

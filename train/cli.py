@@ -1,10 +1,12 @@
 """The ``nbs`` command line.
 
 Exit codes: 0 success; 1 a scene could not be loaded or built (the message says what and where),
-or ``nbs scan`` could not run it (a start inside a wall or outside the building), or ``nbs view``
-found no readable recording; 2 a bad command line (unknown flag, bad value, unknown policy, a
-configuration value out of range); 3 ``nbs view`` could start no viewer (no display, or rerun's
-viewer or web server failed).
+or ``nbs scan`` could not run it (a start inside a wall or outside the building), a file could not
+be written (a full disk), or ``nbs view`` found no readable recording; 2 a bad command line (unknown
+flag, bad value, unknown policy, a configuration value out of range, an output path that cannot be
+written or holds an earlier run's: :mod:`train.outputs`); 3 ``nbs view`` could start no viewer (no
+display, or rerun's viewer or web server failed); 128 + the signal (130 Ctrl-C, 143 SIGTERM) ``nbs
+scan`` or ``nbs compare`` stopped by a signal, what was done kept (:mod:`train.stopping`).
 """
 
 from __future__ import annotations
@@ -13,12 +15,15 @@ import argparse
 import json
 import math
 import re
+import signal
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
 
 from train.arguments import add_robot_arguments, add_scene_arguments, integer_from, scene_option_error
+from train.outputs import Output, OutputError, check_outputs, output_path
+from train.stopping import StopRequest, exit_code
 
 EXIT_SCENE_ERROR = 1
 EXIT_USAGE = 2
@@ -126,10 +131,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     scan.add_argument("--policy", default="greedy", help="who chooses the next scan (default: greedy)")
     scan.add_argument("--seed", type=_seed, default=0, help="seed of the episode, >= 0 (default 0)")
-    scan.add_argument("--out", type=Path, default=None, help="report folder (default: ./scan-<scene>)")
+    scan.add_argument("--out", type=output_path, default=None, help="report folder (default: ./scan-<scene>)")
+    scan.add_argument(
+        "--force", action="store_true", help="write over the report (and --record file) an earlier scan left there"
+    )
     scan.add_argument(
         "--record",
-        type=Path,
+        type=output_path,
         default=None,
         metavar="RUN.rrd",
         help="also log the run as a rerun recording, for nbs view (needs the viz extra)",
@@ -191,13 +199,16 @@ def build_parser() -> argparse.ArgumentParser:
         "potthast_sukhatme, information_gain:F, nearest_frontier, random, ppo:PATH (docs/comparing.md)",
     )
     compare.add_argument("--seeds", default="0", help="comma-separated seeds (default 0)")
-    compare.add_argument("--out", type=Path, required=True, help="output folder")
+    compare.add_argument("--out", type=output_path, required=True, help="output folder")
     compare.add_argument("--jobs", type=_positive_int, default=1, help="worker processes (default 1)")
     compare.add_argument("--backend", choices=("local", "ray"), default="local", help="local processes or Ray")
     compare.add_argument("--address", default=None, help="Ray cluster address (default: start a local instance)")
     compare.add_argument("--quiet", action="store_true", help="no progress bar")
     compare.add_argument(
         "--resume", action="store_true", help="reuse the successful runs and oracles already in --out (same specs)"
+    )
+    compare.add_argument(
+        "--force", action="store_true", help="write over what an earlier comparison left in --out, reusing nothing"
     )
     add_robot_arguments(compare)
     return parser
@@ -210,44 +221,91 @@ def run_train(argv: Sequence[str]) -> int:
     return train_main(list(argv))
 
 
+def _os_error(exc: OSError) -> str:
+    """An OSError on one line, the file first: ``r/metrics.json: No space left on device``."""
+    if exc.filename is not None and exc.strerror:
+        return f"{exc.filename}: {exc.strerror}"
+    return str(exc)
+
+
 def run_compare(args: argparse.Namespace) -> int:
     """``nbs compare``: the grid, its table and plots."""
     from nbs_env.errors import ConfigError
     from train.arguments import config_from_arguments
-    from train.compare import CompareError, check_out_dir, grid, load_finished, run_grid, write_outputs, write_record
+    from train.compare import (
+        CompareError,
+        GridStoppedError,
+        WorkerLostError,
+        check_out_dir,
+        grid,
+        load_finished,
+        run_grid,
+        write_outputs,
+        write_record,
+    )
+
+    def error(message: object, code: int) -> int:
+        print(f"nbs compare: error: {message}", file=sys.stderr)
+        return code
 
     try:
         preset, overrides = config_from_arguments(args, "default", max_scans=SCAN_BUDGET)
         specs = grid(args.scenes, args.policies, args.seeds, preset, overrides)
-        out = check_out_dir(args.out)  # before anything runs
+        if args.backend == "ray":  # the cluster answers (or Ray is there to start one) before anything runs
+            from train.ray_connect import resolve_address
+
+            resolve_address(args.address)
+        out = check_out_dir(args.out, keep=args.resume or args.force)  # before anything runs
         finished = load_finished(out, specs) if args.resume else None
-        if finished and not args.quiet:
-            runs, oracles = len(finished["runs"]), len(finished["oracles"])
-            print(f"resuming: {runs} runs and {oracles} oracles already in {out}")
-        # Each run is written as it finishes: a grid that fails later keeps what it computed.
-        results, oracles = run_grid(
-            specs,
-            args.jobs,
-            args.backend,
-            args.address,
-            progress=not args.quiet,
-            finished=finished,
-            on_done=lambda kind, record: write_record(out, kind, record),
-        )
     except (CompareError, ConfigError) as exc:
-        print(f"nbs compare: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    try:
-        write_outputs(results, oracles, out)
-    except (CompareError, OSError) as exc:
-        print(f"nbs compare: error: {exc}", file=sys.stderr)
-        return EXIT_SCENE_ERROR
+        return error(exc, EXIT_USAGE)
+    if finished and not args.quiet:
+        runs, oracles = len(finished["runs"]), len(finished["oracles"])
+        print(f"resuming: {runs} runs and {oracles} oracles already in {out}")
+    with StopRequest() as stop:
+        try:
+            # Each run is written as it finishes: a grid that fails or is stopped later keeps it.
+            results, oracles = run_grid(
+                specs,
+                args.jobs,
+                args.backend,
+                args.address,
+                progress=not args.quiet,
+                finished=finished,
+                on_done=lambda kind, record: write_record(out, kind, record),
+                stop=stop,
+            )
+        except GridStoppedError as exc:
+            print(
+                f"nbs compare: stopped by {stop.name}: {exc.finished} of {exc.total} runs and oracles are done and "
+                f"kept in {out}; continue with the same command and --resume",
+                file=sys.stderr,
+            )
+            return exit_code(stop.signal or signal.SIGINT)
+        except KeyboardInterrupt:  # a second signal: the workers are ended, the records written are whole
+            print(f"nbs compare: interrupted; the runs recorded so far are in {out}", file=sys.stderr)
+            return exit_code(stop.signal or signal.SIGINT)
+        except (CompareError, ConfigError) as exc:  # Ray missing, or a cluster that stopped answering
+            return error(exc, EXIT_USAGE)
+        except WorkerLostError as exc:
+            return error(exc, EXIT_SCENE_ERROR)
+        except OSError as exc:  # a record that could not be written (a full disk)
+            return error(_os_error(exc), EXIT_SCENE_ERROR)
+        try:
+            write_outputs(results, oracles, out)
+        except CompareError as exc:
+            return error(exc, EXIT_SCENE_ERROR)
+        except OSError as exc:
+            return error(_os_error(exc), EXIT_SCENE_ERROR)
     failed = [r for r in results if not r["ok"]]
     print((args.out / "table.md").read_text())
     print(f"{len(results) - len(failed)} of {len(results)} runs ok; wrote {args.out}/")
     for r in failed:
         spec = r["spec"]
         print(f"failed: {spec['scene']} {spec['policy']} seed {spec['seed']}: {r['error']}", file=sys.stderr)
+    if stop.signal is not None:  # asked to stop while the tables were written: they are whole
+        print(f"nbs compare: stopped by {stop.name} after the grid finished; wrote {out}/", file=sys.stderr)
+        return exit_code(stop.signal)
     return 0 if not failed else 1
 
 
@@ -356,8 +414,10 @@ def _table(rows: list[list[str]], right: set[int]) -> str:
     return "\n".join(lines)
 
 
-def scan_summary(metrics: dict, out: Path, files: Sequence[str]) -> str:
-    """The printed result of ``nbs scan``: a table per true room and the total, in the paper's terms."""
+def scan_summary(metrics: dict, out: Path, files: Sequence[str], stopped_by: str = "") -> str:
+    """The printed result of ``nbs scan``: a table per true room and the total, in the paper's terms.
+
+    ``stopped_by``: the signal that ended the episode early (``"SIGINT"``), or ``""``."""
     header = ["room", "scans", "SE sensed %", "path m", "processed points", "processing s", "time s"]
     rows = [header]
     for room in metrics["rooms"]:
@@ -390,6 +450,8 @@ def scan_summary(metrics: dict, out: Path, files: Sequence[str]) -> str:
     budget = metrics["config"]["max_scans"]
     if metrics["complete"]:
         state = "yes"
+    elif stopped_by:
+        state = f"no (stopped by {stopped_by})"
     elif metrics["scans"] >= budget:
         state = f"no (the budget of {budget} scans ran out)"
     else:
@@ -468,31 +530,38 @@ def run_scan(args: argparse.Namespace) -> int:
             require_rerun()
         except ImportError as exc:
             return _scan_error(f"--record: {exc}", EXIT_USAGE)
-        if args.record.suffix != ".rrd":
+        if args.record.suffix != ".rrd" and not args.record.is_dir():
             return _scan_error(f"--record {args.record}: a rerun recording ends in .rrd", EXIT_USAGE)
     out = args.out if args.out is not None else _default_out(args.scene)
-    from train.arguments import output_folder_problem
-
-    problem = output_folder_problem(out)
-    if problem is not None:
-        return _scan_error(f"--out {out}: {problem}", EXIT_USAGE)
+    replace = None if args.force else "pass --force to overwrite it"
+    outputs = [Output("--out", out, "folder", replace=replace)]
+    if args.record is not None:
+        outputs.append(Output("--record", args.record, "file", replace=replace, example="run.rrd"))
     try:
-        return _scan(args, policy, out, config)
-    except ConfigError as exc:
+        check_outputs(outputs)  # before the scan: a path found unwritable after it would lose it
+    except OutputError as exc:
         return _scan_error(exc, EXIT_USAGE)
-    except (SceneError, NBSError) as exc:  # InvalidPoseError: a start inside a wall or outside
-        return _scan_error(exc, EXIT_SCENE_ERROR)
-    except OSError as exc:  # e.g. an --out folder we may not write
-        return _scan_error(exc, EXIT_SCENE_ERROR)
-    except KeyboardInterrupt:
-        print("nbs scan: interrupted", file=sys.stderr)
-        return 130
+    with StopRequest() as stop:
+        try:
+            return _scan(args, policy, out, config, stop)
+        except ConfigError as exc:
+            return _scan_error(exc, EXIT_USAGE)
+        except (SceneError, NBSError) as exc:  # InvalidPoseError: a start inside a wall or outside
+            return _scan_error(exc, EXIT_SCENE_ERROR)
+        except OSError as exc:  # a file of the report that could not be written (a full disk)
+            return _scan_error(_os_error(exc), EXIT_SCENE_ERROR)
+        except KeyboardInterrupt:  # before the scan began, or a second signal: no report waited for
+            print("nbs scan: interrupted", file=sys.stderr)
+            return exit_code(stop.signal or signal.SIGINT)
 
 
-def _scan(args: argparse.Namespace, policy, out: Path, cfg) -> int:
+def _scan(args: argparse.Namespace, policy, out: Path, cfg, stop: StopRequest) -> int:
+    """Run the episode and write its report; ``stop`` (:class:`train.stopping.StopRequest`) ends
+    the episode early, and the report then holds the scans taken (``"complete": false``)."""
     import matplotlib.pyplot as plt
     from tqdm import tqdm
 
+    from nbs_env.atomic import replacing
     from nbs_env.env import NBSEnv
     from nbs_env.export import REPORT_FILES, write_report
     from train.episode import run_episode
@@ -509,12 +578,14 @@ def _scan(args: argparse.Namespace, policy, out: Path, cfg) -> int:
         if k == 0:
             # The scene loaded and the first scan is taken: now the report has somewhere to go.
             out.mkdir(parents=True, exist_ok=True)
+            # An earlier report's pictures (--force) would pass for this run's steps.
+            for old in steps_dir.glob("step_*.png"):
+                old.unlink()
             if not args.no_steps:
                 steps_dir.mkdir(exist_ok=True)
-                for old in steps_dir.glob("step_*.png"):
-                    old.unlink()
         if not args.no_steps:
-            plt.imsave(steps_dir / f"step_{k:03d}.png", env.render())
+            with replacing(steps_dir / f"step_{k:03d}.png") as temporary:
+                plt.imsave(temporary, env.render())
         # The robot's room number (1, 2, ... in the order it entered them) and the true SE sensed.
         bar.set_postfix(room=info["room"] + 1, se=f"{info['structure_sensed_pct']:.1f}%", refresh=False)
         bar.update(info["scans"] - bar.n)
@@ -533,7 +604,8 @@ def _scan(args: argparse.Namespace, policy, out: Path, cfg) -> int:
     started = time.time()
     with bar:
         try:
-            policy_times = run_episode(env, policy, args.seed, options, on_step_recorded)
+            policy_times = run_episode(env, policy, args.seed, options, on_step_recorded, stop=stop)
+            cut_short = stop()  # else the signal came after the episode's end: the report is whole
         except RuntimeError as exc:
             bar.close()
             return _scan_error(exc, EXIT_SCENE_ERROR)
@@ -548,7 +620,11 @@ def _scan(args: argparse.Namespace, policy, out: Path, cfg) -> int:
         files.remove("scans.e57")
     if recorder is not None:
         files.append(f"{args.record} (nbs view {args.record})")
-    print(scan_summary(metrics, out, files))
+    print(scan_summary(metrics, out, files, stop.name if cut_short else ""))
+    if stop.signal is not None:
+        when = f"after {metrics['scans']} scans; wrote their report" if cut_short else "at the end; wrote the report"
+        print(f"nbs scan: stopped by {stop.name} {when} to {out}/", file=sys.stderr)
+        return exit_code(stop.signal)
     return 0
 
 
@@ -605,10 +681,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     from scenes.errors import SceneError
 
-    if args.command == "scan":
-        return run_scan(args)
-    if args.command == "compare":
-        return run_compare(args)
+    if args.command in ("scan", "compare"):
+        try:
+            return run_scan(args) if args.command == "scan" else run_compare(args)
+        except KeyboardInterrupt:  # Ctrl-C while the command was still setting up, before its handler
+            print(f"nbs {args.command}: interrupted", file=sys.stderr)
+            return exit_code(signal.SIGINT)
     if args.command == "view":
         return run_view(args)
     try:

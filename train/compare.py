@@ -25,13 +25,18 @@ Each run plays one policy on one scene with one seed (:func:`run_one`) and retur
 - ``coverage_vs_scans.png`` (one curve per policy, a band over runs), ``quality_vs_scans.png`` (the
   coverage at the density and at the incidence threshold, against scans) and ``path_time.png``.
 
-Runs are deterministic: the same seeds give the same table, times aside.
+Runs are deterministic: the same seeds give the same table, times aside. Each run is written as it
+finishes (:func:`write_record`), every file whole or not at all (:mod:`nbs_env.atomic`); a grid
+stopped by Ctrl-C or SIGTERM (``run_grid``'s ``stop``) ends its workers and keeps what finished,
+for ``--resume``.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import hashlib
+import io
 import json
 import math
 import multiprocessing
@@ -40,17 +45,31 @@ import sys
 import time
 import traceback
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from nbs_env.atomic import replacing, write_text
 from nbs_env.config import json_form
-from train.arguments import output_folder_problem, parse_range
+from train.arguments import MAX_RUNS, parse_range
 
-__all__ = ["RunSpec", "expand_scenes", "run_grid", "run_one", "summarise", "write_outputs"]
+__all__ = [
+    "GridStoppedError",
+    "RunSpec",
+    "WorkerLostError",
+    "expand_scenes",
+    "run_grid",
+    "run_one",
+    "summarise",
+    "write_outputs",
+]
+
+#: How often (s) a grid waiting on its workers looks whether it was asked to stop.
+STOP_POLL_S = 0.25
 
 #: The table's quantities: (key, heading, format).
 QUANTITIES = (
@@ -64,6 +83,26 @@ QUANTITIES = (
 
 class CompareError(ValueError):
     """A bad grid specification (scenes, policies, seeds)."""
+
+
+class WorkerLostError(RuntimeError):
+    """A worker process of the local backend died mid-run (killed, out of memory)."""
+
+
+class GridStoppedError(Exception):
+    """:func:`run_grid` was asked to stop (Ctrl-C, SIGTERM) before every run finished.
+
+    The runs and oracles that finished went to ``on_done`` first; the workers are ended.
+
+    Attributes
+    ----------
+    finished, total : int
+        Runs and oracles done (reused ones included), and in all.
+    """
+
+    def __init__(self, finished: int, total: int) -> None:
+        super().__init__(f"stopped with {finished} of {total} runs and oracles done")
+        self.finished, self.total = finished, total
 
 
 @dataclass(frozen=True)
@@ -132,8 +171,11 @@ def expand_scenes(text: str, skipped: list[str] | None = None) -> list[str]:
     return out
 
 
-def run_one(spec: RunSpec) -> dict[str, Any]:
-    """Play one run; returns ``{"spec", "ok", "metrics" | "error"}`` and never raises."""
+def run_one(spec: RunSpec, stop: Callable[[], bool] | None = None) -> dict[str, Any] | None:
+    """Play one run; returns ``{"spec", "ok", "metrics" | "error"}`` and never raises.
+
+    ``stop`` (in this process: ``--jobs 1``) is asked between the episode's steps; once it says
+    True the run ends unfinished and None is returned: it is no result."""
     started = time.perf_counter()
     try:
         from nbs_env.env import NBSEnv
@@ -143,7 +185,9 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
 
         policy = make_policy(spec.policy, spec.seed)
         env = NBSEnv(config_for(spec.config(), policy))
-        times = run_episode(env, policy, spec.seed)
+        times = run_episode(env, policy, spec.seed, stop=stop)
+        if stop is not None and stop():
+            return None
         metrics = metrics_dict(env.storey, spec.scene, policy, spec.seed, times)
         metrics["policy"] = spec.policy
         return {"spec": asdict(spec), "ok": True, "metrics": metrics, "wall_s": time.perf_counter() - started}
@@ -184,6 +228,7 @@ def run_grid(
     progress: bool = True,
     finished: dict[str, Any] | None = None,
     on_done: Callable[[str, dict[str, Any]], None] | None = None,
+    stop: Callable[[], bool] | None = None,
 ) -> tuple[list[dict[str, Any]], dict[str, dict[str, Any]]]:
     """Run every spec, and the oracle of every scene.
 
@@ -200,7 +245,13 @@ def run_grid(
         plan): these are reused, not run again.
     on_done : callable, optional
         ``on_done(kind, record)`` as each run (``"run"``) or oracle (``"oracle"``) finishes, e.g.
-        :func:`write_record`, so that a grid that fails later keeps what it computed.
+        :func:`write_record`, so that a grid that fails later keeps what it computed. Called in
+        this process, one record at a time.
+    stop : callable, optional
+        Asked while the grid runs (:class:`train.stopping.StopRequest`: Ctrl-C, SIGTERM); once it
+        says True, the workers are ended (their runs in progress are lost: no result) and
+        :class:`GridStoppedError` is raised. With one job, a run in progress ends at its next step, an
+        oracle's plan when it is made.
 
     Returns
     -------
@@ -208,6 +259,15 @@ def run_grid(
         :func:`run_one`'s records, in the order of ``specs``.
     oracles : dict
         Scene → the oracle's plan (``OraclePlan.to_dict()``) or its error.
+
+    Raises
+    ------
+    GridStoppedError
+        ``stop`` said True before every run finished.
+    CompareError
+        More than one configuration, an unknown backend, or Ray missing.
+    WorkerLostError
+        A worker process died (the local backend).
     """
     from tqdm import tqdm
 
@@ -226,7 +286,12 @@ def run_grid(
         elif kind == "oracle" and arg in old_oracles:
             done[k] = old_oracles[arg]
     todo = [(k, task) for k, task in enumerate(tasks) if k not in done]
-    bar = tqdm(total=len(todo), unit="run", disable=not progress, dynamic_ncols=True)
+
+    def stopping() -> bool:
+        return stop is not None and stop()
+
+    def stopped() -> GridStoppedError:
+        return GridStoppedError(len(done), len(tasks))
 
     def finish(k: int, record: dict[str, Any]) -> None:
         done[k] = record
@@ -234,55 +299,144 @@ def run_grid(
             on_done(tasks[k][0], record)
         bar.update()
 
-    if not todo:
-        pass
-    elif backend == "local":
-        if jobs <= 1:
-            for k, (kind, arg) in todo:
-                finish(k, run_one(arg) if kind == "run" else _oracle(arg, preset, overrides))
-        else:
-            # spawn: forked children would inherit open3d's and OpenBLAS's threads mid-state.
-            context = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
-                futures = {
-                    (pool.submit(run_one, arg) if kind == "run" else pool.submit(_oracle, arg, preset, overrides)): k
-                    for k, (kind, arg) in todo
-                }
-                for future in as_completed(futures):
-                    finish(futures[future], future.result())
-    elif backend == "ray":
-        try:
-            import ray
-        except ImportError:
-            raise CompareError('the Ray backend needs ray: pip install "nbs-env[cluster]"') from None
-        started_here = not ray.is_initialized()
-        if started_here:
-            if address:
-                ray.init(address=address, log_to_driver=False)
-            else:
-                ray.init(num_cpus=max(1, jobs), include_dashboard=False, log_to_driver=False)
-        try:
-            run_remote = ray.remote(run_one)
-            oracle_remote = ray.remote(_oracle)
-            index = {
-                (run_remote.remote(arg) if kind == "run" else oracle_remote.remote(arg, preset, overrides)): k
-                for k, (kind, arg) in todo
-            }
-            refs = list(index)
-            pending = list(refs)
-            while pending:
-                ready, pending = ray.wait(pending, num_returns=1)
-                for ref in ready:
-                    finish(index[ref], ray.get(ref))
-        finally:
-            if started_here:
-                ray.shutdown()
-    else:
+    if backend not in ("local", "ray"):
         raise CompareError(f"unknown backend {backend!r}; backends: local, ray")
-    bar.close()
+    bar = tqdm(total=len(todo), unit="run", disable=not progress, dynamic_ncols=True)
+    try:
+        if not todo:
+            pass
+        elif backend == "local" and jobs <= 1:
+            for k, (kind, arg) in todo:
+                if stopping():
+                    raise stopped()
+                if kind == "oracle":
+                    record = _oracle(arg, preset, overrides)
+                else:
+                    record = run_one(arg) if stop is None else run_one(arg, stop)
+                if record is None:  # the run was cut short: no result
+                    raise stopped()
+                finish(k, record)
+        elif backend == "local":
+            _run_local(todo, jobs, preset, overrides, finish, stopping, stopped)
+        else:
+            _run_ray(todo, jobs, address, preset, overrides, finish, stopping, stopped)
+    finally:
+        bar.close()
     results = [done[k] for k in range(len(specs))]
     oracles = {scenes[k]: done[len(specs) + k] for k in range(len(scenes))}
     return results, oracles
+
+
+def _end_workers(pool: ProcessPoolExecutor) -> None:
+    """End a pool's worker processes now, their tasks unfinished, and drop the tasks not started.
+
+    ``shutdown`` alone would wait for every task already sent to a worker, a grid's worth."""
+    if hasattr(pool, "terminate_workers"):  # Python 3.14: it shuts the executor down too
+        pool.terminate_workers()
+        return
+    # Before 3.14 the executor's processes are only reachable through its private table, which
+    # shutdown() empties: read it first.
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        if process.is_alive():
+            process.terminate()
+    for process in processes:
+        process.join(timeout=10)
+        if process.is_alive():
+            process.kill()
+            process.join()
+
+
+def _run_local(
+    todo: list[tuple[int, tuple[str, Any]]],
+    jobs: int,
+    preset: str,
+    overrides: dict[str, Any],
+    finish: Callable[[int, dict[str, Any]], None],
+    stopping: Callable[[], bool],
+    stopped: Callable[[], GridStoppedError],
+) -> None:
+    """:func:`run_grid`'s tasks in ``jobs`` worker processes, each result handed to ``finish`` here."""
+    from train.stopping import ignore_interrupts
+
+    # spawn: forked children would inherit open3d's and OpenBLAS's threads mid-state.
+    context = multiprocessing.get_context("spawn")
+    pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=ignore_interrupts)
+    try:
+        futures = {
+            (pool.submit(run_one, arg) if kind == "run" else pool.submit(_oracle, arg, preset, overrides)): k
+            for k, (kind, arg) in todo
+        }
+        pending = set(futures)
+        while pending:
+            # A timeout, not a blocking wait: a signal's handler only sets a flag, looked at here.
+            ready, pending = wait(pending, timeout=STOP_POLL_S, return_when=FIRST_COMPLETED)
+            for future in ready:  # what finished is kept, stop or not
+                try:
+                    record = future.result()
+                except BrokenProcessPool:
+                    if stopping():  # SIGTERM sent to the whole process group ended a worker first
+                        raise stopped() from None
+                    raise WorkerLostError(
+                        "a worker process died (killed, or out of memory?); the runs finished so far are "
+                        "kept: rerun with --resume, perhaps with fewer --jobs"
+                    ) from None
+                finish(futures[future], record)
+            if pending and stopping():
+                raise stopped()
+    except BaseException:
+        _end_workers(pool)  # stopped, a record that could not be written, a second Ctrl-C
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _run_ray(
+    todo: list[tuple[int, tuple[str, Any]]],
+    jobs: int,
+    address: str | None,
+    preset: str,
+    overrides: dict[str, Any],
+    finish: Callable[[int, dict[str, Any]], None],
+    stopping: Callable[[], bool],
+    stopped: Callable[[], GridStoppedError],
+) -> None:
+    """:func:`run_grid`'s tasks as Ray tasks, on the cluster at ``address`` or a local instance."""
+    try:
+        import ray
+    except ImportError:
+        raise CompareError('the Ray backend needs ray: pip install "nbs-env[cluster]"') from None
+    started_here = not ray.is_initialized()
+    if started_here:
+        from train.ray_connect import connect_ray
+
+        # A cluster already running is joined without local-only arguments; RayConnectionError is a
+        # ConfigError: one line, exit 2.
+        connect_ray(address, num_cpus=max(1, jobs))
+    pending: list[Any] = []
+    try:
+        run_remote = ray.remote(run_one)
+        oracle_remote = ray.remote(_oracle)
+        index = {
+            (run_remote.remote(arg) if kind == "run" else oracle_remote.remote(arg, preset, overrides)): k
+            for k, (kind, arg) in todo
+        }
+        pending = list(index)
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1, timeout=STOP_POLL_S)
+            for ref in ready:  # what finished is kept, stop or not
+                finish(index[ref], ray.get(ref))
+            if pending and stopping():
+                raise stopped()
+    except BaseException:
+        for ref in pending:  # the tasks not finished: none of them is a result now
+            with contextlib.suppress(Exception):  # already finished, or the cluster is gone
+                ray.cancel(ref, force=True)
+        raise
+    finally:
+        if started_here:
+            ray.shutdown()
 
 
 # ---------------------------------------------------------------------- the table
@@ -561,15 +715,16 @@ def _csv(rows: list[dict[str, Any]], path: Path) -> None:
     keys = [k for k, _, _ in QUANTITIES] + ["of_oracle_pct", "vs_oracle_scans"]
     fields = ["scene", "policy", "room", "runs", "failed", "complete", "not_scanned"]
     fields += [f"{k}_{s}" for k in keys for s in ("mean", "std")]
-    with path.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=fields)
-        writer.writeheader()
-        for r in rows:
-            out = {k: r.get(k, "") for k in fields[:7]}
-            for k in keys:
-                mean, std = r.get(k, ("", ""))
-                out[f"{k}_mean"], out[f"{k}_std"] = mean, std
-            writer.writerow(out)
+    text = io.StringIO(newline="")
+    writer = csv.DictWriter(text, fieldnames=fields)
+    writer.writeheader()
+    for r in rows:
+        out = {k: r.get(k, "") for k in fields[:7]}
+        for k in keys:
+            mean, std = r.get(k, ("", ""))
+            out[f"{k}_mean"], out[f"{k}_std"] = mean, std
+        writer.writerow(out)
+    write_text(path, text.getvalue())
 
 
 def _plots(results: list[dict[str, Any]], oracles: dict[str, dict[str, Any]], out: Path) -> None:
@@ -604,7 +759,7 @@ def _plots(results: list[dict[str, Any]], oracles: dict[str, dict[str, Any]], ou
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="lower right")
     ax.set_title("Coverage against scans (mean over runs; band: min to max)")
-    fig.savefig(out / "coverage_vs_scans.png")
+    _save(fig, out / "coverage_vs_scans.png")
     _quality_plot(ok, policies, out)
 
     fig = Figure(figsize=(9, 4), dpi=110)
@@ -623,7 +778,13 @@ def _plots(results: list[dict[str, Any]], oracles: dict[str, dict[str, Any]], ou
         ax.grid(axis="y", alpha=0.3)
     fig.suptitle("Path length and time per run (mean ± std)")
     fig.tight_layout()
-    fig.savefig(out / "path_time.png")
+    _save(fig, out / "path_time.png")
+
+
+def _save(fig: Any, path: Path) -> None:
+    """Save a figure whole or not at all (:func:`nbs_env.atomic.replacing`)."""
+    with replacing(path) as temporary:
+        fig.savefig(temporary)
 
 
 def _padded(curves: list[list[float]]) -> np.ndarray:
@@ -670,7 +831,7 @@ def _quality_plot(ok: list[dict[str, Any]], policies: list[str], out: Path) -> N
             ax.legend(fontsize=8, loc="lower right")
     fig.suptitle("Coverage meeting the quality thresholds against scans (dotted: all coverage)")
     fig.tight_layout()
-    fig.savefig(out / "quality_vs_scans.png")
+    _save(fig, out / "quality_vs_scans.png")
 
 
 def write_outputs(
@@ -680,24 +841,27 @@ def write_outputs(
 
     The runs and the oracles are written first. Should the summary or the plots fail, what they
     could not write is replaced by ``summary_error.txt`` and :class:`CompareError` says so: the runs
-    stay, and ``--resume`` reuses them.
+    stay, and ``--resume`` reuses them. Every file is written whole or not at all
+    (:mod:`nbs_env.atomic`); one that cannot be (a full disk) raises its ``OSError``, naming it.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     for r in results:
         write_record(out, "run", r)
-    (out / "oracle.json").write_text(json.dumps(oracles, indent=1))
+    write_text(out / "oracle.json", json.dumps(oracles, indent=1))
     try:
         rows = summarise(results, oracles)
         _csv(rows, out / "table.csv")
-        (out / "table.md").write_text(_markdown(rows))
-        (out / "storeys.md").write_text(_storeys_markdown(rows))
-        (out / "methods.md").write_text(_methods_markdown(results, oracles))
+        write_text(out / "table.md", _markdown(rows))
+        write_text(out / "storeys.md", _storeys_markdown(rows))
+        write_text(out / "methods.md", _methods_markdown(results, oracles))
         thresholds = next((r["metrics"].get("quality") for r in results if r["ok"] and "quality" in r["metrics"]), None)
-        (out / "quality.md").write_text(_quality_markdown(rows, thresholds))
+        write_text(out / "quality.md", _quality_markdown(rows, thresholds))
         _plots(results, oracles, out)
+    except OSError:
+        raise  # a file that could not be written (a full disk): its own message names it
     except Exception as exc:  # the runs are on disk; say what failed and where they are
-        (out / "summary_error.txt").write_text(f"{type(exc).__name__}: {exc}\n\n{traceback.format_exc()}")
+        write_text(out / "summary_error.txt", f"{type(exc).__name__}: {exc}\n\n{traceback.format_exc()}")
         raise CompareError(
             f"the runs are in {out}/runs, but the summary failed ({type(exc).__name__}: {exc}); "
             f"see {out / 'summary_error.txt'}; rerun with --resume to reuse the runs"
@@ -706,29 +870,43 @@ def write_outputs(
     return rows
 
 
-def check_out_dir(out: str | Path) -> Path:
+def check_out_dir(out: str | Path, *, keep: bool = False) -> Path:
     """``out`` as a folder this process can write into (created if missing), before any run starts.
+
+    Parameters
+    ----------
+    out : str or Path
+    keep : bool
+        What an earlier grid left there may stay (``--resume`` reuses it, ``--force`` writes over
+        it); else a folder that is not empty is refused.
 
     Raises
     ------
     CompareError
-        ``out`` is a file, or cannot be created or written (:func:`train.arguments.output_folder_problem`).
+        ``out`` is a file, its folder does not exist, it cannot be created or written, or it is not
+        empty and ``keep`` is False (:func:`train.outputs.check_outputs`).
     """
+    from train.outputs import Output, OutputError, check_outputs
+
     out = Path(out)
-    problem = output_folder_problem(out)
-    if problem is None:
-        try:
-            out.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            problem = f"cannot create it ({exc.strerror or exc})"
-    if problem is not None:
-        raise CompareError(f"--out {out}: {problem}")
+    replace = None if keep else "pass --resume to continue that comparison, or --force to write over it"
+    try:
+        check_outputs([Output("--out", out, "folder", replace=replace)])
+        out.mkdir(exist_ok=True)
+    except OutputError as exc:
+        raise CompareError(str(exc)) from None
+    except OSError as exc:
+        raise CompareError(f"--out {out}: cannot create it ({exc.strerror or exc})") from None
     return out
 
 
 def write_record(out: str | Path, kind: str, record: dict[str, Any]) -> None:
     """Write one finished run (its ``run.json`` and ``metrics.json`` or ``error.txt``) or fold one
-    oracle into ``oracle.json``, as :func:`run_grid` reports them."""
+    oracle into ``oracle.json``, as :func:`run_grid` reports them.
+
+    Each file is written whole or not at all (:mod:`nbs_env.atomic`), and ``run.json`` last: a run
+    whose ``run.json`` is there is all there, whatever stopped the grid (:func:`load_finished`).
+    """
     out = Path(out)
     if kind == "oracle":
         path = out / "oracle.json"
@@ -737,15 +915,18 @@ def write_record(out: str | Path, kind: str, record: dict[str, Any]) -> None:
         except (OSError, ValueError):
             stored = {}
         stored[record["scene"]] = record
-        path.write_text(json.dumps(stored, indent=1))
+        write_text(path, json.dumps(stored, indent=1))
         return
     folder = _run_folder(out, record["spec"])
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / "run.json").write_text(json.dumps({k: v for k, v in record.items() if k != "metrics"}, indent=1))
+    (folder / "run.json").unlink(missing_ok=True)  # until the new run's files are all written
     if record["ok"]:
-        (folder / "metrics.json").write_text(json.dumps(record["metrics"], indent=1))
+        write_text(folder / "metrics.json", json.dumps(record["metrics"], indent=1))
+        (folder / "error.txt").unlink(missing_ok=True)  # an earlier failure of the same run
     else:
-        (folder / "error.txt").write_text(record["error"] + "\n\n" + record.get("traceback", ""))
+        write_text(folder / "error.txt", record["error"] + "\n\n" + record.get("traceback", ""))
+        (folder / "metrics.json").unlink(missing_ok=True)
+    write_text(folder / "run.json", json.dumps({k: v for k, v in record.items() if k != "metrics"}, indent=1))
 
 
 def folder_name(name: str) -> str:
@@ -802,6 +983,16 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
     return {"runs": runs, "oracles": oracles}
 
 
+def _refuse_repeats(flag: str, values: Sequence[Any]) -> None:
+    """A scene, policy or seed given twice would count one run twice in the table's means."""
+    counts: dict[Any, int] = {}
+    for value in values:
+        counts[value] = counts.get(value, 0) + 1
+    repeated = [f"{value} ({n} times)" for value, n in counts.items() if n > 1]
+    if repeated:
+        raise CompareError(f"{flag} names {', '.join(repeated)}; each run is counted once: give each once")
+
+
 def grid(
     scenes: str, policies: str, seeds: str, preset: str = "default", overrides: dict[str, Any] | None = None
 ) -> list[RunSpec]:
@@ -820,8 +1011,9 @@ def grid(
     Raises
     ------
     CompareError
-        An unknown scene, policy or checkpoint, bad seeds, or scene options (``--storey``,
-        ``--ifc-doors``, ``--y-up``) that do not apply to one of the scenes.
+        An unknown scene, policy or checkpoint, bad seeds, a scene, policy or seed given twice
+        (``generated:0-3,generated:2`` included), or scene options (``--storey``, ``--ifc-doors``,
+        ``--y-up``) that do not apply to one of the scenes.
     ConfigError
         A configuration value out of range, policies that require different robots, or options
         that contradict what a policy requires; the message names them.
@@ -835,6 +1027,8 @@ def grid(
     policy_list = [p.strip() for p in str(policies).split(",") if p.strip()]
     if not policy_list:
         raise CompareError("no policies given")
+    _refuse_repeats("--scenes", scene_list)
+    _refuse_repeats("--policies", policy_list)
     from nbs_env.errors import ModelFileError
     from train.arguments import adopt_requirements, scene_option_error
 
@@ -851,6 +1045,7 @@ def grid(
         raise CompareError("no seeds given")
     if min(seed_list) < 0:
         raise CompareError(f"seeds are integers >= 0, got {seeds!r}")
+    _refuse_repeats("--seeds", seed_list)
     options = overrides.get("scene_options", {})
     for scene in scene_list:
         problem = scene_option_error(
@@ -858,6 +1053,12 @@ def grid(
         )
         if problem is not None:
             raise CompareError(problem)
+    runs = len(scene_list) * len(policy_list) * len(seed_list)
+    if runs > MAX_RUNS:
+        raise CompareError(
+            f"{len(scene_list):,} scenes x {len(policy_list)} policies x {len(seed_list):,} seeds make {runs:,} "
+            f"runs, at most {MAX_RUNS:,}"
+        )
     specs = [
         RunSpec(scene, policy, seed, preset, overrides)
         for scene in scene_list

@@ -19,8 +19,12 @@ def run_episode(
     options: dict[str, Any] | None = None,
     on_step: Callable[[dict[str, Any]], None] | None = None,
     max_invalid: int = 10,
+    stop: Callable[[], bool] | None = None,
 ) -> dict[int, float]:
     """Reset ``env``, play ``policy`` to the end of the episode.
+
+    ``stop``, when given, is asked before each step after the first scan: once it says True the
+    episode ends there, unfinished (:class:`train.stopping.StopRequest`: Ctrl-C or SIGTERM).
 
     Returns
     -------
@@ -40,7 +44,7 @@ def run_episode(
     times: dict[int, float] = {}
     invalid = 0
     done = not env.storey.open
-    while not done:
+    while not done and not (stop is not None and stop()):
         before = info["scans"]
         t = time.perf_counter()
         action = policy.act(obs, info)

@@ -27,11 +27,11 @@ import numpy as np
 from nbs_env import threads
 from nbs_env.config import Config, EnvConfig, _finite, _integer, _require
 from nbs_env.errors import ConfigError, ModelFileError
-from nbs_env.observation import ROOM_FEATURES
+from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES
 from policies.learned import NetworkConfig, build_network, save_checkpoint
 from train.arguments import add_robot_arguments, config_from_arguments, parse_range, scene_option_error
 
-__all__ = ["TrainConfig", "main", "train"]
+__all__ = ["TrainConfig", "check_memory", "main", "memory_claim", "train"]
 
 #: Seeds of the held-out test storeys (``generated:10000000`` on, docs/results.md).
 #: Training storeys are drawn by the env's own generator from the whole 31-bit range, with the
@@ -212,6 +212,111 @@ class TrainConfig(Config):
         return NetworkConfig()
 
 
+#: The share of this machine's memory a run's own arrays may claim (:func:`memory_claim`): the rest is
+#: for what the estimate leaves out and cannot bound from the options alone: the env workers (about
+#: 1 GiB each with their storeys and maps), torch and PPO's minibatches, and the rest of the machine.
+MEMORY_SHARE = 0.5
+#: Where the machine's memory cannot be read (not Linux nor another POSIX system): a workstation's.
+_FALLBACK_MEMORY = 16 * 2**30
+
+
+def _machine_memory() -> int:
+    """Bytes of memory this process may use: the machine's, or its container's limit where lower."""
+    try:
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):
+        total = _FALLBACK_MEMORY
+    try:  # a cgroup v2 container's limit ("max" where none is set)
+        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        if limit.isdigit():
+            total = min(total, int(limit))
+    except OSError:
+        pass
+    return total
+
+
+def _bytes(n: float) -> str:
+    """``n`` bytes as a person reads them: ``65.6 KiB``, ``12.2 TiB``."""
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
+        if n < 1024 or unit == "TiB":
+            return f"{n:,.1f} {unit}" if unit != "B" else f"{int(n)} B"
+        n /= 1024
+    return f"{n:,.1f} TiB"
+
+
+def memory_claim(config: TrainConfig, backend: str = "local", behaviour_cloning: bool = True) -> dict[str, int]:
+    """The memory a run's options make it claim, in bytes, estimated from the options alone before
+    anything is built: the rollout buffer and the behaviour-cloning samples, the arrays that grow with
+    ``n_steps``, ``bc_steps`` and ``envs``.
+
+    Parameters
+    ----------
+    config : TrainConfig
+    backend : {"local", "ray"}
+        With ``"ray"`` the actors' segments arrive at the learner as well, one more copy of a rollout.
+    behaviour_cloning : bool
+        Count behaviour cloning (a resumed run does not clone again).
+
+    Returns
+    -------
+    dict
+        ``"step"``: bytes of one step of one env in the rollout buffer (its observation as
+        stable-baselines3 stores it, the action and its mask, PPO's six figures); ``"rollout"``: the
+        buffer, twice over (an update flattens each observation array into a copy), three times with
+        Ray; ``"sample"``: bytes of one behaviour-cloning sample (its observation kept twice, then read
+        as float32 and one-hot in one batch, 40 bytes a voxel cell); ``"cloning"``: all of them.
+    """
+    env = config.env_config()
+    cells = int(np.prod(env.observation.shape))
+    k = env.robot.navigation.max_candidates
+    actions = k + (env.rooms.completion == "policy")
+    floats = k * len(CANDIDATE_FEATURES) + 4 + len(ROOM_FEATURES)  # candidates, pose, room: float32
+    step = cells + 4 * floats + 8 + 4 * actions + 4 * 6  # voxels uint8, action int64, mask float32, figures
+    rollout = config.n_steps * config.envs * step * (3 if backend == "ray" else 2)
+    sample = 40 * cells + 2 * 4 * floats + actions + 8
+    cloning = config.bc_steps * config.envs * sample if behaviour_cloning else 0
+    return {"step": step, "rollout": rollout, "sample": sample, "cloning": cloning}
+
+
+def check_memory(config: TrainConfig, backend: str = "local", behaviour_cloning: bool = True) -> None:
+    """Refuse a run whose options claim more than :data:`MEMORY_SHARE` of this machine's memory
+    (:func:`memory_claim`), before anything is built: numpy's or torch's allocation would fail only
+    after the workers started, or the machine would start swapping.
+
+    Parameters
+    ----------
+    config : TrainConfig
+    backend : {"local", "ray"}
+    behaviour_cloning : bool
+        Count behaviour cloning.
+
+    Raises
+    ------
+    ConfigError
+        The run claims too much; the message names the options to lower and what they claim.
+    """
+    claim = memory_claim(config, backend, behaviour_cloning)
+    budget = MEMORY_SHARE * _machine_memory()
+    total = claim["rollout"] + claim["cloning"]
+    if total <= budget:
+        return
+    if claim["rollout"] >= claim["cloning"]:
+        options = f"--n-steps {config.n_steps} x --envs {config.envs}"
+        copies = "three times with Ray" if backend == "ray" else "twice"
+        what = f"rollouts of {_bytes(claim['rollout'])} ({_bytes(claim['step'])} a step of each env, held {copies})"
+        lower = "--n-steps or --envs"
+    else:
+        options = f"--bc-steps {config.bc_steps} x --envs {config.envs}"
+        what = f"behaviour-cloning samples of {_bytes(claim['cloning'])} ({_bytes(claim['sample'])} each)"
+        lower = "--bc-steps or --envs"
+    # The whole only where the other part adds to it noticeably.
+    in_all = f", {_bytes(total)} in all" if min(claim["rollout"], claim["cloning"]) > 0.01 * total else ""
+    raise ConfigError(
+        f"{options} asks for {what}{in_all}, more than {MEMORY_SHARE:.0%} of this machine's "
+        f"{_bytes(_machine_memory())} of memory: lower {lower}"
+    )
+
+
 def _env_factory(run: TrainConfig):
     """A picklable maker of one training env: the fast preset on the run's generated storeys, with
     its prices, completion and episode length."""
@@ -257,6 +362,19 @@ def ray_rollouts(config: TrainConfig, address: str | None = None, seed: int = 0)
         return _policy_class()(observation_space, action_space, lambda _: 0.0, network=network)
 
     return RayRollouts(_env_factory(config), make_policy, config.envs, address=address, seed=seed)
+
+
+def _check_ray(address: str | None) -> None:
+    """That the cluster a Ray run would join answers (:func:`train.ray_connect.resolve_address`), unless
+    this process already joined one (a user's own ``ray.init``)."""
+    from train.ray_connect import resolve_address
+
+    try:
+        import ray
+    except ImportError:
+        raise ConfigError('--backend ray needs Ray: pip install "nbs-env[cluster]"') from None
+    if not ray.is_initialized():
+        resolve_address(address)
 
 
 def _policy_class():
@@ -498,6 +616,8 @@ def build_model(config: TrainConfig, venv, device: str = "cpu", tensorboard: str
     _require_rl()
     from sb3_contrib import MaskablePPO
 
+    # The rollout buffer is allocated here: sized from the options before numpy is asked for it.
+    check_memory(dataclasses.replace(config, envs=venv.num_envs), behaviour_cloning=False)
     algorithm = getattr(venv, "ppo_class", MaskablePPO)  # Ray's rollouts bring their own collection
     return algorithm(
         _policy_class(),
@@ -620,6 +740,10 @@ def train(
     network = config.network
     out = Path(out)
     state = latest_state(out) if resume else None
+    # Checked before anything is built or written: what the options claim, and where Ray would run.
+    check_memory(config, backend, behaviour_cloning=bool(config.bc_steps) and state is None)
+    if backend == "ray":
+        _check_ray(address)
     # Checked before any worker starts: a bad checkpoint fails at once, not after the envs are up.
     initial = _load_init(config.init, network) if config.init and state is None else None
     out.mkdir(parents=True, exist_ok=True)
@@ -899,6 +1023,8 @@ def _has_tensorboard() -> bool:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from train.ray_connect import ADDRESS_HELP
+
     p = argparse.ArgumentParser(prog="nbs train", description="Train a masked PPO agent on generated storeys.")
     p.add_argument("--algo", choices=("maskable_ppo",), default="maskable_ppo")
     p.add_argument("--timesteps", type=int, default=None, help="PPO timesteps in all (default 2048)")
@@ -942,9 +1068,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="local",
         help="where rollouts are collected: local worker processes (default) or Ray actors",
     )
-    p.add_argument(
-        "--address", default=None, help="with --backend ray: the cluster to join (default: a local instance)"
-    )
+    p.add_argument("--address", default=None, help=f"with --backend ray: {ADDRESS_HELP}")
     p.add_argument("--quiet", action="store_true")
     add_robot_arguments(p)
     return p

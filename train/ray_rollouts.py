@@ -163,24 +163,31 @@ class RayRollouts(VecEnv):
     n_envs : int
         Actors, one env each.
     address : str, optional
-        The cluster to join (``"auto"``, ``host:port``); None starts a local instance with one CPU
-        per env.
+        The cluster to join (``host:port``, checked to answer first; ``"auto"``; ``"local"``); None joins
+        the cluster ``RAY_ADDRESS`` names or ``ray start`` runs on this machine, else starts a local
+        instance with one CPU per env (:func:`train.ray_connect.connect_ray`).
     seed : int
         Actor ``i``'s env is seeded with ``seed + i``.
+
+    Raises
+    ------
+    ConfigError
+        Ray is missing, or no cluster answers at the address (:class:`train.ray_connect.RayConnectionError`).
     """
 
     def __init__(self, make_env, make_policy, n_envs: int, address: str | None = None, seed: int = 0) -> None:
+        from train.ray_connect import connect_ray
+
         ray = _require_ray()
         self._ray = ray
         self._started = False
+        local = not address
         if not ray.is_initialized():
-            if address:
-                ray.init(address=address, log_to_driver=False)
-            else:
-                ray.init(num_cpus=n_envs, include_dashboard=False, log_to_driver=False)
+            local = connect_ray(address, num_cpus=n_envs).local
             self._started = True
         cores = int(ray.cluster_resources().get("CPU", n_envs))
-        threads = max(1, cores // n_envs) if not address else 1
+        # On an instance of its own the actors share this machine's cores; on a cluster each gets one.
+        threads = max(1, cores // n_envs) if local else 1
         actor = ray.remote(num_cpus=1)(_Worker)
         self.workers = [actor.remote(make_env, make_policy, seed + i, threads) for i in range(n_envs)]
         observation_space, action_space = ray.get(self.workers[0].spaces.remote())

@@ -1,0 +1,117 @@
+"""Files written whole or not at all: the report's and ``nbs compare``'s outputs.
+
+Every file goes to a temporary file in its own folder (``.NAME.XXXXXXXX.tmp.SUFFIX``: hidden, and
+with the final suffix, by which matplotlib and laspy choose the format), is flushed to the disk
+(``fsync``) and then renamed onto its name (``os.replace``, atomic on POSIX and Windows within one
+file system). A full disk, a signal or a crash while writing leaves the previous file as it was, or
+no file, and no partial one: the temporary file is removed whatever stopped the write.
+
+:func:`write_bytes` and :func:`write_text` write what is in memory; :func:`replacing` lends a
+temporary path to a library that writes the file itself (libE57, laspy, matplotlib). An ``OSError``
+names the file that was being written, never the temporary one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import secrets
+from collections.abc import Iterator
+from pathlib import Path
+
+__all__ = ["replacing", "write_bytes", "write_text"]
+
+#: Bytes per ``os.write`` call: large enough to be fast, small enough that a failure leaves a
+#: short partial temporary file to remove.
+CHUNK = 1 << 20
+
+
+def _write(fd: int, data: memoryview) -> int:
+    """The one place where bytes reach a file: ``os.write`` (the tests make it fail halfway)."""
+    return os.write(fd, data)
+
+
+def _temporary(path: Path) -> Path:
+    return path.with_name(f".{path.stem}.{secrets.token_hex(4)}.tmp{path.suffix}")
+
+
+def _named(exc: OSError, path: Path) -> OSError:
+    """``exc`` naming ``path`` (the file the user knows), of the same OSError subclass (by errno)."""
+    if exc.errno is None:
+        return exc
+    return OSError(exc.errno, exc.strerror or str(exc), str(path))
+
+
+def _fsync(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _fsync_folder(folder: Path) -> None:
+    """Make the rename itself durable; some systems (Windows) open no folder, which is fine."""
+    with contextlib.suppress(OSError):
+        _fsync(folder)
+
+
+@contextlib.contextmanager
+def replacing(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """A temporary path beside ``path`` to write the file to; renamed onto ``path`` on success.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        The file to write; its folder must exist.
+
+    Yields
+    ------
+    Path
+        The temporary file's path, in ``path``'s folder and with its suffix. The block must create it.
+
+    Raises
+    ------
+    OSError
+        The block's, or the flush's or rename's, naming ``path``. Whatever the block raises (a
+        ``KeyboardInterrupt`` included), the temporary file is removed and ``path`` left as it was.
+    """
+    path = Path(path)
+    temporary = _temporary(path)
+    try:
+        yield temporary
+        _fsync(temporary)
+        os.replace(temporary, path)
+    except BaseException as exc:
+        with contextlib.suppress(OSError):
+            temporary.unlink(missing_ok=True)
+        if isinstance(exc, OSError) and exc.filename in (None, str(temporary)):
+            raise _named(exc, path) from exc
+        raise
+    _fsync_folder(path.parent)
+
+
+def write_bytes(path: str | os.PathLike[str], data: bytes | bytearray | memoryview) -> Path:
+    """Write ``data`` to ``path`` whole or not at all (module docstring); returns ``path``.
+
+    Raises
+    ------
+    OSError
+        Naming ``path`` (a full disk: ``errno.ENOSPC``); ``path`` is left as it was.
+    """
+    path = Path(path)
+    view = memoryview(data).cast("B")
+    with replacing(path) as temporary:
+        fd = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
+        try:
+            done = 0
+            while done < len(view):
+                done += _write(fd, view[done : done + CHUNK])
+        finally:
+            os.close(fd)
+    return path
+
+
+def write_text(path: str | os.PathLike[str], text: str) -> Path:
+    """Write ``text`` as UTF-8 to ``path`` whole or not at all (:func:`write_bytes`); returns ``path``."""
+    return write_bytes(path, text.encode("utf-8"))

@@ -1,0 +1,229 @@
+"""What ``nbs scan`` and ``nbs compare`` leave on disk when the disk fills or a signal stops them:
+every file whole (the previous one, or the new one, never a truncated one), the finished work kept,
+one line saying so, and the exit code of the signal."""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+import nbs_env.atomic
+from nbs_env.atomic import replacing, write_text
+from train.cli import EXIT_SCENE_ERROR, main
+
+ROOT = Path(__file__).resolve().parents[1]
+#: The bundled scene at the fast preset, a few scans: a report in seconds.
+FAST = ["--preset", "fast", "--max-scans", "3", "--quiet"]
+
+
+def full_disk(monkeypatch) -> list[int]:
+    """Make every write of :mod:`nbs_env.atomic` put half its bytes down, then fail as a full disk does;
+    returns the sizes it was asked to write."""
+    asked: list[int] = []
+
+    def write(fd: int, data: memoryview) -> int:
+        asked.append(len(data))
+        os.write(fd, data[: len(data) // 2])
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(nbs_env.atomic, "_write", write)
+    return asked
+
+
+def leftovers(folder: Path) -> list[str]:
+    """The temporary files of :mod:`nbs_env.atomic` under ``folder``."""
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob(".*.tmp*"))
+
+
+# ---------------------------------------------------------------------- whole or not at all
+def test_a_full_disk_leaves_the_previous_file_and_no_partial_one(tmp_path, monkeypatch):
+    path = tmp_path / "metrics.json"
+    write_text(path, '{"scans": 3}\n')
+    assert leftovers(tmp_path) == [] and path.read_text() == '{"scans": 3}\n'
+    asked = full_disk(monkeypatch)
+    with pytest.raises(OSError) as raised:
+        write_text(path, json.dumps({"scans": list(range(1000))}))
+    assert asked, "the write never reached the disk"
+    assert raised.value.errno == errno.ENOSPC and raised.value.filename == str(path)
+    assert path.read_text() == '{"scans": 3}\n'  # the previous file, whole
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["metrics.json"]  # and nothing else
+    # A new file that cannot be written is no file at all.
+    with pytest.raises(OSError):
+        write_text(tmp_path / "table.md", "| a |\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["metrics.json"]
+
+
+def test_a_library_s_file_is_renamed_only_once_written(tmp_path):
+    """libE57, laspy and matplotlib write to a temporary path with the file's suffix; an error or a
+    signal in the middle leaves the previous file."""
+    path = tmp_path / "cloud.laz"
+    path.write_bytes(b"previous")
+    with pytest.raises(KeyboardInterrupt), replacing(path) as temporary:
+        assert temporary.parent == tmp_path and temporary.suffix == ".laz" and temporary.name.startswith(".")
+        temporary.write_bytes(b"half of a new")
+        raise KeyboardInterrupt
+    assert path.read_bytes() == b"previous" and leftovers(tmp_path) == []
+    with replacing(path) as temporary:
+        temporary.write_bytes(b"new")
+    assert path.read_bytes() == b"new" and leftovers(tmp_path) == []
+
+
+def test_nbs_scan_on_a_full_disk_keeps_the_previous_report_and_names_the_file(tmp_path, monkeypatch, capsys):
+    out = tmp_path / "report"
+    out.mkdir()
+    (out / "metrics.json").write_text('{"previous": true}\n')
+    full_disk(monkeypatch)
+    code = main(["scan", "--scene", "l_room", *FAST, "--no-steps", "--out", str(out), "--force"])
+    err = capsys.readouterr().err
+    assert code == EXIT_SCENE_ERROR, err
+    assert err == f"nbs scan: error: {out / 'metrics.json'}: No space left on device\n"
+    assert (out / "metrics.json").read_text() == '{"previous": true}\n'
+    assert leftovers(out) == []
+
+
+def test_nbs_compare_on_a_full_disk_stops_and_names_the_file(tmp_path, monkeypatch, capsys):
+    out = tmp_path / "grid"
+    full_disk(monkeypatch)
+    code = main(["compare", "--scenes", "l_room", "--policies", "random", "--seeds", "0,1", *FAST, "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == EXIT_SCENE_ERROR, err
+    metrics = out / "runs" / "l_room" / "random" / "seed0" / "metrics.json"
+    assert err == f"nbs compare: error: {metrics}: No space left on device\n"
+    assert not metrics.exists() and leftovers(out) == []
+    assert not (out / "runs" / "l_room" / "random" / "seed1").exists()  # the grid stopped there
+
+
+# ---------------------------------------------------------------------- signals
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (Linux's /proc)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                found.append(int(entry.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"  # a zombie has ended; only its parent's reaper is late
+
+
+def _start(args: list[str], folder: Path, ready: str) -> subprocess.Popen:
+    """``python -m train ARGS``, once a file matching ``folder / ready`` exists (the first scan or
+    run recorded)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "train", *args], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    deadline = time.monotonic() + 120
+    while not (folder.is_dir() and any(folder.glob(ready))):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            proc.kill()
+            pytest.fail(f"{folder / ready} never appeared: {proc.communicate()}")
+        time.sleep(0.02)
+    return proc
+
+
+needs_proc = pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="reads processes from Linux's /proc")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_during_nbs_scan_writes_the_report_of_the_scans_taken(tmp_path, sig):
+    out = tmp_path / "report"
+    args = ["scan", "--scene", "l_room", "--preset", "fast", "--max-scans", "30", "--quiet", "--out", str(out)]
+    proc = _start(args, out, "steps/step_000.png")
+    proc.send_signal(sig)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 128 + sig, stderr
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert 1 <= metrics["scans"] < 30 and not metrics["complete"]
+    name = signal.Signals(sig).name
+    assert stderr == f"nbs scan: stopped by {name} after {metrics['scans']} scans; wrote their report to {out}/\n"
+    assert f"storey complete: no (stopped by {name})" in stdout
+    for file in ("scans.e57", "cloud.laz", "cloud.ply", "samples.npz", "topdown.png"):
+        assert (out / file).stat().st_size > 0, file
+    assert len(list((out / "steps").glob("step_*.png"))) == metrics["scans"] and leftovers(out) == []
+
+
+def test_a_stop_between_runs_keeps_the_finished_ones(tmp_path):
+    """One job: the run in progress when the stop comes ends at its next step and is no result."""
+    from train.compare import GridStoppedError, grid, load_finished, run_grid, write_record
+
+    specs = grid("l_room", "random", "0,1", "fast", {"max_scans": 3})
+    done: list[dict] = []
+
+    def on_done(kind: str, record: dict) -> None:
+        write_record(tmp_path, kind, record)
+        done.append(record)
+
+    with pytest.raises(GridStoppedError) as stopped:
+        run_grid(specs, jobs=1, progress=False, on_done=on_done, stop=lambda: bool(done))
+    assert (stopped.value.finished, stopped.value.total) == (1, 3)  # two runs and the oracle
+    assert [r["spec"]["seed"] for r in done] == [0]
+    assert list(load_finished(tmp_path, specs)["runs"]) == [specs[0].key]
+
+
+#: The stopped grid's runs: enough that some are left when the first is recorded (about a second each).
+SEEDS = 6
+
+
+def _compare_stopped_by(sig: int, tmp_path: Path) -> tuple[list[str], Path, str]:
+    """Start a grid of two jobs, stop it by ``sig`` after its first run; check what it kept."""
+    out = tmp_path / "grid"
+    args = ["compare", "--scenes", "l_room", "--policies", "random", "--seeds", ",".join(map(str, range(SEEDS)))]
+    args += ["--preset", "fast", "--max-scans", "2", "--jobs", "2", "--quiet", "--out", str(out)]
+    proc = _start(args, out, "runs/l_room/random/seed*/run.json")
+    workers = _children(proc.pid)
+    proc.send_signal(sig)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 128 + sig, stderr
+    kept = sorted(p.parent.name for p in out.glob("runs/l_room/random/seed*/run.json"))
+    assert 1 <= len(kept) < SEEDS, (kept, stderr)
+    name = signal.Signals(sig).name
+    assert stderr.startswith(f"nbs compare: stopped by {name}: ") and stderr.count("\n") == 1, stderr
+    assert f"kept in {out}; continue with the same command and --resume" in stderr
+    for seed in kept:  # every run kept is whole
+        record = json.loads((out / "runs" / "l_room" / "random" / seed / "run.json").read_text())
+        assert record["ok"] and json.loads((out / "runs" / "l_room" / "random" / seed / "metrics.json").read_text())
+    assert leftovers(out) == [] and not (out / "table.md").exists()
+    deadline = time.monotonic() + 10
+    while any(_alive(pid) for pid in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not [pid for pid in workers if _alive(pid)], "a worker process outlived nbs compare"
+    return args, out, stdout
+
+
+@needs_proc
+def test_sigterm_during_nbs_compare_ends_its_workers_and_keeps_the_finished_runs(tmp_path):
+    _compare_stopped_by(signal.SIGTERM, tmp_path)
+
+
+@needs_proc
+@pytest.mark.expensive
+def test_ctrl_c_during_nbs_compare_then_resume_finishes_the_grid(tmp_path):
+    """Two grids' worth of worker start-ups, about half a minute on 2 busy cores."""
+    args, out, _ = _compare_stopped_by(signal.SIGINT, tmp_path)
+    kept = {p: p.read_text() for p in out.glob("runs/l_room/random/seed*/metrics.json")}
+    proc = subprocess.run(
+        [sys.executable, "-m", "train", *args, "--resume"], cwd=ROOT, capture_output=True, text=True, timeout=300
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert f"{SEEDS} of {SEEDS} runs ok" in proc.stdout
+    # Reused, not run again: a run again would have taken other times.
+    assert {p: json.loads(p.read_text()) for p in kept} == {p: json.loads(text) for p, text in kept.items()}
+    assert len(list(out.glob("runs/l_room/random/seed*/metrics.json"))) == SEEDS and (out / "table.md").is_file()

@@ -1,0 +1,120 @@
+"""The output paths of a command, checked before it does any work.
+
+A scan or a grid can run for hours; a path it cannot write, found when it writes, loses that work.
+:func:`check_outputs` looks at every output path a command was given, at its start, without
+creating anything: a folder (``--out``) must be a folder or not exist yet, in a folder that exists;
+a file (``--record``) must not be a folder and its folder must exist; each folder it would be written
+in must take a file (one is created there and removed: permission bits say nothing for root or on a
+read-only mount); and what an earlier run left there (a non-empty folder, an existing file) is
+refused unless the command was told to replace it. The message names the flag and the path.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+__all__ = ["Output", "OutputError", "check_outputs", "output_path"]
+
+
+class OutputError(ValueError):
+    """An output path that cannot be written, or holds what an earlier run left; the message says
+    which flag, which path and why, on one line."""
+
+
+@dataclass(frozen=True)
+class Output:
+    """One output path of a command line.
+
+    Attributes
+    ----------
+    flag : str
+        The option that named it, for the message (``"--out"``).
+    path : Path
+    kind : {"folder", "file"}
+        A folder the command fills (and makes when missing), or one file it writes.
+    replace : str or None
+        What to pass to write over what an earlier run left there (``"pass --force to overwrite
+        it"``), said when it is refused; None: an existing file or non-empty folder is fine.
+    example : str
+        For a file: a name to suggest when the path is a folder (``"run.rrd"``).
+    """
+
+    flag: str
+    path: Path
+    kind: Literal["folder", "file"] = "folder"
+    replace: str | None = None
+    example: str = ""
+
+
+def output_path(text: str) -> Path:
+    """argparse type of an output path: an empty one (``--out ''``) names no file or folder, and
+    ``Path('')`` would quietly be the working folder."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty path names no file or folder")
+    return Path(text)
+
+
+def _write_problem(folder: Path) -> str | None:
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        return f"cannot make a file in {folder} ({exc.strerror or exc})"
+    return None
+
+
+def _parent_problem(path: Path) -> str | None:
+    """Why no file or folder can be made at ``path``: its folder is missing, no folder, or takes no file."""
+    parent = path.parent
+    if not parent.exists():
+        return f"its folder {parent} does not exist"
+    if not parent.is_dir():
+        return f"{parent} is not a folder"
+    return _write_problem(parent)
+
+
+def _problem(output: Output) -> str | None:
+    path = output.path
+    if output.kind == "folder":
+        if not path.exists():
+            return _parent_problem(path)
+        if not path.is_dir():
+            return "exists and is not a folder"
+        problem = _write_problem(path)
+        if problem is None and output.replace is not None:
+            try:
+                held = sorted(p.name + ("/" if p.is_dir() else "") for p in path.iterdir())
+            except OSError as exc:
+                return f"cannot list it ({exc.strerror or exc})"
+            if held:
+                shown = ", ".join(held[:4]) + (", ..." if len(held) > 4 else "")
+                return f"is not empty (it holds {shown}); {output.replace}, or choose another folder"
+        return problem
+    if output.kind != "file":
+        raise ValueError(f"an output is a folder or a file, got {output.kind!r}")
+    if path.is_dir():
+        example = f" (e.g. {path / output.example})" if output.example else ""
+        return f"is a folder; name a file in it{example}"
+    if path.exists() and output.replace is not None:
+        return f"exists; {output.replace}, or choose another name"
+    return _parent_problem(path)
+
+
+def check_outputs(outputs: Iterable[Output]) -> None:
+    """Check every output path of a command before it starts (module docstring); creates nothing.
+
+    Raises
+    ------
+    OutputError
+        For the first path that cannot be written or may not be replaced: ``"--out r: its folder
+        x does not exist"``.
+    """
+    for output in outputs:
+        problem = _problem(output)
+        if problem is not None:
+            raise OutputError(f"{output.flag} {output.path}: {problem}")
