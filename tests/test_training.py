@@ -216,8 +216,8 @@ def test_a_signal_during_behaviour_cloning_ends_the_clone_at_once():
 
 @pytest.mark.expensive
 def test_a_signal_stops_a_run_with_its_state_saved(tmp_path):
-    """SIGTERM mid-run: the run stops at its next step, saves its state and exits 130 with the
-    command that continues it; --resume then finishes it."""
+    """SIGTERM mid-run: the run stops at its next step, saves its state and exits 143 (128 + SIGTERM,
+    as nbs scan and nbs compare do) with the command that continues it; --resume then finishes it."""
     pytest.importorskip("sb3_contrib")
     out = tmp_path / "run"
     p = _cli(
@@ -230,7 +230,7 @@ def test_a_signal_stops_a_run_with_its_state_saved(tmp_path):
         time.sleep(0.5)
     p.send_signal(signal.SIGTERM)
     _, err = p.communicate(timeout=300)
-    assert p.returncode == 130, err
+    assert p.returncode == 143, err
     assert "--resume" in err and "Traceback" not in err
     done = json.loads((out / "training_state.json").read_text())["timesteps"]
     assert 8 <= done < 4000

@@ -1148,6 +1148,8 @@ def _resume(args) -> int:
 
 
 def _run(config: TrainConfig, out: Path, args, resume: bool) -> int:
+    from train.stopping import exit_code
+
     try:
         path, model = train(
             config, out, progress=not args.quiet, resume=resume, backend=args.backend, address=args.address
@@ -1167,14 +1169,15 @@ def _run(config: TrainConfig, out: Path, args, resume: bool) -> int:
             "state to continue from: run the command again",
             file=sys.stderr,
         )
-        return 130
+        return exit_code(model.interrupted)
     if model.interrupted is not None:
         print(
             f"nbs train: stopped by signal {model.interrupted} at {model.num_timesteps} timesteps; "
             f"the run is saved: continue it with nbs train --resume {out}",
             file=sys.stderr,
         )
-        return 130
+        # 130 for Ctrl-C, 143 for SIGTERM, as nbs scan and nbs compare exit and shells report.
+        return exit_code(model.interrupted)
     print(f"wrote {path}")
     return 0
 
