@@ -437,7 +437,11 @@ def load_checkpoint(path: str | Path):
     try:
         state = torch.load(weights, map_location="cpu", weights_only=True)
     except Exception as exc:
-        raise ModelFileError(f"{weights}: not a tensors-only weights file ({type(exc).__name__}: {exc})") from None
+        # Only the exception's kind: torch's message runs to several lines and suggests loading with
+        # weights_only=False, which would run whatever pickle the file holds.
+        raise ModelFileError(
+            f"{weights}: not a tensors-only weights file (torch's tensors-only reader refused it: {type(exc).__name__})"
+        ) from None
     if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
         raise ModelFileError(f"{weights}: not a dict of tensors")
     bad = sorted(k for k, v in state.items() if v.is_floating_point() and not bool(torch.isfinite(v).all()))
@@ -448,7 +452,8 @@ def load_checkpoint(path: str | Path):
         encoder.load_state_dict({k[len("encoder.") :]: v for k, v in state.items() if k.startswith("encoder.")})
         scorer.load_state_dict({k[len("scorer.") :]: v for k, v in state.items() if k.startswith("scorer.")})
     except RuntimeError as exc:
-        raise ModelFileError(f"{weights}: weights do not fit the network of {path.name}: {exc}") from None
+        detail = " ".join(str(exc).split())  # torch's message spans lines; a CLI error is one
+        raise ModelFileError(f"{weights}: weights do not fit the network of {path.name}: {detail}") from None
     encoder.eval()
     scorer.eval()
     return config, encoder, scorer, layout, document

@@ -24,6 +24,8 @@ CASES = [
     ("scan --scene office --resolution nan", EXIT_USAGE, "angular_step must be a finite number"),
     ("scan --scene office --resolution inf", EXIT_USAGE, "angular_step must be a finite number"),
     ("scan --scene office --resolution 0.0001", EXIT_USAGE, "rays per scan"),
+    ("scan --scene office --resolution 1e-320", EXIT_USAGE, "rays per scan"),
+    ("scan --scene office --min-density 1e300", EXIT_USAGE, "min_density must be within [0, 1e8]"),
     ("scan --scene office --voxel nan", EXIT_USAGE, "voxel_size must be a finite number"),
     ("scan --scene office --voxel 1e9", EXIT_USAGE, "voxel_size must be within [0.01, 1] metres"),
     ("scan --scene office --preset slow", EXIT_USAGE, "--preset: invalid choice: 'slow'"),

@@ -45,7 +45,7 @@ from scenes import load_scene
         (lambda: RoomRules(completion_fraction=1.0), "completion_fraction is a share"),
         (lambda: WallSearchConfig(scans=-1), "scans must be an integer >= 0"),
         (lambda: RobotConfig(voxel_size=5.0), "voxel_size must be within"),
-        (lambda: QualityConfig(min_density=-1.0), "min_density must be >= 0"),
+        (lambda: QualityConfig(min_density=-1.0), "min_density must be within"),
         (lambda: QualityConfig(max_incidence=95.0), "max_incidence must be in"),
         (lambda: QualityConfig(density_radius=float("inf")), "density_radius must be a finite number"),
         (lambda: ScannerConfig(station_time=0.0), "station_time must be > 0"),

@@ -216,3 +216,89 @@ def test_any_damaged_ifc_loads_or_raises_a_scene_error(cut, flip):
         data[k] = (data[k] + 1 + flip % 200) % 256
         path.write_bytes(bytes(data))
         loads_or_refuses(path)
+
+
+# ---------------------------------------------------------------------- checkpoints
+REFERENCE = Path(__file__).parents[1] / "policies" / "data" / "ppo_reference"
+
+
+def _reference_document() -> dict:
+    return json.loads((REFERENCE / "policy.json").read_text())
+
+
+CHECKPOINT_PLACES = [p for p in _paths(_reference_document()) if p]
+
+
+@st.composite
+def broken_checkpoints(draw):
+    """The reference checkpoint's description with one to three values replaced or removed (its weights
+    untouched, so that a change reaches past the checksum), or its weights replaced by other bytes (the
+    checksum made to match, so that they reach torch's tensors-only reader)."""
+    document = _reference_document()
+    weights = None
+    if draw(st.integers(0, 4)) == 0:
+        data = (REFERENCE / "policy.pt").read_bytes()
+        weights = draw(
+            st.one_of(
+                st.binary(max_size=300),
+                st.integers(0, len(data) - 1).map(lambda n: data[:n]),
+            )
+        )
+        import hashlib
+
+        document["sha256"] = hashlib.sha256(weights).hexdigest()
+        return document, weights
+    for _ in range(draw(st.integers(1, 3))):
+        place = draw(st.sampled_from(CHECKPOINT_PLACES))
+        parent = document
+        try:
+            for key in place[:-1]:
+                parent = parent[key]
+            old = parent[place[-1]]
+            if isinstance(old, (int, float)) and not isinstance(old, bool) and draw(st.booleans()):
+                parent[place[-1]] = draw(st.sampled_from([0, -1, 10**9, 10**30, 2.5, float("nan")]))
+            elif draw(st.integers(0, 3)) == 0 and isinstance(parent, dict):
+                parent.pop(place[-1], None)
+            else:
+                parent[place[-1]] = draw(VALUES)
+        except (KeyError, IndexError, TypeError):
+            continue
+    return document, weights
+
+
+@settings(SETTINGS, max_examples=80)
+@given(case=broken_checkpoints())
+def test_any_damaged_checkpoint_drives_a_run_or_is_refused_in_one_line(case, capsys, monkeypatch):
+    """Through ``nbs scan --policy ppo:DIR``'s door, the episode itself replaced: a checkpoint either
+    gives a run configuration its checks accept, or exit 2 (a configuration it cannot drive) or 1 (a
+    file it cannot read) with one line; never a traceback or an allocation its description claims."""
+    pytest.importorskip("torch")
+    import shutil
+
+    import train.cli
+    from train.cli import EXIT_SCENE_ERROR, EXIT_USAGE, main
+
+    document, weights = case
+    reached = []
+    monkeypatch.setattr(train.cli, "_scan", lambda args, policy, out, config, stop: reached.append(config) or 0)
+    with tempfile.TemporaryDirectory() as folder:
+        checkpoint = Path(folder) / "ckpt"
+        shutil.copytree(REFERENCE, checkpoint)
+        (checkpoint / "policy.json").write_text(json.dumps(document))
+        if weights is not None:
+            (checkpoint / "policy.pt").write_bytes(weights)
+        argv = ["scan", "--scene", "l_room", "--policy", f"ppo:{checkpoint}", "--out", f"{folder}/r", "--quiet"]
+        try:
+            with time_limit(SECONDS):
+                code = main(argv)
+        except SystemExit as exc:
+            code = exc.code
+    err = capsys.readouterr().err
+    assert "Traceback" not in err, err
+    if code == 0:
+        hypothesis.event("accepted")
+        assert len(reached) == 1
+        return
+    hypothesis.event(f"refused with {code}")
+    assert code in (EXIT_USAGE, EXIT_SCENE_ERROR), (code, err)
+    assert len(err.strip().splitlines()) == 1 and err.startswith("nbs scan: error: "), err

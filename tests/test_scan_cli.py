@@ -365,7 +365,7 @@ def test_bad_start_is_refused(tmp_path, capsys, start, message):
         (["--max-scans", "0"], "expected an integer >= 1"),
         (["--scanner", "vz-400"], "unknown scanner 'vz-400'"),
         (["--scanner", "rtc360:1mm"], "valid settings: 3mm, 6mm, 12mm"),
-        (["--min-density", "-1"], "min_density must be >= 0"),
+        (["--min-density", "-1"], "min_density must be within [0, 1e8]"),
         (["--max-incidence", "120"], "max_incidence must be in"),
         (["--record", "run.txt"], "a rerun recording ends in .rrd"),
     ],

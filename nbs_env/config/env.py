@@ -89,7 +89,12 @@ class QualityConfig(Config):
 
     def __post_init__(self) -> None:
         _finite(min_density=self.min_density, max_incidence=self.max_incidence, density_radius=self.density_radius)
-        _require(self.min_density >= 0, f"min_density must be >= 0 points per m², got {self.min_density}")
+        # 10^8 per m² is a 0.1 mm spacing, ten times finer than any terrestrial scanner's finest
+        # setting: a larger figure is a typo or a unit mistake, not a quality level.
+        _require(
+            0 <= self.min_density <= 1e8,
+            f"min_density must be within [0, 1e8] points per m² (1e8: a 0.1 mm spacing), got {self.min_density}",
+        )
         _require(0 < self.max_incidence <= 90, f"max_incidence must be in (0, 90] degrees, got {self.max_incidence}")
         _require(self.density_radius > 0, f"density_radius must be > 0 m, got {self.density_radius}")
 

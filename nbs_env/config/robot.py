@@ -162,10 +162,13 @@ class ScannerConfig(Config):
         _require(
             self.preset is None or isinstance(self.preset, str), f"preset must be a name or None, got {self.preset!r}"
         )
-        rays = self.n_rows * self.n_cols
+        # In floats first: a step of 1e-320° makes the exact count's round() overflow.
+        rays = 360.0 / self.angular_step * ((self.elevation_max - self.elevation_min) / self.angular_step + 1)
+        if rays <= 2 * MAX_RAYS:
+            rays = self.n_rows * self.n_cols
         _require(
             rays <= MAX_RAYS,
-            f"angular_step {self.angular_step}° makes {rays:,} rays per scan; the limit is {MAX_RAYS:,}",
+            f"angular_step {self.angular_step}° makes {rays:,.0f} rays per scan; the limit is {MAX_RAYS:,}",
         )
 
     @property
