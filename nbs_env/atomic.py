@@ -14,8 +14,10 @@ names the file that was being written, never the temporary one.
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import secrets
+import shutil
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -42,6 +44,18 @@ def _named(exc: OSError, path: Path) -> OSError:
     return OSError(exc.errno, exc.strerror or str(exc), str(path))
 
 
+#: Free bytes below which a library's failure to write is taken for a full disk: more than the
+#: largest block the writers used here flush at once (a LAZ chunk, libE57's pages, numpy's zip members).
+NEARLY_FULL = 8 << 20
+
+
+def _nearly_full(folder: Path) -> bool:
+    try:
+        return shutil.disk_usage(folder).free < NEARLY_FULL
+    except OSError:
+        return False
+
+
 def _fsync(path: Path) -> None:
     fd = os.open(path, os.O_RDONLY)
     try:
@@ -57,13 +71,17 @@ def _fsync_folder(folder: Path) -> None:
 
 
 @contextlib.contextmanager
-def replacing(path: str | os.PathLike[str]) -> Iterator[Path]:
+def replacing(path: str | os.PathLike[str], writer_errors: tuple[type[Exception], ...] = ()) -> Iterator[Path]:
     """A temporary path beside ``path`` to write the file to; renamed onto ``path`` on success.
 
     Parameters
     ----------
     path : str or PathLike
         The file to write; its folder must exist.
+    writer_errors : tuple of exception classes
+        The errors by which the library writing the file reports that it could not (libE57's
+        ``E57Exception``, lazrs' ``LazrsError``): raised as an ``OSError`` naming ``path``,
+        ``errno.ENOSPC`` where the disk is (nearly) full, ``errno.EIO`` otherwise.
 
     Yields
     ------
@@ -73,8 +91,9 @@ def replacing(path: str | os.PathLike[str]) -> Iterator[Path]:
     Raises
     ------
     OSError
-        The block's, or the flush's or rename's, naming ``path``. Whatever the block raises (a
-        ``KeyboardInterrupt`` included), the temporary file is removed and ``path`` left as it was.
+        The block's (or one of ``writer_errors``), or the flush's or rename's, naming ``path``.
+        Whatever the block raises (a ``KeyboardInterrupt`` included), the temporary file is removed
+        and ``path`` left as it was.
     """
     path = Path(path)
     temporary = _temporary(path)
@@ -83,10 +102,20 @@ def replacing(path: str | os.PathLike[str]) -> Iterator[Path]:
         _fsync(temporary)
         os.replace(temporary, path)
     except BaseException as exc:
+        # Measured before the partial file is removed: a library's own error (lazrs' IoError,
+        # libE57's E57Exception) on a disk with nothing left is a full disk, and says so.
+        full = isinstance(exc, Exception) and not isinstance(exc, OSError) and _nearly_full(temporary.parent)
+        failed = isinstance(exc, writer_errors)
         with contextlib.suppress(OSError):
             temporary.unlink(missing_ok=True)
         if isinstance(exc, OSError) and exc.filename in (None, str(temporary)):
             raise _named(exc, path) from exc
+        if full:
+            raise OSError(errno.ENOSPC, f"{os.strerror(errno.ENOSPC)} ({type(exc).__name__})", str(path)) from exc
+        if failed:
+            first = (str(exc).strip().splitlines() or [""])[0]
+            detail = f"{type(exc).__name__}: {first}" if first else type(exc).__name__
+            raise OSError(errno.EIO, f"could not be written ({detail})", str(path)) from exc
         raise
     _fsync_folder(path.parent)
 

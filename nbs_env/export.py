@@ -80,6 +80,7 @@ other than the writers: the Rust ``e57`` crate, LASzip.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import time
@@ -700,7 +701,9 @@ def write_e57(
     sensor = _sensor(scanner)
     # Under a temporary name, renamed onto ``path`` once whole (nbs_env.atomic): a failure or a
     # signal leaves the previous file (and libE57 opens no existing file for writing).
-    with replacing(path) as temporary:
+    from pye57 import libe57
+
+    with replacing(path, writer_errors=(libe57.E57Exception,)) as temporary:
         _write_e57_file(temporary, scans, names, times, intensity, scanner, sensor, created)
     return path
 
@@ -721,6 +724,7 @@ def _write_e57_file(
     from nbs_env import __version__
 
     imf = libe57.ImageFile(str(path), "w")
+    writer = buffers = compressed = None
     try:
 
         def string(text: str) -> Any:
@@ -841,6 +845,12 @@ def _write_e57_file(
                 writer.write(n)
             writer.close()
     except BaseException:
+        # A writer left open when the file is cancelled crashes the process (a segmentation fault)
+        # when Python frees it: close it first (it raises the same error again) and drop it.
+        if writer is not None:
+            with contextlib.suppress(Exception):
+                writer.close()
+        writer = buffers = compressed = None
         imf.cancel()  # libE57 removes the partial file
         path.unlink(missing_ok=True)
         raise
@@ -887,6 +897,14 @@ def _matching(name: str, values: np.ndarray | None, shape: tuple[int, ...]) -> n
     if array.shape != shape:
         raise ValueError(f"{name} must have shape {shape}, got {array.shape}")
     return array
+
+
+def _lazrs_errors() -> tuple[type[Exception], ...]:
+    try:
+        import lazrs
+    except ImportError:
+        return ()
+    return (lazrs.LazrsError,)
 
 
 def write_las(
@@ -1002,7 +1020,8 @@ def write_las(
     if normals is not None:
         rounded = np.rint(np.asarray(normals, dtype=np.float64) * _NORMAL_STEPS) / _NORMAL_STEPS
         las.NormalX, las.NormalY, las.NormalZ = (rounded[:, i].astype(np.float32) for i in range(3))
-    with replacing(path) as temporary:  # the suffix (.laz or .las) tells laspy to compress or not
+    with replacing(path, writer_errors=(laspy.errors.LaspyException, *_lazrs_errors())) as temporary:
+        # The suffix (.laz or .las) tells laspy to compress or not.
         las.write(str(temporary))
     return path
 

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from nbs_env.atomic import replacing
 from nbs_env.config import Config, _integer, _require
 from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES, CandidateColumn, candidate_table_of
@@ -380,18 +381,21 @@ def save_checkpoint(
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     weights = folder / "policy.pt"
-    torch.save({k: v.detach().cpu() for k, v in state_dict.items()}, weights)
-    document = {
-        "format": CHECKPOINT_FORMAT,
-        "version": CHECKPOINT_VERSION,
-        "network": config.to_dict(),
-        "input_layout": input_layout,
-        "weights": weights.name,
-        "sha256": _sha256(weights),
-        "training": training or {},
-    }
     path = folder / "policy.json"
-    path.write_text(json.dumps(document, indent=1))
+    # Both files are written whole under temporary names, then renamed (the weights first): a full
+    # disk or a crash leaves the previous pair, never a description of weights that are not there.
+    with replacing(path) as description, replacing(weights, writer_errors=(RuntimeError,)) as temporary:
+        torch.save({k: v.detach().cpu() for k, v in state_dict.items()}, temporary)
+        document = {
+            "format": CHECKPOINT_FORMAT,
+            "version": CHECKPOINT_VERSION,
+            "network": config.to_dict(),
+            "input_layout": input_layout,
+            "weights": weights.name,
+            "sha256": _sha256(temporary),
+            "training": training or {},
+        }
+        description.write_text(json.dumps(document, indent=1))
     return path
 
 

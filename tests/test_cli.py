@@ -24,7 +24,7 @@ def test_scenes_list(capsys):
 
 
 def test_scenes_show_writes_a_png(tmp_path):
-    out = tmp_path / "pics" / "top.png"
+    out = tmp_path / "top.png"
     assert main(["scenes", "show", "l_room", "--out", str(out)]) == 0
     from PIL import Image
 

@@ -162,6 +162,47 @@ def test_a_modified_state_is_refused(tmp_path):
         latest_state(tmp_path)
 
 
+def test_a_full_disk_during_training_keeps_the_last_state_and_resume_goes_on(tmp_path, monkeypatch, capsys):
+    """torch.save on a full disk raises its own RuntimeError halfway through a file: ``nbs train`` says
+    which file in one line and exits 1, the run's last state stays whole (no weights without their
+    description, no temporary file), and ``--resume`` continues from it once there is room."""
+    pytest.importorskip("sb3_contrib")
+    torch = pytest.importorskip("torch")
+    import shutil
+    from collections import namedtuple
+
+    import nbs_env.atomic
+    from train.ppo import latest_state, main, train
+
+    out = tmp_path / "run"
+    train(_tiny(timesteps=8), out, progress=False)
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file() and "tb" not in p.parts}
+    save = torch.save
+
+    def full(obj, f, *args, **kwargs):
+        Path(f).write_bytes(b"PK\x03\x04 half a zip")
+        raise RuntimeError("[enforce fail at inline_container.cc:672] . PytorchStreamWriter failed writing file")
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(torch, "save", full)
+    monkeypatch.setattr(nbs_env.atomic.shutil, "disk_usage", lambda folder: usage(10**9, 10**9, 0))
+    code = main(["--resume", str(out), "--timesteps", "16", "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 1, err
+    assert err.startswith(f"nbs train: error: {out}") and "No space left on device (RuntimeError)" in err, err
+    assert f"--resume {out}" in err and len(err.strip().splitlines()) == 1, err
+    after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file() and "tb" not in p.parts}
+    changed = sorted(str(k) for k in after if after[k] != before.get(k))
+    # Only the learning-curve and progress files a resumed run rewrites whole may differ; no state did.
+    assert not [c for c in changed if c.endswith((".pt", "policy.json", "training_state.json"))], changed
+    assert not [p for p in out.rglob(".*.tmp*")], "a temporary file was left"
+    monkeypatch.setattr(torch, "save", save)
+    monkeypatch.setattr(nbs_env.atomic.shutil, "disk_usage", shutil.disk_usage)
+    assert latest_state(out)[1]["timesteps"] == 8
+    assert main(["--resume", str(out), "--timesteps", "16", "--quiet"]) == 0
+    assert latest_state(out)[1]["timesteps"] == 16
+
+
 def _cli(*args: str, **kwargs) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     return subprocess.Popen(

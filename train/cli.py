@@ -116,7 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
     gen.add_argument(
         "--clutter-density", type=_clutter_density, default=None, help="objects per 6 m², 0..10 (default 1)"
     )
-    gen.add_argument("--out", type=Path, required=True, help="floor-plan JSON to write")
+    gen.add_argument("--out", type=output_path, required=True, help="floor-plan JSON to write")
     gen.add_argument("--show", type=_picture, default=None, help="also draw the storey to this picture (.png, ...)")
 
     scan = sub.add_parser(
@@ -356,18 +356,26 @@ def run(args: argparse.Namespace) -> int:
         if problem is not None:
             print(f"nbs scenes {args.action}: error: {problem}", file=sys.stderr)
             return EXIT_USAGE
+    if args.action in ("show", "generate"):
+        # Before the storey is loaded or generated: a path found unwritable afterwards would waste it.
+        outputs = [Output("--out", args.out, "file")]
+        if args.action == "generate" and args.show is not None:
+            outputs.append(Output("--show", args.show, "file"))
+        try:
+            check_outputs(outputs)
+        except OutputError as exc:
+            print(f"nbs scenes {args.action}: error: {exc}", file=sys.stderr)
+            return EXIT_USAGE
     if args.action == "show":
-        from scenes.render import save_scene_png
-
         scene = _load(args)
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        save_scene_png(scene, args.out)
+        _save_picture(scene, args.out)
         print(f"wrote {args.out}")
         return 0
     if args.action == "info":
         print(json.dumps(_scene_summary(_load(args)), indent=1))
         return 0
     if args.action == "generate":
+        from nbs_env.atomic import write_text
         from scenes import generate_plan
 
         opts: dict = {}
@@ -379,17 +387,23 @@ def run(args: argparse.Namespace) -> int:
         plan = generate_plan(args.seed, **opts)
         scene = plan.to_scene(validate=False)
         elapsed = time.perf_counter() - t0
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        plan.to_json(args.out)
+        write_text(args.out, plan.to_json())  # whole or not at all: a full disk leaves no half a plan
         summary = f"{len(plan.rooms)} rooms, {len(plan.doors)} doors, {len(plan.clutter)} clutter objects"
         print(f"wrote {args.out}: {summary} ({elapsed:.2f} s)")
         if args.show is not None:
-            from scenes.render import save_scene_png
-
-            save_scene_png(scene, args.show)
+            _save_picture(scene, args.show)
             print(f"wrote {args.show}")
         return 0
     raise AssertionError(args.action)  # argparse only lets known actions through
+
+
+def _save_picture(scene, path: Path) -> None:
+    """The storey's top view, written whole or not at all (the format by ``path``'s suffix)."""
+    from nbs_env.atomic import replacing
+    from scenes.render import save_scene_png
+
+    with replacing(path) as temporary:
+        save_scene_png(scene, temporary)
 
 
 # ---------------------------------------------------------------------- nbs scan
@@ -694,8 +708,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SceneError as exc:
         print(f"nbs: error: {exc}", file=sys.stderr)
         return EXIT_SCENE_ERROR
-    except OSError as exc:  # e.g. an --out folder we may not write
-        print(f"nbs: error: {exc}", file=sys.stderr)
+    except OSError as exc:  # a file that could not be written (a full disk), named
+        print(f"nbs: error: {_os_error(exc)}", file=sys.stderr)
         return EXIT_SCENE_ERROR
 
 

@@ -13,6 +13,7 @@ the CPU build). Uses a GPU when torch sees one.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import os
@@ -25,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from nbs_env import threads
+from nbs_env.atomic import replacing, write_text
 from nbs_env.config import Config, EnvConfig, _finite, _integer, _require
 from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES
@@ -520,19 +522,20 @@ def save_training_state(model, folder: str | Path, run: TrainConfig) -> Path:
         "policy": {k: v.detach().cpu() for k, v in policy.state_dict().items()},
         "optimizer": policy.optimizer.state_dict(),
     }
-    temporary = tensors.with_suffix(".tmp")
-    torch.save(state, temporary)
-    temporary.replace(tensors)  # a signal during the write leaves the previous state whole
-    document = {
-        "format": STATE_FORMAT,
-        "version": 1,
-        "timesteps": int(model.num_timesteps),
-        "tensors": tensors.name,
-        "sha256": _sha256(tensors),
-        "run": run.to_dict(),
-    }
     path = folder / STATE_JSON
-    path.write_text(json.dumps(document, indent=1))
+    # Both whole under temporary names, then renamed, the tensors first: a full disk, a signal or a
+    # crash leaves the previous state (a pair whose checksum holds), never half of a new one.
+    with replacing(path) as description, replacing(tensors, writer_errors=(RuntimeError,)) as temporary:
+        torch.save(state, temporary)
+        document = {
+            "format": STATE_FORMAT,
+            "version": 1,
+            "timesteps": int(model.num_timesteps),
+            "tensors": tensors.name,
+            "sha256": _sha256(temporary),
+            "run": run.to_dict(),
+        }
+        description.write_text(json.dumps(document, indent=1))
     return path
 
 
@@ -767,13 +770,12 @@ def train(
     recorded = {**config.to_dict(), "config": config.env_config().to_dict()}
     log = out / "learning_curve.jsonl"
     if state is None:
-        log.write_text("")
+        write_text(log, "")
     greedy = GreedyPolicy()
     baseline = None
     if config.eval_every:
         # A resumed run's greedy is the one its curve already holds: the same storeys, the same robot.
-        lines = log.read_text().splitlines() if log.is_file() else []
-        earlier = [json.loads(line) for line in lines if line.strip()]
+        earlier = _curve(log)
         baseline = earlier[-1]["greedy"] if earlier and earlier[-1].get("greedy") else None
         if baseline is None:
             baseline = evaluate(greedy.act, held_out, config.max_episode_steps, config.evaluation_config())
@@ -822,33 +824,38 @@ def train(
             record = {"timesteps": n, "learned": learned, "greedy": baseline}
             record["train_return"] = float(np.mean(self.episodes[-20:])) if self.episodes else None
             record["seconds"] = time.time() - started
-            with log.open("a") as f:
-                f.write(json.dumps(record) + "\n")
+            # The whole curve again rather than an appended line: a full disk leaves the previous one.
+            write_text(log, (log.read_text() if log.is_file() else "") + json.dumps(record) + "\n")
 
         def _on_training_end(self) -> None:
             self.bar.close()
 
     started = time.time()
     warm = None
-    with _Stop() as stop:
-        if config.bc_steps and state is None:
-            teacher = _teacher(config.bc_teacher)
-            warm = behaviour_clone(model, config.bc_steps, progress=progress, teacher=teacher, stop=stop)
-            if warm is None:  # stopped while cloning: nothing learned yet that a resume could use
-                venv.close()
-                model.interrupted = stop.signal
-                return None, model
-        if warm is not None:
-            (out / "behaviour_cloning.json").write_text(json.dumps(warm, indent=1))
-            if config.checkpoint_every:  # the behaviour-cloned start, a policy of its own to compare
-                checkpoint(0)
-        elif state is not None and (out / "behaviour_cloning.json").is_file():
-            warm = json.loads((out / "behaviour_cloning.json").read_text())
-        model.learn(
-            total_timesteps=max(0, config.timesteps - done_before),
-            callback=Progress(),
-            reset_num_timesteps=state is None,
-        )
+    try:
+        with _Stop() as stop:
+            if config.bc_steps and state is None:
+                teacher = _teacher(config.bc_teacher)
+                warm = behaviour_clone(model, config.bc_steps, progress=progress, teacher=teacher, stop=stop)
+                if warm is None:  # stopped while cloning: nothing learned yet that a resume could use
+                    venv.close()
+                    model.interrupted = stop.signal
+                    return None, model
+            if warm is not None:
+                write_text(out / "behaviour_cloning.json", json.dumps(warm, indent=1))
+                if config.checkpoint_every:  # the behaviour-cloned start, a policy of its own to compare
+                    checkpoint(0)
+            elif state is not None and (out / "behaviour_cloning.json").is_file():
+                warm = json.loads((out / "behaviour_cloning.json").read_text())
+            model.learn(
+                total_timesteps=max(0, config.timesteps - done_before),
+                callback=Progress(),
+                reset_num_timesteps=state is None,
+            )
+    except BaseException:  # a file that could not be written, a failed worker: end the workers too
+        with contextlib.suppress(Exception):
+            venv.close()
+        raise
     venv.close()
     seconds = time.time() - started + (0.0 if state is None else float(_previous_seconds(out)))
     training = {
@@ -865,6 +872,24 @@ def train(
     plot_learning_curve(log, out / "learning_curve.png")
     model.interrupted = stop.signal
     return final, model
+
+
+def _curve(log: Path) -> list[dict]:
+    """The records of ``learning_curve.jsonl`` (none where there is no file)."""
+    if not log.is_file():
+        return []
+    records = []
+    for k, line in enumerate(log.read_text().splitlines(), start=1):
+        if not line.strip():
+            continue
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError as exc:
+            raise ModelFileError(f"{log}: line {k} is not JSON ({exc}); remove it to continue") from None
+        if not isinstance(record, dict):
+            raise ModelFileError(f"{log}: line {k} is not a record (a JSON object); remove it to continue")
+        records.append(record)
+    return records
 
 
 def _previous_seconds(out: Path) -> float:
@@ -1010,7 +1035,8 @@ def plot_learning_curve(log: str | Path, out: str | Path) -> Path | None:
         ax.legend(fontsize=8)
     fig.tight_layout()
     path = Path(out)
-    fig.savefig(path)
+    with replacing(path) as temporary:
+        fig.savefig(temporary)
     return path
 
 
@@ -1163,6 +1189,14 @@ def _run(config: TrainConfig, out: Path, args, resume: bool) -> int:
     except KeyboardInterrupt:  # before the run's steps began (starting the workers, the first evaluation)
         print("nbs train: interrupted before training began; nothing to continue from", file=sys.stderr)
         return 130
+    except OSError as exc:  # a file of the run that could not be written (a full disk): the last whole state stays
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(
+            f"nbs train: error: {where}{exc.strerror or exc}; the run keeps its last saved state: make room and "
+            f"continue it with nbs train --resume {out}",
+            file=sys.stderr,
+        )
+        return 1
     if model.interrupted is not None and path is None:
         print(
             f"nbs train: stopped by signal {model.interrupted} during behaviour cloning, before the run had a "
