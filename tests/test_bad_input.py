@@ -118,6 +118,11 @@ CASES = [
     ("train --n-steps 100000000 --out t", EXIT_USAGE, "--n-steps 100000000 x --envs 2 asks for rollouts of"),
     ("train --bc-steps 100000000 --out t", EXIT_USAGE, "lower --bc-steps or --envs"),
     ("train --backend ray --address nohost --out t", EXIT_USAGE, "--address 'nohost': expected HOST:PORT"),
+    # The run folder, checked before the workers start (it was once found at the first checkpoint).
+    ("train --out no/run", EXIT_USAGE, "--out no/run: its folder no does not exist"),
+    ("train --out /dev/null", EXIT_USAGE, "--out /dev/null: exists and is not a folder"),
+    ("train --out /dev/null/run", EXIT_USAGE, "--out /dev/null/run: /dev/null is not a folder"),
+    ("train --out /proc/run", EXIT_USAGE, "--out /proc/run: cannot make a file in /proc"),
 ]
 
 

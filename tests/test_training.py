@@ -262,23 +262,26 @@ def test_a_signal_stops_a_run_with_its_state_saved(tmp_path):
     pytest.importorskip("sb3_contrib")
     out = tmp_path / "run"
     p = _cli(
-        "--out", str(out), "--timesteps", "4000", "--envs", "1", "--n-steps", "8", "--rooms", "1-1",
-        "--completion", "policy", "--checkpoint-every", "8", "--quiet",
+        "--out", str(out), "--timesteps", "4000", "--envs", "2", "--n-steps", "8", "--rooms", "1-1",
+        "--completion", "policy", "--checkpoint-every", "16", "--quiet", start_new_session=True,
     )  # fmt: skip
     deadline = time.time() + 300
-    while not (out / "checkpoint_8" / "training_state.json").is_file():
+    while not (out / "checkpoint_16" / "training_state.json").is_file():
         assert p.poll() is None and time.time() < deadline, p.stderr.read() if p.poll() is not None else "timeout"
         time.sleep(0.5)
-    p.send_signal(signal.SIGTERM)
+    # To the whole process group, as `timeout`, a batch system or a container's stop sends it: the
+    # rollout workers ignore it and the learner saves the run (workers that died of it once left the
+    # learner a broken pipe).
+    os.killpg(p.pid, signal.SIGTERM)
     _, err = p.communicate(timeout=300)
     assert p.returncode == 143, err
     assert "--resume" in err and "Traceback" not in err
     done = json.loads((out / "training_state.json").read_text())["timesteps"]
     assert 8 <= done < 4000
-    p = _cli("--resume", str(out), "--timesteps", str(done + 8), "--quiet")
+    p = _cli("--resume", str(out), "--timesteps", str(done + 16), "--quiet")  # one rollout of 2 × 8
     _, err = p.communicate(timeout=300)
     assert p.returncode == 0, err
-    assert json.loads((out / "training_state.json").read_text())["timesteps"] == done + 8
+    assert json.loads((out / "training_state.json").read_text())["timesteps"] == done + 16
 
 
 # ---------------------------------------------------------------------- Ray

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -17,7 +16,6 @@ __all__ = [
     "adopt_requirements",
     "config_from_arguments",
     "integer_from",
-    "output_folder_problem",
     "parse_range",
     "scene_option_error",
     "scene_options",
@@ -62,27 +60,6 @@ def parse_range(text: str, most: int = MAX_RUNS) -> tuple[int, int]:
     if b - a + 1 > most:
         raise ValueError(f"{text!r} spans {b - a + 1:,} values, at most {most:,}")
     return a, b
-
-
-def output_folder_problem(path: str | Path) -> str | None:
-    """Why no report could be written into the folder ``path`` (None when it can), found before any
-    work starts and without creating it: it exists and is no folder, or the nearest folder that
-    exists (itself, or the one it would be made in) takes no file. A file is really written there and
-    removed: permission bits say nothing for root or on read-only mounts."""
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        return "exists and is not a folder"
-    here = path
-    while not here.exists():
-        here = here.parent
-    if not here.is_dir():
-        return f"cannot create it: {here} is not a folder"
-    try:
-        with tempfile.TemporaryFile(dir=here):
-            pass
-    except OSError as exc:
-        return f"cannot write in {here} ({exc.strerror or exc})"
-    return None
 
 
 # ---------------------------------------------------------------------- the robot's options

@@ -330,11 +330,14 @@ def _env_factory(run: TrainConfig):
         from stable_baselines3.common.monitor import Monitor
 
         if multiprocessing.parent_process() is not None:
-            # A worker process: Ctrl-C is the learner's to handle (it saves the run, then closes
-            # the workers), not a worker's to die of mid-step.
+            # A worker process: Ctrl-C (sent by the terminal to the whole process group) and SIGTERM
+            # (sent to the group by `timeout`, a batch system or a container's stop) are the
+            # learner's to handle: it saves the run, then closes the workers. A worker that died of
+            # them mid-step would leave the learner a broken pipe instead of a saved run.
             import signal
 
-            signal.signal(signal.SIGINT, signal.SIG_IGN)
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(sig, signal.SIG_IGN)
         config = run.env_config()
         # Monitor puts each episode's return in info["episode"], for the learning-curve log.
         env = gym.make("nbs_env:nbs_env/NBS-Fast-v0", config=config, max_episode_steps=run.max_episode_steps)
@@ -666,32 +669,6 @@ def load_model(checkpoint: str | Path, env=None, device: str = "cpu"):
     return model
 
 
-class _Stop:
-    """SIGINT and SIGTERM during training ask the run to stop at its next step, with its state saved."""
-
-    def __init__(self) -> None:
-        self.signal: int | None = None
-        self._previous: dict[int, Any] = {}
-
-    def __enter__(self) -> _Stop:
-        import signal
-        import threading
-
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                self._previous[sig] = signal.signal(sig, self._handle)
-        return self
-
-    def _handle(self, sig, frame) -> None:
-        self.signal = sig
-
-    def __exit__(self, *exc) -> None:
-        import signal
-
-        for sig, handler in self._previous.items():
-            signal.signal(sig, handler)
-
-
 def train(
     config: TrainConfig,
     out: str | Path,
@@ -737,6 +714,7 @@ def train(
     from tqdm import tqdm
 
     from policies import GreedyPolicy
+    from train.stopping import StopRequest
 
     if backend not in ("local", "ray"):
         raise ConfigError(f"backend must be 'local' or 'ray', got {backend!r}")
@@ -833,7 +811,7 @@ def train(
     started = time.time()
     warm = None
     try:
-        with _Stop() as stop:
+        with StopRequest() as stop:
             if config.bc_steps and state is None:
                 teacher = _teacher(config.bc_teacher)
                 warm = behaviour_clone(model, config.bc_steps, progress=progress, teacher=teacher, stop=stop)
@@ -996,10 +974,14 @@ def behaviour_clone(
             optimiser.step()
             losses.append(loss.item())
     policy.set_training_mode(False)
-    with torch.no_grad():
-        tensors, _ = policy.obs_to_tensor(all_obs)
-        chosen = policy.get_distribution(tensors, action_masks=all_masks).get_actions(deterministic=True)
-    agreement = float((chosen.cpu().numpy() == all_actions).mean())
+    chosen = []
+    with torch.no_grad():  # in minibatches: the encoder's activations for every sample at once grow with bc_steps
+        for start in range(0, n, batch_size):
+            part = slice(start, start + batch_size)
+            tensors, _ = policy.obs_to_tensor({k: v[part] for k, v in all_obs.items()})
+            dist = policy.get_distribution(tensors, action_masks=all_masks[part])
+            chosen.append(dist.get_actions(deterministic=True).cpu().numpy())
+    agreement = float((np.concatenate(chosen) == all_actions).mean())
     return {
         "samples": n,
         "loss_first": losses[0],
@@ -1049,6 +1031,7 @@ def _has_tensorboard() -> bool:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from train.outputs import output_path
     from train.ray_connect import ADDRESS_HELP
 
     p = argparse.ArgumentParser(prog="nbs train", description="Train a masked PPO agent on generated storeys.")
@@ -1080,7 +1063,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-episode-steps", type=int, default=40, help="decisions per episode at the most")
     p.add_argument("--cell-size", default="2.0-3.6", help="range of the generator's cell edge in metres, e.g. 2.0-6.0")
     p.add_argument("--init", default="", help="checkpoint to start the network from (default: random weights)")
-    p.add_argument("--out", type=Path, help="the run folder (required unless --resume)")
+    p.add_argument("--out", type=output_path, help="the run folder (required unless --resume)")
     p.add_argument(
         "--resume",
         type=Path,
@@ -1149,14 +1132,30 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"nbs train: error: {exc}", file=sys.stderr)
         return 2
-    if args.out.exists() and any(args.out.glob("**/training_state.json")):
+    if args.out.is_dir() and any(args.out.glob("**/training_state.json")):
         print(
             f"nbs train: error: --out {args.out} holds a run already; continue it with --resume {args.out}, "
             "or name another folder",
             file=sys.stderr,
         )
         return 2
+    problem = _output_problem("--out", args.out)
+    if problem is not None:
+        print(f"nbs train: error: {problem}", file=sys.stderr)
+        return 2
     return _run(config, args.out, args, resume=False)
+
+
+def _output_problem(flag: str, folder: Path) -> str | None:
+    """Why the run folder cannot be written (:mod:`train.outputs`), found before the run starts: a run
+    of hours that finds it at its first checkpoint would lose them. None when it can."""
+    from train.outputs import Output, OutputError, check_outputs
+
+    try:
+        check_outputs([Output(flag, folder, "folder")])
+    except OutputError as exc:
+        return str(exc)
+    return None
 
 
 def _resume(args) -> int:
@@ -1167,6 +1166,10 @@ def _resume(args) -> int:
         config = resume_config(args.resume, args.timesteps)
     except ModelFileError as exc:
         print(f"nbs train: error: --resume: {exc}", file=sys.stderr)
+        return 2
+    problem = _output_problem("--resume", args.resume)
+    if problem is not None:  # a run folder that has become read-only since
+        print(f"nbs train: error: {problem}", file=sys.stderr)
         return 2
     if args.envs != build_parser().get_default("envs"):
         config = dataclasses.replace(config, envs=args.envs)
@@ -1186,9 +1189,21 @@ def _run(config: TrainConfig, out: Path, args, resume: bool) -> int:
     except ConfigError as exc:
         print(f"nbs train: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:  # before the run's steps began (starting the workers, the first evaluation)
-        print("nbs train: interrupted before training began; nothing to continue from", file=sys.stderr)
+    except KeyboardInterrupt:  # before the run's steps began, or a second signal that would not wait
+        try:
+            latest_state(out)
+            kept = f"the run keeps its last saved state: continue it with nbs train --resume {out}"
+        except ModelFileError:
+            kept = "nothing was saved to continue from"
+        print(f"nbs train: interrupted; {kept}", file=sys.stderr)
         return 130
+    except (EOFError, BrokenPipeError, ConnectionResetError) as exc:  # a rollout worker that ended
+        print(
+            f"nbs train: error: a rollout worker process ended ({type(exc).__name__}); the run keeps its last "
+            f"saved state: continue it with nbs train --resume {out}",
+            file=sys.stderr,
+        )
+        return 1
     except OSError as exc:  # a file of the run that could not be written (a full disk): the last whole state stays
         where = f"{exc.filename}: " if exc.filename else ""
         print(
