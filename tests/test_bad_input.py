@@ -263,6 +263,36 @@ def test_compare_refuses_an_earlier_comparison_without_resume_or_force(tmp_path,
             main([*command.split(), flag])
 
 
+@pytest.mark.parametrize(("name", "make"), [("runs", "file"), ("oracle.json", "folder"), ("table.md", "folder")])
+def test_compare_refuses_a_folder_whose_parts_are_of_the_wrong_kind_before_running(
+    tmp_path, monkeypatch, capsys, name, make
+):
+    """``runs`` as a file or ``oracle.json`` as a folder were found when the first run was recorded."""
+    import train.compare
+
+    monkeypatch.setattr(train.compare, "run_grid", lambda *a, **k: pytest.fail("the grid started"))
+    out = tmp_path / "grid"
+    out.mkdir()
+    (out / name).mkdir() if make == "folder" else (out / name).write_text("")
+    code, err = run_cli(f"compare --scenes l_room --policies greedy --out {out} --resume --quiet", capsys)
+    what = "is not a folder" if make == "file" else "is a folder"
+    assert (code, err) == (
+        EXIT_USAGE,
+        f"nbs compare: error: --out {out}: {out / name} {what}; move it away or choose another --out\n",
+    )
+
+
+def test_compare_with_a_run_record_turned_folder_says_so_in_one_line(tmp_path, capsys):
+    out = tmp_path / "grid"
+    command = f"compare --scenes office --policies random --preset fast --max-scans 2 --out {out} --quiet"
+    assert run_cli(command, capsys)[0] == 0
+    record = out / "runs" / "office" / "random" / "seed0" / "run.json"
+    record.unlink()
+    record.mkdir()
+    code, err = run_cli(command + " --resume", capsys)
+    assert code == EXIT_SCENE_ERROR and err.strip().splitlines() == [f"nbs compare: error: {record}: Is a directory"]
+
+
 def test_compare_writes_each_run_as_it_finishes_and_keeps_them_when_the_summary_fails(tmp_path, monkeypatch, capsys):
     import train.compare
 

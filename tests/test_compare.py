@@ -199,6 +199,39 @@ def test_resume_reuses_finished_runs_and_reruns_the_rest(tiny, monkeypatch):
     assert compare.load_finished(resumed, grid(**{**TINY, "preset": "default"}))["oracles"] == {}
 
 
+@pytest.mark.parametrize(
+    ("damage", "runs", "oracles"),
+    [
+        ("metrics {}", 5, 1),  # once: every --resume failed the same way on the table's KeyError
+        ("metrics []", 5, 1),
+        ("oracle null", 6, 0),  # once: a TypeError when the next oracle was recorded
+        ("oracle curve x", 6, 0),
+    ],
+)
+def test_a_damaged_record_is_run_again_not_reused(tiny, damage, runs, oracles):
+    import shutil
+
+    import train.compare as compare
+
+    specs, _, _, _, out = tiny
+    damaged = out.parent / f"damaged-{damage.replace(' ', '-')}"
+    shutil.copytree(out, damaged)
+    run = damaged / "runs" / "l_room" / "random" / "seed1"
+    if damage.startswith("metrics"):
+        (run / "metrics.json").write_text(damage.split(" ", 1)[1])
+    elif damage == "oracle null":
+        (damaged / "oracle.json").write_text("null")
+    else:
+        stored = json.loads((damaged / "oracle.json").read_text())
+        stored["l_room"]["coverage_pct"] = "x"
+        (damaged / "oracle.json").write_text(json.dumps(stored))
+    finished = compare.load_finished(damaged, specs)
+    assert (len(finished["runs"]), len(finished["oracles"])) == (runs, oracles)
+    # Recording an oracle over a damaged oracle.json starts it afresh rather than failing.
+    compare.write_record(damaged, "oracle", {"scene": "l_room", "ok": False})
+    assert json.loads((damaged / "oracle.json").read_text())["l_room"]["ok"] is False
+
+
 def test_the_calibration_raises_epsilon_until_the_rule_ends_the_share_of_rooms():
     """The knee (most ε losing at most the allowed points) is kept unless the rule would then end
     fewer than the required share of rooms; then ε rises to the smallest that ends that share."""

@@ -897,6 +897,13 @@ def check_out_dir(out: str | Path, *, keep: bool = False) -> Path:
         raise CompareError(str(exc)) from None
     except OSError as exc:
         raise CompareError(f"--out {out}: cannot create it ({exc.strerror or exc})") from None
+    # What the grid writes at the top of the folder must be of its kind: found after the first run,
+    # a file named runs would cost that run.
+    for name, folder in (("runs", True), ("oracle.json", False), ("table.md", False), ("table.csv", False)):
+        path = out / name
+        if path.exists() and path.is_dir() != folder:
+            what = "is not a folder" if folder else "is a folder"
+            raise CompareError(f"--out {out}: {path} {what}; move it away or choose another --out")
     return out
 
 
@@ -913,6 +920,8 @@ def write_record(out: str | Path, kind: str, record: dict[str, Any]) -> None:
         try:
             stored = json.loads(path.read_text())
         except (OSError, ValueError):
+            stored = {}
+        if not isinstance(stored, dict):  # a file damaged or edited into something else: start it afresh
             stored = {}
         stored[record["scene"]] = record
         write_text(path, json.dumps(stored, indent=1))
@@ -964,9 +973,11 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
         try:
             record = json.loads((folder / "run.json").read_text())
             if record.get("ok") and record.get("spec") == json_form(asdict(spec)):
-                runs[spec.key] = {**record, "metrics": json.loads((folder / "metrics.json").read_text())}
-        except (OSError, ValueError, TypeError, AttributeError):
-            continue  # not there, unreadable or malformed: run it again
+                finished = {**record, "metrics": json.loads((folder / "metrics.json").read_text())}
+                summarise([finished], {})  # figures the table can be made of (a `{}` once failed every resume)
+                runs[spec.key] = finished
+        except Exception:  # not there, unreadable, or figures the table cannot use: run it again
+            continue
     oracles: dict[str, Any] = {}
     settings = [{"preset": s.preset, "overrides": json_form(s.overrides)} for s in specs]
     try:
@@ -978,9 +989,21 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
             isinstance(plan, dict)
             and plan.get("ok")
             and {"preset": plan.get("preset"), "overrides": plan.get("overrides")} in settings
+            and _oracle_usable(plan)
         ):
             oracles[scene] = plan
     return {"runs": runs, "oracles": oracles}
+
+
+def _oracle_usable(plan: dict[str, Any]) -> bool:
+    """An oracle record holds what the table reads of it: its best coverage, its curve, its rooms'."""
+    try:
+        best = float(plan["max_coverage_pct"])
+        curve = np.asarray(plan["coverage_pct"], dtype=float)
+        rooms = {str(k): float(v) for k, v in plan.get("room_max_pct", {}).items()}
+    except (KeyError, TypeError, ValueError, AttributeError):
+        return False
+    return curve.ndim == 1 and bool(np.isfinite(best)) and all(np.isfinite(v) for v in rooms.values())
 
 
 def _refuse_repeats(flag: str, values: Sequence[Any]) -> None:
