@@ -79,6 +79,13 @@ _RELATIVE = (int(CandidateColumn.PREDICTED_GAIN), int(CandidateColumn.PATH_LENGT
 BUNDLED = {"reference": Path(__file__).parent / "data" / "ppo_reference"}
 
 
+def _recorded(node: Any, key: str) -> dict[str, Any]:
+    """``node[key]`` where both are JSON objects, else ``{}``: what a checkpoint's description records
+    of its training is read, never trusted to be there or of its type."""
+    value = node.get(key) if isinstance(node, dict) else None
+    return value if isinstance(value, dict) else {}
+
+
 def trained_rules(document: dict[str, Any]) -> dict[str, Any]:
     """The room rules a checkpoint's network was trained with, as dotted configuration names.
 
@@ -95,8 +102,8 @@ def trained_rules(document: dict[str, Any]) -> dict[str, Any]:
         ``{"rooms.wall_search.scans": N}`` from a checkpoint that recorded only ``--wall-search``;
         empty when it records neither (checkpoints of older versions written during a run).
     """
-    training = document.get("training") if isinstance(document.get("training"), dict) else {}
-    rooms = (training.get("config") or {}).get("rooms") if isinstance(training.get("config"), dict) else None
+    training = _recorded(document, "training")
+    rooms = _recorded(training, "config").get("rooms")
     if isinstance(rooms, dict):
         out: dict[str, Any] = {}
 
@@ -138,8 +145,7 @@ def trained_inputs(document: dict[str, Any]) -> dict[str, Any]:
         ``{"observation.cell": 0.2, ...}`` for those of :data:`INPUT_FIELDS` that
         ``training.config`` records as numbers; empty for a checkpoint that records no configuration.
     """
-    training = document.get("training") if isinstance(document.get("training"), dict) else {}
-    config = training.get("config") if isinstance(training.get("config"), dict) else {}
+    config = _recorded(_recorded(document, "training"), "config")
     out: dict[str, Any] = {}
     for path in INPUT_FIELDS:
         node: Any = config
