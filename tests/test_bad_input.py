@@ -78,6 +78,7 @@ CASES = [
     ("compare --scenes generated:5-2 --policies greedy --out c", EXIT_USAGE, "generated:A-B"),
     # A range is bounded before its seeds are listed: this one was a MemoryError.
     ("compare --scenes generated:0-100000000000 --policies greedy --out c", EXIT_USAGE, "at most 100,000"),
+    ("compare --scenes office --policies greedy --jobs 100000 --out c", EXIT_USAGE, "--jobs 100000: this machine has"),
     ("compare --scenes office --policies information_gain: --out c", EXIT_USAGE, "the option after the colon"),
     ("compare --scenes office --policies nope --out c", EXIT_USAGE, "unknown policy"),
     ("compare --scenes office --policies greedy --storey 0 --out c", EXIT_USAGE, "--storey applies to .ifc files"),

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import re
 import signal
 import sys
@@ -200,7 +201,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     compare.add_argument("--seeds", default="0", help="comma-separated seeds (default 0)")
     compare.add_argument("--out", type=output_path, required=True, help="output folder")
-    compare.add_argument("--jobs", type=_positive_int, default=1, help="worker processes (default 1)")
+    compare.add_argument(
+        "--jobs", type=_positive_int, default=1, help="worker processes, at most twice the cores here (default 1)"
+    )
     compare.add_argument("--backend", choices=("local", "ray"), default="local", help="local processes or Ray")
     compare.add_argument("--address", default=None, help="Ray cluster address (default: start a local instance)")
     compare.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -248,6 +251,17 @@ def run_compare(args: argparse.Namespace) -> int:
         print(f"nbs compare: error: {message}", file=sys.stderr)
         return code
 
+    cores = os.cpu_count() or 1
+    if args.jobs > 2 * cores and (args.backend == "local" or args.address is None):
+        # Each worker holds a storey, its maps and a scanner's rays (about 1 GB): workers beyond the
+        # cores only share them, and a hundred of them would exhaust the memory. Twice the cores
+        # leaves room for a machine whose count is read low (a container's).
+        where = "local workers" if args.backend == "local" else "workers of a Ray instance started here"
+        return error(
+            f"--jobs {args.jobs}: this machine has {cores} cores, and {where} beyond them only share them; "
+            f"pass at most {2 * cores}, or --backend ray --address for a cluster",
+            EXIT_USAGE,
+        )
     try:
         preset, overrides = config_from_arguments(args, "default", max_scans=SCAN_BUDGET)
         specs = grid(args.scenes, args.policies, args.seeds, preset, overrides)
