@@ -134,7 +134,7 @@ def test_a_resumed_run_continues_with_its_optimiser(tmp_path):
 
 def test_a_resumed_run_extends_its_learning_curve(tmp_path):
     """The curve of a resumed run goes on from the state's timesteps: the clone's record once, at 0,
-    and the greedy's figures the curve already holds, not evaluated again."""
+    and the greedy's and the teacher's figures the curve already holds, not evaluated again."""
     pytest.importorskip("sb3_contrib")
     from train.ppo import resume_config, train
 
@@ -145,6 +145,9 @@ def test_a_resumed_run_extends_its_learning_curve(tmp_path):
     curve = [json.loads(line) for line in (out / "learning_curve.jsonl").read_text().splitlines()]
     assert [r["timesteps"] for r in curve] == [0, 8, 16]
     assert all(r["greedy"] == curve[0]["greedy"] for r in curve)
+    # The teacher's figures on the same storeys, measured once, are the yardstick of every record.
+    assert set(curve[0]["teacher"]) == {"scans", "structure_sensed_pct", "path_length_m"}
+    assert all(r["teacher"] == curve[0]["teacher"] for r in curve)
 
 
 def test_a_modified_state_is_refused(tmp_path):

@@ -434,7 +434,9 @@ def _layout(model) -> str:
     return "xyz" if shape == (64, 64, 16) else "zxy"
 
 
-def evaluate(policy_fn, storeys: list[int], max_episode_steps: int, config: EnvConfig) -> dict[str, float]:
+def evaluate(
+    policy_fn, storeys: list[int], max_episode_steps: int, config: EnvConfig, room_rule: float | None = None
+) -> dict[str, float]:
     """Mean scans, SE % and path of a policy over held-out generated storeys.
 
     Parameters
@@ -447,6 +449,10 @@ def evaluate(policy_fn, storeys: list[int], max_episode_steps: int, config: EnvC
         Decisions per episode at the most, and its scan budget.
     config : EnvConfig
         The envs' configuration (:meth:`TrainConfig.env_config`); its scene and budget are replaced.
+    room_rule : float, optional
+        Where the env has a "room done" action: the completion fraction at which
+        ``info["gain_rule_done"]`` says a room is done (a greedy teacher's ``stop``, as behaviour
+        cloning gives it); None: the robot's own.
     """
     from nbs_env.config import make_config
     from nbs_env.env import NBSEnv
@@ -458,6 +464,8 @@ def evaluate(policy_fn, storeys: list[int], max_episode_steps: int, config: EnvC
         # At most max_episode_steps decisions, as training's TimeLimit, and as many scans: with the
         # gain rule a step takes at least one scan, with "room done" steps the decisions bind first.
         for _ in range(max_episode_steps):
+            if room_rule is not None and "gain_rule_done" in info:
+                info = {**info, "gain_rule_done": env.gain_rule_done(room_rule)}
             obs, _, terminated, truncated, info = env.step(policy_fn(obs, info))
             if terminated or truncated:
                 break
@@ -750,13 +758,22 @@ def train(
     if state is None:
         write_text(log, "")
     greedy = GreedyPolicy()
-    baseline = None
+    baseline = taught = None
     if config.eval_every:
-        # A resumed run's greedy is the one its curve already holds: the same storeys, the same robot.
+        # A resumed run's greedy and teacher are the ones its curve already holds: the same storeys,
+        # the same robot.
         earlier = _curve(log)
         baseline = earlier[-1]["greedy"] if earlier and earlier[-1].get("greedy") else None
+        taught = earlier[-1].get("teacher") if earlier else None
         if baseline is None:
             baseline = evaluate(greedy.act, held_out, config.max_episode_steps, config.evaluation_config())
+        if taught is None and config.bc_steps:
+            # The teacher on the same storeys: what a policy that learned beyond its clone must beat at
+            # equal coverage (its stop is where it declares rooms done, as in behaviour cloning).
+            tutor = _teacher(config.bc_teacher)
+            taught = evaluate(
+                tutor.act, held_out, config.max_episode_steps, config.evaluation_config(), room_rule=tutor.stop
+            )
 
     def checkpoint(n: int) -> None:
         folder = out / f"checkpoint_{n}"
@@ -800,6 +817,8 @@ def train(
 
             learned = evaluate(act, held_out, config.max_episode_steps, config.evaluation_config())
             record = {"timesteps": n, "learned": learned, "greedy": baseline}
+            if taught is not None:
+                record["teacher"] = taught
             record["train_return"] = float(np.mean(self.episodes[-20:])) if self.episodes else None
             record["seconds"] = time.time() - started
             # The whole curve again rather than an appended line: a full disk leaves the previous one.
@@ -1011,6 +1030,8 @@ def plot_learning_curve(log: str | Path, out: str | Path) -> Path | None:
         ax.plot(steps, [r["learned"][key] for r in records], "o-", label="learned (validation storeys)")
         if records[0].get("greedy"):
             ax.axhline(records[0]["greedy"][key], color="k", ls="--", label="greedy")
+        if records[-1].get("teacher"):
+            ax.axhline(records[-1]["teacher"][key], color="tab:orange", ls=":", label="teacher")
         ax.set_xlabel("PPO timesteps (0: after behaviour cloning)" if steps[0] == 0 else "PPO timesteps")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
