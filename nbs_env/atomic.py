@@ -95,7 +95,10 @@ def replacing(path: str | os.PathLike[str], writer_errors: tuple[type[Exception]
         Whatever the block raises (a ``KeyboardInterrupt`` included), the temporary file is removed
         and ``path`` left as it was.
     """
-    path = Path(path)
+    # Through a link to its file: renamed onto the link itself, the new file would replace the link.
+    path = Path(os.path.realpath(path))
+    if path.exists() and not path.is_file():
+        raise OSError(errno.EINVAL, "not a regular file (a device, a fifo or a socket): nothing is written", str(path))
     temporary = _temporary(path)
     try:
         yield temporary

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -434,14 +435,20 @@ def load_checkpoint(path: str | Path):
         if not isinstance(network, dict):
             raise TypeError(f"network must be a JSON object of NetworkConfig's fields, got {_json_kind(network)}")
         config = NetworkConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in network.items()})
-        weights = path.parent / str(document["weights"])
+        name = document["weights"]
+        # A name in the checkpoint's own folder: a path would let a description handed to a user
+        # make the tool read any file of theirs (checksummed, then refused, but read).
+        if not isinstance(name, str) or Path(name).name != name or name in ("", ".", ".."):
+            raise TypeError(f"weights must name a file beside {path.name}, got {name!r}")
+        weights = path.parent / name
         layout = str(document.get("input_layout", "xyz"))
     except (KeyError, TypeError, ConfigError) as exc:
         raise ModelFileError(f"{path}: malformed checkpoint description ({exc})") from None
     if layout not in ("xyz", "zxy"):
         raise ModelFileError(f"{path}: input_layout must be 'xyz' or 'zxy', got {layout!r}")
     if not weights.is_file():
-        raise ModelFileError(f"{weights}: weights file missing")
+        missing = not os.path.lexists(weights)
+        raise ModelFileError(f"{weights}: {'weights file missing' if missing else 'not a regular file'}")
     if _sha256(weights) != document.get("sha256"):
         raise ModelFileError(f"{weights}: checksum does not match {path.name} (modified or truncated)")
     try:

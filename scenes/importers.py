@@ -442,9 +442,16 @@ def _read_ply(source: str, path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarr
     index_prop = next((p for p in props if p in ("vertex_indices", "vertex_index")), None)
     if index_prop is None:
         raise InvalidMeshError(source, "the PLY face element has no vertex_indices list")
-    polys = _ply_polygons(data[index_prop], n_raw)
-    label_raw = np.asarray(data["label"]).reshape(-1)
-    room_raw = np.asarray(data["room"]).reshape(-1) if "room" in props else np.full(n_raw, -1)
+    try:
+        polys = _ply_polygons(data[index_prop], n_raw)
+        label_raw = np.asarray(data["label"]).reshape(-1)
+        room_raw = np.asarray(data["room"]).reshape(-1) if "room" in props else np.full(n_raw, -1)
+    except (KeyError, IndexError, ValueError) as exc:
+        # The header declares the property, the body does not hold it where it should (an ASCII face
+        # line with fewer or more values than the header lists).
+        raise InvalidMeshError(
+            source, f"the face element's values do not match its header's properties ({type(exc).__name__}: {exc})"
+        ) from None
     if not np.all(np.isin(label_raw, [c.value for c in SurfaceClass])):
         bad = np.unique(label_raw[~np.isin(label_raw, [c.value for c in SurfaceClass])])
         raise InvalidMeshError(

@@ -42,7 +42,7 @@ def read_json(text: str, *, max_depth: int = MAX_JSON_DEPTH, **kwargs: Any) -> A
     JSONNestingError
         The document is nested deeper than ``max_depth`` (a ``json.JSONDecodeError``).
     json.JSONDecodeError
-        Invalid JSON, as ``json.loads`` raises it.
+        Invalid JSON, as ``json.loads`` raises it, or an integer too long to convert.
     """
     # Strings are blanked out keeping their length, so positions stay those of the text.
     masked = _STRING.sub(lambda m: " " * len(m.group()), text)
@@ -53,4 +53,11 @@ def read_json(text: str, *, max_depth: int = MAX_JSON_DEPTH, **kwargs: Any) -> A
         deeper = np.flatnonzero(depth > max_depth)
         if len(deeper):
             raise JSONNestingError(f"nested deeper than {max_depth} levels", text, int(brackets[deeper[0]]))
-    return json.loads(text, **kwargs)
+    try:
+        return json.loads(text, **kwargs)
+    except ValueError as exc:
+        if isinstance(exc, json.JSONDecodeError):
+            raise
+        # Python refuses to convert an integer of more than 4,300 digits (a ValueError that is no
+        # JSONDecodeError): a number no honest document holds, reported as the bad JSON it is.
+        raise json.JSONDecodeError("a number of more than 4,300 digits", text, 0) from None

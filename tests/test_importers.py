@@ -357,6 +357,16 @@ def test_ply_label_outside_surface_classes(tmp_path):
         load_mesh_scene(p)
 
 
+def test_ascii_ply_whose_face_lines_do_not_match_the_header(tmp_path):
+    """The label on the next line: trimesh reads no 'label' (once a KeyError from inside the loader)."""
+    p = tmp_path / "split.ply"
+    header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+    faces = "element face 1\nproperty list uchar int vertex_indices\nproperty uchar label\nend_header\n"
+    p.write_text(header + faces + "0 0 0\n1 0 0\n0 1 0\n3 0 1 99\n0\n")
+    with pytest.raises(InvalidMeshError, match=r"split\.ply.*do not match its header's properties"):
+        load_mesh_scene(p)
+
+
 # ------------------------------------------------------------------------------------ round trip
 @pytest.mark.parametrize("ext", [".obj", ".glb", ".ply"])
 def test_round_trip(tmp_path, ext):

@@ -322,6 +322,24 @@ def test_a_checkpoint_whose_network_is_not_an_object_is_refused(tmp_path, value,
         LearnedPolicy(path)
 
 
+@pytest.mark.parametrize("name", ["/etc/passwd", "../policy.pt", "sub/policy.pt", "", ".."])
+def test_a_checkpoint_reads_weights_only_from_its_own_folder(tmp_path, name):
+    """A description that names a path (``/etc/passwd``) once made the tool read any file of the user's."""
+    path = _saved(tmp_path)
+    document = json.loads(path.read_text())
+    path.write_text(json.dumps({**document, "weights": name}))
+    with pytest.raises(ModelFileError, match=r"weights must name a file beside policy\.json"):
+        LearnedPolicy(path)
+
+
+def test_weights_that_are_no_regular_file_are_called_so(tmp_path):
+    path = _saved(tmp_path)
+    (path.parent / "policy.pt").unlink()
+    (path.parent / "policy.pt").mkdir()
+    with pytest.raises(ModelFileError, match=r"policy\.pt: not a regular file"):
+        LearnedPolicy(path)
+
+
 def test_a_checkpoint_made_for_another_env_is_refused_when_given_one(tmp_path, capsys):
     """A network reads one observation window of cells of the size it was trained with, one candidate
     count and one number of actions: a run that differs is refused when the policy is given

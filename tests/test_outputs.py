@@ -152,6 +152,22 @@ def _usage(free: int):
     return namedtuple("usage", "total used free")(10**12, 10**12 - free, free)
 
 
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs fifos")
+def test_an_output_that_is_a_fifo_is_refused_and_a_link_is_written_through(tmp_path, capsys):
+    """Renamed onto, a device (``/dev/full``), a fifo or a link was replaced by a plain file."""
+    fifo = tmp_path / "plan.json"
+    os.mkfifo(fifo)
+    code = main(["scenes", "generate", "--seed", "1", "--rooms", "2", "--out", str(fifo)])
+    assert code == 2 and "is not a regular file" in capsys.readouterr().err
+    assert fifo.is_fifo()
+    with pytest.raises(OSError, match="not a regular file"):
+        write_text(fifo, "{}")
+    target, link = tmp_path / "target.json", tmp_path / "link.json"
+    link.symlink_to(target)
+    assert main(["scenes", "generate", "--seed", "1", "--rooms", "2", "--out", str(link)]) == 0
+    assert link.is_symlink() and json.loads(target.read_text())["rooms"]
+
+
 def test_nbs_scan_on_a_full_disk_keeps_the_previous_report_and_names_the_file(tmp_path, monkeypatch, capsys):
     out = tmp_path / "report"
     out.mkdir()

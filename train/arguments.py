@@ -276,6 +276,9 @@ def config_from_arguments(
         given["scene_options"] = options
     paths = config_paths()
     for key, value in args.set:
+        root = key.split(".", 1)[0]
+        if root in COMMAND_FIELDS:
+            raise ConfigError(f"--set {key}: {COMMAND_FIELDS[root]}")
         if key not in paths:
             raise ConfigError(f"--set {key}: the configuration has no such field (dotted names, e.g. robot.voxel_size)")
         clash = [p for p in given if p == key or p.startswith(key + ".") or key.startswith(p + ".")]
@@ -291,6 +294,15 @@ def config_from_arguments(
             "coverage: use --preset fast, the same robot with the meter"
         )
     return preset, given
+
+
+#: Configuration fields a command sets itself, with what to use instead of ``--set``.
+COMMAND_FIELDS = {
+    "scene": "the command's --scene (nbs compare: --scenes) names the building",
+    "scene_options": "--storey, --ifc-doors, --y-up and --units say how the building file is read",
+    "preset": "use --preset",
+    "keep_scans": "the command decides whether the scans are kept (nbs scan keeps them for scans.e57)",
+}
 
 
 def adopt_requirements(overrides: dict[str, Any], requirements: dict[str, tuple[Any, str]]) -> dict[str, Any]:

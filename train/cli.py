@@ -251,6 +251,8 @@ def run_compare(args: argparse.Namespace) -> int:
         print(f"nbs compare: error: {message}", file=sys.stderr)
         return code
 
+    if args.resume and args.force:
+        return error("--resume reuses what is in --out and --force writes over it: pass one of them", EXIT_USAGE)
     cores = os.cpu_count() or 1
     if args.jobs > 2 * cores and (args.backend == "local" or args.address is None):
         # Each worker holds a storey, its maps and a scanner's rays (about 1 GB): workers beyond the
@@ -701,6 +703,28 @@ def run_view(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """``nbs``: every command's errors end here as one line and an exit code, never a traceback:
+    Ctrl-C before a command's own handler is in place (while modules load) exits 130, and a file
+    the system refuses (a name too long, a loop of links) exits 1 naming it."""
+    from train.stopping import defer_signals, pending_signal
+
+    defer_signals()
+    try:
+        code = _main(argv)
+    except KeyboardInterrupt:
+        print("nbs: interrupted", file=sys.stderr)
+        return exit_code(pending_signal() or signal.SIGINT)
+    except OSError as exc:
+        print(f"nbs: error: {_os_error(exc)}", file=sys.stderr)
+        return EXIT_SCENE_ERROR
+    late = pending_signal()
+    if late is not None and code == 0:  # a command with no steps to stop at finished meanwhile
+        print(f"nbs: stopped by {signal.Signals(late).name}", file=sys.stderr)
+        return exit_code(late)
+    return code
+
+
+def _main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``nbs`` console script; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["train"]:
@@ -716,6 +740,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"nbs {args.command}: interrupted", file=sys.stderr)
             return exit_code(signal.SIGINT)
     if args.command == "view":
+        from train.stopping import undefer_signals
+
+        undefer_signals()  # it waits for Ctrl-C itself
         return run_view(args)
     try:
         return run(args)

@@ -100,9 +100,12 @@ def _problem(output: Output) -> str | None:
     if path.is_dir():
         example = f" (e.g. {path / output.example})" if output.example else ""
         return f"is a folder; name a file in it{example}"
+    if path.exists() and not path.is_file():
+        # Renamed over, a device (/dev/full), a fifo or a socket would be replaced by a plain file.
+        return "is not a regular file (a device, a fifo or a socket); name a file"
     if path.exists() and output.replace is not None:
         return f"exists; {output.replace}, or choose another name"
-    return _parent_problem(path)
+    return _parent_problem(path.resolve() if path.is_symlink() else path)
 
 
 def check_outputs(outputs: Iterable[Output]) -> None:
@@ -115,6 +118,9 @@ def check_outputs(outputs: Iterable[Output]) -> None:
         x does not exist"``.
     """
     for output in outputs:
-        problem = _problem(output)
+        try:
+            problem = _problem(output)
+        except OSError as exc:  # a name too long for the file system, a loop of links
+            problem = f"cannot be used ({exc.strerror or exc})"
         if problem is not None:
             raise OutputError(f"{output.flag} {output.path}: {problem}")

@@ -42,6 +42,8 @@ HELD_OUT_BASE = 10_000_000
 #: Seeds of the validation storeys the periodic evaluation plays, kept apart from the test storeys
 #: so that choosing a checkpoint by the learning curve does not peek at the test table.
 VALIDATION_BASE = 20_000_000
+#: The most validation storeys a run evaluates on (:attr:`TrainConfig.eval_storeys`).
+MAX_EVAL_STOREYS = 10_000
 
 
 def _require_rl():
@@ -157,6 +159,17 @@ class TrainConfig(Config):
             _integer(self, name, 1)
         for name in ("seed", "eval_every", "checkpoint_every", "bc_steps"):
             _integer(self, name, 0)
+        # Each validation storey is an episode per evaluation: ten thousand is days of evaluating.
+        _require(
+            self.eval_storeys <= MAX_EVAL_STOREYS,
+            f"eval_storeys must be at most {MAX_EVAL_STOREYS:,}, got {self.eval_storeys:,}",
+        )
+        # PPO normalises each minibatch's advantages by their spread: a rollout of one step has none
+        # (NaN logits after the first update).
+        _require(
+            self.n_steps * self.envs >= 2,
+            f"n_steps x envs must be at least 2 (a rollout PPO can normalise), got {self.n_steps} x {self.envs}",
+        )
         _require(
             len(self.rooms) == 2
             and all(isinstance(r, int) for r in self.rooms)

@@ -15,7 +15,15 @@ import threading
 from types import FrameType
 from typing import Any
 
-__all__ = ["STOP_SIGNALS", "StopRequest", "exit_code", "ignore_interrupts"]
+__all__ = [
+    "STOP_SIGNALS",
+    "StopRequest",
+    "defer_signals",
+    "exit_code",
+    "ignore_interrupts",
+    "pending_signal",
+    "undefer_signals",
+]
 
 #: The signals a :class:`StopRequest` catches.
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -31,6 +39,45 @@ def ignore_interrupts() -> None:
     process's to handle (it keeps the finished work, then ends the workers), not a worker's to die
     of with a traceback."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+#: A signal received while a command was still starting (:func:`defer_signals`), not yet acted on.
+_pending: int | None = None
+
+
+def _record(sig: int, frame: FrameType | None) -> None:
+    global _pending
+    if _pending is not None:  # asked twice: do not wait
+        raise KeyboardInterrupt
+    _pending = sig
+
+
+def defer_signals() -> None:
+    """From a command's first line: SIGINT and SIGTERM are recorded, not raised, until a
+    :class:`StopRequest` takes them over (it then stops the work at its first step) or the command
+    ends (:func:`pending_signal`). While a command imports its libraries a ``KeyboardInterrupt``
+    could land inside one that catches every exception around an optional import, and the signal
+    would be lost: the command then ran to its end as if never asked to stop."""
+    global _pending
+    _pending = None
+    if threading.current_thread() is threading.main_thread():
+        for sig in STOP_SIGNALS:
+            signal.signal(sig, _record)
+
+
+def undefer_signals() -> None:
+    """Python's own handling of SIGINT and SIGTERM again, for a command that waits for Ctrl-C itself
+    (``nbs view --web``); a signal recorded meanwhile is raised now as ``KeyboardInterrupt``."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if _pending is not None:
+        raise KeyboardInterrupt
+
+
+def pending_signal() -> int | None:
+    """The signal :func:`defer_signals` recorded and no :class:`StopRequest` took over, or None."""
+    return _pending
 
 
 class StopRequest:
@@ -50,9 +97,12 @@ class StopRequest:
         self._previous: dict[int, Any] = {}
 
     def __enter__(self) -> StopRequest:
+        global _pending
         if threading.current_thread() is threading.main_thread():
             for sig in STOP_SIGNALS:
                 self._previous[sig] = signal.signal(sig, self._handle)
+        if _pending is not None:  # asked while the command was starting: stop at the first step
+            self.signal, _pending = _pending, None
         return self
 
     def __exit__(self, *exc: object) -> None:
