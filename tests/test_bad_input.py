@@ -25,6 +25,9 @@ CASES = [
     ("scan --scene office --resolution inf", EXIT_USAGE, "angular_step must be a finite number"),
     ("scan --scene office --resolution 0.0001", EXIT_USAGE, "rays per scan"),
     ("scan --scene office --resolution 1e-320", EXIT_USAGE, "rays per scan"),
+    # A name longer than the file system takes (255 bytes): an OSError once escaped the checks.
+    (f"scan --scene office --out {'b' * 300}", EXIT_USAGE, "cannot be used (File name too long)"),
+    (f"scenes info {'b' * 300}.obj", EXIT_SCENE_ERROR, "File name too long"),
     ("scan --scene office --min-density 1e300", EXIT_USAGE, "min_density must be within [0, 1e8]"),
     ("scan --scene office --voxel nan", EXIT_USAGE, "voxel_size must be a finite number"),
     ("scan --scene office --voxel 1e9", EXIT_USAGE, "voxel_size must be within [0.01, 1] metres"),
