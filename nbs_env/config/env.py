@@ -14,6 +14,10 @@ from nbs_env.config.robot import RobotConfig
 from nbs_env.config.rooms import RoomRules
 from scenes.generator import GeneratorConfig
 
+#: The most cells an observation window may have (64× the default 64 × 64 × 16): each is a float per
+#: step and a network input.
+MAX_WINDOW_CELLS = 1 << 22
+
 __all__ = ["EnvConfig", "ObservationConfig", "QualityConfig", "RewardConfig"]
 
 
@@ -40,6 +44,11 @@ class ObservationConfig(Config):
         _require(
             len(self.shape) == 3 and all(isinstance(n, int) and n >= 1 for n in self.shape),
             f"shape must be three positive integers, got {self.shape}",
+        )
+        cells = int(np.prod([float(n) for n in self.shape]))
+        _require(
+            cells <= MAX_WINDOW_CELLS,
+            f"shape {tuple(self.shape)} has {cells:,} cells; at most {MAX_WINDOW_CELLS:,} (the default has 65,536)",
         )
         _finite(cell=self.cell, below_floor=self.below_floor)
         _require(self.cell > 0, f"cell must be > 0 metres, got {self.cell}")
@@ -96,7 +105,9 @@ class QualityConfig(Config):
             f"min_density must be within [0, 1e8] points per m² (1e8: a 0.1 mm spacing), got {self.min_density}",
         )
         _require(0 < self.max_incidence <= 90, f"max_incidence must be in (0, 90] degrees, got {self.max_incidence}")
-        _require(self.density_radius > 0, f"density_radius must be > 0 m, got {self.density_radius}")
+        _require(
+            0 < self.density_radius <= 1, f"density_radius must be within (0, 1] metres, got {self.density_radius}"
+        )
 
 
 @dataclass(frozen=True)
@@ -210,7 +221,15 @@ class EnvConfig(Config):
         _finite(
             coverage_spacing=self.coverage_spacing, coverage_radius=self.coverage_radius, travel_speed=self.travel_speed
         )
-        _require(self.coverage_spacing > 0 and self.coverage_radius > 0, "coverage spacing and radius must be > 0")
+        # The samples number (structural area / spacing²): below a centimetre, more than memory.
+        _require(
+            0.01 <= self.coverage_spacing <= 1,
+            f"coverage_spacing must be within [0.01, 1] metres, got {self.coverage_spacing}",
+        )
+        _require(
+            0 < self.coverage_radius <= 1, f"coverage_radius must be within (0, 1] metres, got {self.coverage_radius}"
+        )
+        _require(isinstance(self.expose_belief, bool), f"expose_belief must be a bool, got {self.expose_belief!r}")
         _require(self.travel_speed > 0, f"travel_speed must be > 0, got {self.travel_speed}")
         _require(isinstance(self.preset, str), f"preset must be a preset's name, got {self.preset!r}")
         _require(isinstance(self.coverage_meter, bool), f"coverage_meter must be a bool, got {self.coverage_meter!r}")

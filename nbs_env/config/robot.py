@@ -134,6 +134,8 @@ class ScannerConfig(Config):
             f"need -90 <= elevation_min < elevation_max <= 90, got {self.elevation_min}, {self.elevation_max}",
         )
         _require(self.min_range >= 0, f"min_range must be >= 0, got {self.min_range}")
+        # The longest-ranging terrestrial scanners reach about 6 km; beyond 10 km a figure is a typo.
+        _require(self.max_range <= 10_000, f"max_range must be at most 10,000 m, got {self.max_range}")
         _require(
             self.min_range < self.max_range,
             f"min_range ({self.min_range} m) must be below max_range ({self.max_range} m)",
@@ -154,7 +156,9 @@ class ScannerConfig(Config):
             _require(
                 self.instrument_step > 0, f"instrument_step must be > 0 degrees or None, got {self.instrument_step}"
             )
-        _require(self.setup_time >= 0, f"setup_time must be >= 0 seconds, got {self.setup_time}")
+        _require(
+            0 <= self.setup_time <= 86_400, f"setup_time must be within [0, 86,400] seconds, got {self.setup_time}"
+        )
         _require(self.points_per_second > 0, f"points_per_second must be > 0, got {self.points_per_second}")
         if self.station_time is not None:
             _finite(station_time=self.station_time)
@@ -454,12 +458,17 @@ class NavigationConfig(Config):
             self.robot_height > self.floor_clearance,
             f"robot_height ({self.robot_height} m) must exceed floor_clearance ({self.floor_clearance} m)",
         )
-        _require(self.lattice > 0, f"lattice must be > 0, got {self.lattice}")
+        # Positions on a lattice finer than 5 cm are finer than the maps they are checked on, and
+        # their count (storey area / lattice²) grows past memory.
+        _require(0.05 <= self.lattice <= 5, f"lattice must be within [0.05, 5] metres, got {self.lattice}")
         _require(
             isinstance(self.max_candidates, int) and not isinstance(self.max_candidates, bool),
             f"max_candidates must be an integer, got {self.max_candidates!r}",
         )
-        _require(self.max_candidates >= 1, f"max_candidates must be >= 1, got {self.max_candidates}")
+        _require(
+            1 <= self.max_candidates <= 100_000,
+            f"max_candidates must be within [1, 100,000], got {self.max_candidates}",
+        )
         _require(self.min_distance >= 0, f"min_distance must be >= 0, got {self.min_distance}")
         _require(isinstance(self.snap, bool), f"snap must be a bool, got {self.snap!r}")
 
@@ -552,10 +561,18 @@ class RoIConfig(Config):
         _finite_fields(self, *lengths, "band_below_ceiling", "corner_distance", "collinear_deg")
         for name in lengths:
             _require(getattr(self, name) > 0, f"{name} must be > 0 metres, got {getattr(self, name)}")
+        # Grids of the room's extent: a pixel or bin below a millimetre asks for more cells than memory.
+        _require(0.005 <= self.pixel <= 1, f"pixel must be within [0.005, 1] metres, got {self.pixel}")
+        _require(
+            0.001 <= self.histogram_bin <= 1,
+            f"histogram_bin must be within [0.001, 1] metres, got {self.histogram_bin}",
+        )
+        _require(self.max_range <= 1000, f"max_range must be at most 1,000 metres, got {self.max_range}")
         _require(self.band_below_ceiling >= 0, f"band_below_ceiling must be >= 0, got {self.band_below_ceiling}")
         _require(self.corner_distance >= 0, f"corner_distance must be >= 0, got {self.corner_distance}")
         _require(0 <= self.collinear_deg < 90, f"collinear_deg must be in [0, 90), got {self.collinear_deg}")
         _integer(self, "azimuth_bins", 4)
+        _require(self.azimuth_bins <= 36_000, f"azimuth_bins must be at most 36,000, got {self.azimuth_bins}")
 
 
 @dataclass(frozen=True)
@@ -639,7 +656,7 @@ class DoorConfig(Config):
         )
         _require(self.floor_gap >= 0, f"floor_gap must be >= 0 metres, got {self.floor_gap}")
         _require(self.behind >= 0, f"behind must be >= 0 metres, got {self.behind}")
-        _require(self.pixel > 0, f"pixel must be > 0 metres, got {self.pixel}")
+        _require(0.005 <= self.pixel <= 1, f"pixel must be within [0.005, 1] metres, got {self.pixel}")
         _integer(self, "min_behind_points", 0)
         _integer(self, "min_rising_rays", 1)
         _require(0 <= self.covered_share <= 1, f"covered_share must be in [0, 1], got {self.covered_share}")
