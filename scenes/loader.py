@@ -17,7 +17,7 @@ from scenes.floorplan import FloorPlan, extrude, load_plan
 from scenes.generator import GeneratorConfig, generate_storey
 from scenes.model import Scene
 
-__all__ = ["MESH_EXTENSIONS", "SUPPORTED_EXTENSIONS", "bundled_plan", "list_scenes", "load_source"]
+__all__ = ["MESH_EXTENSIONS", "SUPPORTED_EXTENSIONS", "bundled_plan", "check_source", "list_scenes", "load_source"]
 
 MESH_EXTENSIONS = (".obj", ".glb", ".gltf", ".ply")
 SUPPORTED_EXTENSIONS = (".json", *MESH_EXTENSIONS, ".ifc")
@@ -70,12 +70,9 @@ def load_source(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene:
     if not isinstance(spec, (str, Path)):
         raise TypeError(f"scene spec must be a str, Path or FloorPlan, got {type(spec).__name__}")
     text = str(spec)
+    check_source(text)
     if text.startswith(_GENERATED):
-        seed_text = text[len(_GENERATED) :]
-        try:
-            seed = int(seed_text)
-        except ValueError:
-            raise UnknownSceneError(text, f"the seed {seed_text!r} is not an integer (use generated:SEED)") from None
+        seed = int(text[len(_GENERATED) :])
         fields = tuple(GeneratorConfig.__dataclass_fields__)
         opts = _take(options, (*fields, "validate"), "generated storey")
         opts.pop("validate", None)  # generated storeys are always validated
@@ -90,17 +87,7 @@ def load_source(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene:
     path = Path(text)
     suffix = path.suffix.lower()
     if not suffix and "/" not in text and "\\" not in text:
-        if text in list_scenes():
-            return extrude(bundled_plan(text), source=text, **_take(options, ("validate",), "bundled scene"))
-        raise UnknownSceneError(
-            text, f"no bundled scene of that name and no such file; bundled: {', '.join(list_scenes())}"
-        )
-    if suffix not in SUPPORTED_EXTENSIONS:
-        raise UnsupportedFormatError(
-            text, f"unsupported file type {suffix or '(none)'!r}; supported: {', '.join(SUPPORTED_EXTENSIONS)}"
-        )
-    if not path.is_file():
-        raise SceneFileError(text, "no such file" if not path.exists() else "not a regular file")
+        return extrude(bundled_plan(text), source=text, **_take(options, ("validate",), "bundled scene"))
     if suffix == ".json":
         return extrude(load_plan(path), source=text, **_take(options, ("validate",), "floor-plan file"))
     if suffix in MESH_EXTENSIONS:
@@ -110,6 +97,44 @@ def load_source(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene:
     from scenes.ifc import load_ifc_scene
 
     return load_ifc_scene(path, **_take(options, ("storey", "class_map", "name", "doors"), "IFC file"))
+
+
+def check_source(text: str) -> None:
+    """Whether ``text`` names a source :func:`load_source` can try, without reading it: a
+    ``generated:SEED`` with an integer seed, a bundled name, or an existing regular file of a
+    supported type. What a command checks for every scene before any run starts.
+
+    Raises
+    ------
+    UnknownSceneError, UnsupportedFormatError, SceneFileError
+        As :func:`load_source` would, naming the source.
+    """
+    if text.startswith(_GENERATED):
+        seed_text = text[len(_GENERATED) :]
+        try:
+            int(seed_text)
+        except ValueError:
+            raise UnknownSceneError(text, f"the seed {seed_text!r} is not an integer (use generated:SEED)") from None
+        return
+    path = Path(text)
+    suffix = path.suffix.lower()
+    if not suffix and "/" not in text and "\\" not in text:
+        if text not in list_scenes():
+            raise UnknownSceneError(
+                text, f"no bundled scene of that name and no such file; bundled: {', '.join(list_scenes())}"
+            )
+        return
+    if suffix not in SUPPORTED_EXTENSIONS:
+        raise UnsupportedFormatError(
+            text, f"unsupported file type {suffix or '(none)'!r}; supported: {', '.join(SUPPORTED_EXTENSIONS)}"
+        )
+    try:
+        regular = path.is_file()
+        present = path.exists()
+    except OSError as exc:  # a name too long, a loop of links
+        raise SceneFileError(text, exc.strerror or str(exc)) from None
+    if not regular:
+        raise SceneFileError(text, "no such file" if not present else "not a regular file")
 
 
 def _take(options: dict[str, Any], allowed: tuple[str, ...], kind: str) -> dict[str, Any]:

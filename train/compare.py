@@ -995,6 +995,24 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
     return {"runs": runs, "oracles": oracles}
 
 
+def _check_scene(scene: str) -> None:
+    """CompareError unless ``scene`` names a source that can be loaded, found without loading it."""
+    from scenes import SceneError
+    from scenes.corpus import PREFIX as CORPUS_PREFIX
+    from scenes.corpus import corpus_entry
+    from scenes.loader import check_source
+
+    try:
+        if scene.startswith(CORPUS_PREFIX):
+            entry = corpus_entry(scene[len(CORPUS_PREFIX) :])
+            if entry.generated is None and entry.path() is None:
+                raise CompareError(f"{scene}: its local-only file {entry.file!r} is not here (see docs/buildings.md)")
+        else:
+            check_source(scene)
+    except SceneError as exc:
+        raise CompareError(str(exc)) from None
+
+
 def _oracle_usable(plan: dict[str, Any]) -> bool:
     """An oracle record holds what the table reads of it: its best coverage, its curve, its rooms'."""
     try:
@@ -1045,6 +1063,8 @@ def grid(
 
     skipped: list[str] = []
     scene_list = expand_scenes(scenes, skipped)
+    for scene in scene_list:  # each named source exists before any run starts (not a failed run each)
+        _check_scene(scene)
     if skipped:
         print(f"nbs compare: skipped (local-only files absent): {', '.join(skipped)}", file=sys.stderr)
     policy_list = [p.strip() for p in str(policies).split(",") if p.strip()]
