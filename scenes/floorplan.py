@@ -567,7 +567,7 @@ def extrude(plan: FloorPlan, *, source: str | None = None, validate: bool = True
         if shared.is_empty or shared.length < 1e-6 or shared.distance(Point(c)) > 1e-3:
             raise PlanGeometryError(
                 src,
-                f"door at {tuple(c)} is not on a wall shared by {d.rooms[0]!r} and {d.rooms[1]!r}",
+                f"door at {_xy(c)} is not on a wall shared by {d.rooms[0]!r} and {d.rooms[1]!r}",
                 path=f"{path}.position",
             )
         found_a = _find_edge(edges[a], c, t / 2, d.width / 2)
@@ -575,7 +575,7 @@ def extrude(plan: FloorPlan, *, source: str | None = None, validate: bool = True
         if found_a is None or found_b is None:
             raise PlanGeometryError(
                 src,
-                f"door at {tuple(c)} ({d.width} m wide) does not fit on the wall shared by "
+                f"door at {_xy(c)} ({d.width} m wide) does not fit on the wall shared by "
                 f"{d.rooms[0]!r} and {d.rooms[1]!r} (too close to a corner, or the wall is too short)",
                 path=f"{path}.position",
             )
@@ -584,7 +584,7 @@ def extrude(plan: FloorPlan, *, source: str | None = None, validate: bool = True
         if not shared.buffer(1e-4).contains(seg):
             raise PlanGeometryError(
                 src,
-                f"door at {tuple(c)} runs past the wall shared by {d.rooms[0]!r} and {d.rooms[1]!r}",
+                f"door at {_xy(c)} runs past the wall shared by {d.rooms[0]!r} and {d.rooms[1]!r}",
                 path=f"{path}.position",
             )
         openings.setdefault((a, ea.index), []).append(
@@ -632,11 +632,11 @@ def extrude(plan: FloorPlan, *, source: str | None = None, validate: bool = True
         found = _find_edge(edges[r], c, t / 2, w.width / 2)
         if found is None or centre[r].exterior.distance(Point(c)) > 1e-3:
             raise PlanGeometryError(
-                src, f"window at {tuple(c)} does not fit on a wall of room {w.room!r}", path=f"{path}.position"
+                src, f"window at {_xy(c)} does not fit on a wall of room {w.room!r}", path=f"{path}.position"
             )
         if any(j != r and centre[j].boundary.distance(Point(c)) < 1e-3 for j in range(len(centre))):
             raise PlanGeometryError(
-                src, f"window at {tuple(c)} is on an inside wall; windows go on outside walls", path=f"{path}.position"
+                src, f"window at {_xy(c)} is on an inside wall; windows go on outside walls", path=f"{path}.position"
             )
         e, s = found
         openings.setdefault((r, e.index), []).append(
@@ -777,3 +777,8 @@ def clutter_mesh(
         local[:3, 3] = centre
         parts.append(trimesh.creation.box(extents=extents, transform=place @ local))
     return trimesh.util.concatenate(parts)
+
+
+def _xy(point) -> str:
+    """``(x, y)`` as a user wrote it, for a message: plain numbers, not numpy's reprs."""
+    return "(" + ", ".join(f"{float(v):g}" for v in point) + ")"

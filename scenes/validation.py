@@ -142,7 +142,9 @@ def validate_plan_scene(plan: PlanLike, scene: Scene) -> None:
             break
     if first is None:
         raise StoreyValidationError(
-            name, f"the start {tuple(np.round(start[:2], 3))} is not {STOREY_CLEARANCE} m clear of walls and clutter"
+            name,
+            f"the start ({', '.join(f'{float(v):g}' for v in np.round(start[:2], 3))}) is not "
+            f"{STOREY_CLEARANCE} m clear of walls and clutter",
         )
     seen = {first}
     todo = [first]

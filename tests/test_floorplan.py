@@ -230,3 +230,14 @@ def test_overlapping_rooms(plan_dict, write_json):
     plan_dict["rooms"][1]["polygon"] = [[4, 0], [9, 0], [9, 4], [4, 4]]
     with pytest.raises(PlanGeometryError, match="overlaps"):
         load_scene(str(write_json(plan_dict)))
+
+
+def test_messages_give_positions_as_plain_numbers():
+    """numpy's reprs once reached the user: ``door at (np.float64(50.0), np.float64(50.0))``."""
+    from helpers import two_room_plan
+
+    plan = two_room_plan()
+    plan["doors"][0]["position"] = [50, 50.5]
+    with pytest.raises(PlanGeometryError, match=r"door at \(50, 50\.5\) is not on a wall") as raised:
+        FloorPlan.from_dict(plan).to_scene()
+    assert "np." not in str(raised.value)
