@@ -314,8 +314,32 @@ def _pt(p: Sequence[float]) -> tuple[float, float]:
     return (float(p[0]), float(p[1]))
 
 
+#: The most elements of each list a plan may hold, checked before the schema walks them: a storey of
+#: 500 rooms is a campus, not a storey; 300,000 clutter objects once took minutes to check and extrude.
+MAX_ITEMS = {"rooms": 500, "doors": 2_000, "windows": 2_000, "clutter": 10_000}
+#: The most corners of one room's polygon.
+MAX_CORNERS = 1_000
+
+
+def _check_counts(data: Any, source: str) -> None:
+    if not isinstance(data, dict):
+        return  # the schema says what it should be
+    for key, most in MAX_ITEMS.items():
+        items = data.get(key)
+        if isinstance(items, list) and len(items) > most:
+            raise FloorPlanError(source, f"{len(items):,} {key}; a plan holds at most {most:,}", path=key)
+    for i, room in enumerate(data.get("rooms") or [] if isinstance(data.get("rooms"), list) else []):
+        corners = room.get("polygon") if isinstance(room, dict) else None
+        if isinstance(corners, list) and len(corners) > MAX_CORNERS:
+            raise FloorPlanError(
+                source, f"{len(corners):,} corners; a room has at most {MAX_CORNERS:,}", path=f"rooms[{i}].polygon"
+            )
+
+
 def _validate_schema(data: Any, source: str) -> None:
     import jsonschema
+
+    _check_counts(data, source)
 
     validator = jsonschema.Draft202012Validator(PLAN_SCHEMA)
     errors = sorted(validator.iter_errors(data), key=lambda e: (len(e.absolute_path), list(map(str, e.absolute_path))))

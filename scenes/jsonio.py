@@ -56,8 +56,8 @@ def read_json(text: str, *, max_depth: int = MAX_JSON_DEPTH, **kwargs: Any) -> A
     try:
         return json.loads(text, **kwargs)
     except ValueError as exc:
-        if isinstance(exc, json.JSONDecodeError):
-            raise
+        if isinstance(exc, json.JSONDecodeError) or "integer string conversion" not in str(exc):
+            raise  # bad JSON, or a caller's own refusal (parse_constant refusing NaN)
         # Python refuses to convert an integer of more than 4,300 digits (a ValueError that is no
         # JSONDecodeError): a number no honest document holds, reported as the bad JSON it is.
         raise json.JSONDecodeError("a number of more than 4,300 digits", text, 0) from None

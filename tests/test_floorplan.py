@@ -241,3 +241,26 @@ def test_messages_give_positions_as_plain_numbers():
     with pytest.raises(PlanGeometryError, match=r"door at \(50, 50\.5\) is not on a wall") as raised:
         FloorPlan.from_dict(plan).to_scene()
     assert "np." not in str(raised.value)
+
+
+@pytest.mark.parametrize(("key", "most"), [("clutter", 10_000), ("doors", 2_000), ("rooms", 500)])
+def test_a_plan_s_lists_are_counted_before_they_are_checked(key, most):
+    """300,000 clutter objects or 100,000 doors once took minutes; refused at once, naming the list."""
+    import time
+
+    from helpers import two_room_plan
+
+    plan = two_room_plan()
+    plan[key] = [plan[key][0] if plan.get(key) else {}] * (most + 1)
+    start = time.perf_counter()
+    with pytest.raises(FloorPlanError, match=rf"{most + 1:,} {key}; a plan holds at most {most:,}"):
+        FloorPlan.from_dict(plan)
+    assert time.perf_counter() - start < 1.0
+
+
+def test_a_number_too_long_to_read_is_bad_json(tmp_path):
+    """An integer of 100,000 digits: Python refuses to convert it (a ValueError from inside)."""
+    path = tmp_path / "long.json"
+    path.write_text('{"format": "nbs-floorplan", "version": ' + "9" * 100_000 + "}")
+    with pytest.raises(FloorPlanError, match="a number of more than 4,300 digits"):
+        load_plan(path)
