@@ -107,6 +107,10 @@ _TYPE_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MA
 #: Most elements an accessor without data may declare (it is zeros or sparse): the indices of the
 #: largest storey, three per face.
 _MAX_EMPTY_ACCESSOR = 3 * MAX_FACES
+#: Most bytes a glTF's buffers may declare in all: the largest storey's vertices, indices and normals
+#: (5 million faces) fit in a tenth of it. The buffers are read whole, so a file declaring (and
+#: holding, sparse) 6 GiB once reached memory.
+MAX_BUFFER_BYTES = 2 << 30
 
 
 def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
@@ -136,6 +140,10 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
         raise InvalidMeshError(source, "the glTF JSON is not an object")
     buffers = _items(source, doc, "buffers")
     views = _items(source, doc, "bufferViews")
+    for i, image in enumerate(_items(source, doc, "images")):
+        if isinstance(image.get("uri"), str) and not image["uri"].startswith("data:"):
+            _side_file(source, path, image["uri"], f"images[{i}]")
+    _check_node_tree(source, _items(source, doc, "nodes"))
     buffer_length = []
     for i, buffer in enumerate(buffers):
         declared = _natural(source, buffer, "byteLength", f"buffers[{i}]")
@@ -143,6 +151,12 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
         if have is not None and declared > have:
             raise InvalidMeshError(
                 source, f"buffers[{i}].byteLength declares {declared:,} bytes, but the file holds {have:,}"
+            )
+        if sum(buffer_length) + declared > MAX_BUFFER_BYTES:
+            raise InvalidMeshError(
+                source,
+                f"buffers[{i}].byteLength brings the buffers to {sum(buffer_length) + declared:,} bytes; at most "
+                f"{MAX_BUFFER_BYTES:,} are read (five million faces need a tenth of it)",
             )
         buffer_length.append(declared)
     view_length = []
@@ -228,8 +242,55 @@ def _buffer_bytes(source: str, path: Path, buffer: dict, index: int, bin_length:
             return len(base64.b64decode(uri.partition(",")[2], validate=False))
         except (binascii.Error, ValueError):
             raise InvalidMeshError(source, f"buffers[{index}].uri is not base64 data") from None
+    side = _side_file(source, path, uri, f"buffers[{index}]")
+    return side.stat().st_size if side is not None else None
+
+
+def _side_file(source: str, path: Path, uri: str, where: str) -> Path | None:
+    """The file a relative ``uri`` names beside ``path``; None when it is not there (the parser says
+    so). A fifo or a device would hang the parser or feed it without end: refused."""
     side = path.parent / unquote(uri)
-    return side.stat().st_size if side.is_file() else None
+    try:
+        if not side.exists():
+            return None
+        regular = side.is_file()
+    except OSError as exc:
+        raise InvalidMeshError(source, f"{where}.uri {uri!r}: {exc.strerror or exc}") from None
+    if not regular:
+        raise InvalidMeshError(source, f"{where}.uri {uri!r} is not a regular file (a folder, a fifo or a device)")
+    return side
+
+
+def _check_node_tree(source: str, nodes: list[dict]) -> None:
+    """The nodes' ``children`` must name nodes and form a forest: a node that is its own descendant
+    once sent the scene graph's walk round without end."""
+    children: list[list[int]] = []
+    for i, node in enumerate(nodes):
+        kids = node.get("children", [])
+        if not isinstance(kids, list) or not all(
+            isinstance(k, int) and not isinstance(k, bool) and 0 <= k < len(nodes) for k in kids
+        ):
+            raise InvalidMeshError(source, f"nodes[{i}].children must name nodes 0..{len(nodes) - 1}")
+        children.append(kids)
+    parents = [0] * len(nodes)
+    for kids in children:
+        for k in kids:
+            parents[k] += 1
+    shared = [k for k, n in enumerate(parents) if n > 1]
+    if shared:
+        raise InvalidMeshError(
+            source, f"nodes[{shared[0]}] is the child of {parents[shared[0]]} nodes; a node has one parent"
+        )
+    # With one parent each, the nodes form a forest unless some lie on a cycle: those are never
+    # reached from the roots (the nodes without a parent).
+    seen = 0
+    stack = [k for k, n in enumerate(parents) if n == 0]
+    while stack:
+        k = stack.pop()
+        seen += 1
+        stack.extend(children[k])
+    if seen < len(nodes):
+        raise InvalidMeshError(source, "the glTF nodes' children form a cycle (a node is its own descendant)")
 
 
 def _items(source: str, doc: dict, key: str) -> list[dict]:

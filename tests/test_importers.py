@@ -700,8 +700,24 @@ def _without_view(document):
         (_without_view, r"accessors\[0\]\.count declares 10,000,000,000 elements with no bufferView"),
         (lambda d: d["accessors"][0].update(count=-1), r"accessors\[0\]\.count must be an integer >= 0"),
         (lambda d: json_nested(5000), r"invalid glTF JSON: nested deeper than 64 levels"),
+        (lambda d: d["nodes"][0].update(children=[0]), r"the glTF nodes' children form a cycle"),
+        (lambda d: d["nodes"][0].update(children=[99]), r"nodes\[0\]\.children must name nodes"),
+        (
+            lambda d: d["buffers"].append({"byteLength": 6 << 30, "uri": "big.bin"}),
+            r"buffers\[1\]\.byteLength brings the buffers to [\d,]+ bytes; at most 2,147,483,648",
+        ),
     ],
-    ids=["buffer", "view", "accessor", "accessor-without-data", "negative-count", "deep-json"],
+    ids=[
+        "buffer",
+        "view",
+        "accessor",
+        "accessor-without-data",
+        "negative-count",
+        "deep-json",
+        "node-cycle",
+        "node-index",
+        "huge-buffers",
+    ],
 )
 def test_glb_declaring_more_than_it_holds(tmp_path, edit, match):
     # An accessor of 1e10 elements without data once made trimesh allocate 37 GiB of zeros.
@@ -709,6 +725,20 @@ def test_glb_declaring_more_than_it_holds(tmp_path, edit, match):
     p.write_bytes(_edit_glb(glb_of(box_room(), tmp_path / "ok.glb").read_bytes(), edit))
     with pytest.raises(InvalidMeshError, match=rf"liar\.glb: {match}"):
         load_mesh_scene(p)
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="needs fifos")
+@pytest.mark.parametrize("kind", ["buffers", "images"])
+def test_gltf_side_files_must_be_regular_files(tmp_path, kind):
+    """A buffer or image uri naming a fifo once hung the parser."""
+    import json
+    import os
+
+    os.mkfifo(tmp_path / "fifo.bin")
+    document = {"asset": {"version": "2.0"}, kind: [{"uri": "fifo.bin", "byteLength": 4}]}
+    (tmp_path / "m.gltf").write_text(json.dumps(document))
+    with pytest.raises(InvalidMeshError, match=rf"{kind}\[0\]\.uri 'fifo.bin' is not a regular file"):
+        load_mesh_scene(tmp_path / "m.gltf")
 
 
 def json_nested(depth: int) -> str:
