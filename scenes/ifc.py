@@ -78,6 +78,7 @@ from scenes.errors import IfcError, MissingDependencyError, MissingStructureErro
 from scenes.geometry import split_long_faces
 from scenes.importers import footprint_polygon
 from scenes.interior import derive_rooms, rooms_by_probe
+from scenes.limits import check_storey_size
 from scenes.model import Door, Room, Scene, SurfaceClass
 
 __all__ = [
@@ -304,6 +305,9 @@ def load_ifc_scene(
         raise MissingStructureError(
             source, f"storey {chosen.name!r} has no floor faces (no slab at its elevation {elevation:.2f} m)"
         )
+    # Before splitting long faces: a storey kilometres wide (a file whose units say kilometres) would
+    # be cut into more triangles than memory holds before the scene's own check saw its size.
+    check_storey_size(source, vertices[np.unique(faces)] if len(faces) else vertices[:0], len(faces), stated=True)
     structural = np.isin(labels, [c.value for c in SurfaceClass if c.is_structural])
     vertices, faces, origin = split_long_faces(vertices, faces, MAX_FACE_EDGE, structural)
     labels = labels[origin]

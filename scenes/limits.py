@@ -75,7 +75,9 @@ def check_face_count(source: str, n_faces: int) -> None:
         )
 
 
-def check_storey_size(source: str, vertices: np.ndarray, n_faces: int, *, units: str | None = None) -> None:
+def check_storey_size(
+    source: str, vertices: np.ndarray, n_faces: int, *, units: str | None = None, stated: bool = False
+) -> None:
     """Refuse a storey beyond the limits (see the module docstring) before anything is sized from it.
 
     Parameters
@@ -89,6 +91,9 @@ def check_storey_size(source: str, vertices: np.ndarray, n_faces: int, *, units:
     units : str, optional
         The unit the coordinates were read in, when the source has a ``units`` option (mesh files):
         the message then suggests the unit that fits. None for sources in metres by definition.
+    stated : bool
+        The coordinates were scaled to metres by the unit the file states (IFC's
+        ``IfcUnitAssignment``): the message then doubts that unit.
 
     Raises
     ------
@@ -110,7 +115,9 @@ def check_storey_size(source: str, vertices: np.ndarray, n_faces: int, *, units:
         f"{MAX_STOREY_WIDTH:g} m across and {MAX_STOREY_HEIGHT:g} m high)"
     )
     guess = _likely_unit(width, height, units or "m")
-    if units is not None and guess is not None:
+    if stated:
+        cause = "read in the length unit the file states: check its IfcUnitAssignment"
+    elif units is not None and guess is not None:
         cause = f"is the file in {_UNIT_WORDS[guess]}? pass --units {guess} (load_scene's units={guess!r})"
     elif guess is not None:
         cause = f"are its lengths in {_UNIT_WORDS[guess]}? they must be metres"

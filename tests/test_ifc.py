@@ -439,3 +439,16 @@ def test_a_space_the_file_marks_external_is_no_room(tmp_path, how):
 
     scene = _tiny_with(tmp_path, edit)
     assert [r.name for r in scene.rooms] == ["inside"]
+
+
+def test_a_storey_kilometres_wide_by_its_stated_unit_is_refused_before_it_is_meshed(tmp_path):
+    """The length unit said kilometres: long faces were split into more triangles than memory held
+    before the storey's size was checked."""
+    from scenes.errors import StoreySizeError
+
+    text = (Path(__file__).parent / "data" / "two_rooms.ifc").read_text()
+    assert "IFCSIUNIT(*,.LENGTHUNIT.,$,.METRE.)" in text
+    path = tmp_path / "km.ifc"
+    path.write_text(text.replace("IFCSIUNIT(*,.LENGTHUNIT.,$,.METRE.)", "IFCSIUNIT(*,.LENGTHUNIT.,.KILO.,.METRE.)"))
+    with pytest.raises(StoreySizeError, match=r"km\.ifc: the storey is [\d,]+ m across.*check its IfcUnitAssignment"):
+        load_ifc_scene(path)
