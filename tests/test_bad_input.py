@@ -28,6 +28,11 @@ CASES = [
     # A name longer than the file system takes (255 bytes): an OSError once escaped the checks.
     (f"scan --scene office --out {'b' * 300}", EXIT_USAGE, "cannot be used (File name too long)"),
     (f"scenes info {'b' * 300}.obj", EXIT_SCENE_ERROR, "File name too long"),
+    # Names whose bytes are not UTF-8 (as Python holds them: surrogates) once failed halfway through a
+    # report, in libE57, matplotlib or rerun.
+    ("scan --scene office --out e4_\udcff_dir", EXIT_USAGE, "--out e4_\ufffd_dir: the name is not valid UTF-8"),
+    ("scan --scene p_\udcff.json", EXIT_USAGE, "the name is not valid UTF-8; rename it"),
+    ("compare --scenes p_\udcff.json --policies random --out c", EXIT_USAGE, "the name is not valid UTF-8"),
     ("scan --scene office --min-density 1e300", EXIT_USAGE, "min_density must be within [0, 1e8]"),
     # Sizes every grid, table or window is made from, bounded before any is made (each once asked
     # for more memory than the machine had, or overflowed to infinity with a warning).

@@ -1001,7 +1001,11 @@ def _check_scene(scene: str) -> None:
     from scenes.corpus import PREFIX as CORPUS_PREFIX
     from scenes.corpus import corpus_entry
     from scenes.loader import check_source
+    from train.arguments import utf8_problem
 
+    problem = utf8_problem("--scenes", scene)
+    if problem is not None:
+        raise CompareError(problem)
     try:
         if scene.startswith(CORPUS_PREFIX):
             entry = corpus_entry(scene[len(CORPUS_PREFIX) :])

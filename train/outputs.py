@@ -119,6 +119,12 @@ def check_outputs(outputs: Iterable[Output]) -> None:
     """
     for output in outputs:
         try:
+            str(output.path).encode("utf-8")
+        except UnicodeEncodeError:
+            shown = str(output.path).encode("utf-8", "surrogateescape").decode("utf-8", "replace")
+            # libE57, laspy, matplotlib and rerun encode names as UTF-8: the report would stop halfway.
+            raise OutputError(f"{output.flag} {shown}: the name is not valid UTF-8; choose another") from None
+        try:
             problem = _problem(output)
         except OSError as exc:  # a name too long for the file system, a loop of links
             problem = f"cannot be used ({exc.strerror or exc})"
