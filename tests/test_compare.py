@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+from pathlib import Path
 
 import pytest
 
@@ -318,3 +319,26 @@ def test_a_run_folder_is_one_component_inside_out(tmp_path, name):
     assert folder.resolve().is_relative_to((tmp_path / "runs").resolve())
     assert folder_name("ppo:a/b") != folder_name("ppo:a_b")
     assert folder_name("greedy") == "greedy" and folder_name("ppo:reference") == "ppo_reference"
+
+
+def test_resume_runs_again_where_the_building_file_changed(tmp_path):
+    """Runs were matched by the scene's name only: an edited file's old results came back as they were."""
+    import shutil
+
+    import train.compare as compare
+
+    plan = tmp_path / "plan.json"
+    shutil.copy(Path(__file__).parents[1] / "scenes" / "data" / "l_room.json", plan)
+    specs = grid(str(plan), "random", "0", "fast", {"max_scans": 2})
+    out = tmp_path / "out"
+    results, oracles = run_grid(specs, jobs=1, progress=False)
+    write_outputs(results, oracles, out)
+    for record in results:
+        compare.write_record(out, "run", record)
+    for record in oracles.values():
+        compare.write_record(out, "oracle", record)
+    assert results[0]["source_sha256"] == compare.source_digest(str(plan)) is not None
+    assert len(compare.load_finished(out, specs)["runs"]) == 1
+    plan.write_text(plan.read_text().replace('"ceiling_height": 2.6', '"ceiling_height": 2.7'))
+    finished = compare.load_finished(out, specs)
+    assert finished == {"runs": {}, "oracles": {}}

@@ -171,12 +171,53 @@ def expand_scenes(text: str, skipped: list[str] | None = None) -> list[str]:
     return out
 
 
+def source_digest(scene: str) -> str | None:
+    """The SHA-256 of the file a scene is read from (a path or a corpus entry's file), or None (a
+    bundled or generated storey, or no file there): ``--resume`` reuses a run only while its
+    building's file is the one it ran on."""
+    from scenes.corpus import PREFIX as CORPUS_PREFIX
+    from scenes.corpus import corpus_entry
+
+    try:
+        if scene.startswith(CORPUS_PREFIX):
+            path = corpus_entry(scene[len(CORPUS_PREFIX) :]).path()
+        elif scene.startswith("generated:") or not Path(scene).suffix:
+            return None
+        else:
+            path = Path(scene)
+        if path is None or not Path(path).is_file():
+            return None
+        digest = hashlib.sha256()
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                digest.update(block)
+        return digest.hexdigest()
+    except Exception:  # an unknown entry, an unreadable file: the run itself will say so
+        return None
+
+
+def policy_digest(policy: str) -> str | None:
+    """The SHA-256 of a ``ppo:PATH`` checkpoint's description (which holds its weights' SHA-256), or
+    None for any other policy: ``--resume`` reuses a run only while its checkpoint is the same."""
+    if not policy.startswith("ppo:"):
+        return None
+    try:
+        from policies.learned import resolve_checkpoint
+
+        path = resolve_checkpoint(policy[len("ppo:") :])
+        path = path / "policy.json" if path.is_dir() else path
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except Exception:  # no such checkpoint: the run itself will say so
+        return None
+
+
 def run_one(spec: RunSpec, stop: Callable[[], bool] | None = None) -> dict[str, Any] | None:
     """Play one run; returns ``{"spec", "ok", "metrics" | "error"}`` and never raises.
 
     ``stop`` (in this process: ``--jobs 1``) is asked between the episode's steps; once it says
     True the run ends unfinished and None is returned: it is no result."""
     started = time.perf_counter()
+    source, checkpoint = source_digest(spec.scene), policy_digest(spec.policy)
     try:
         from nbs_env.env import NBSEnv
         from nbs_env.report import metrics_dict
@@ -190,10 +231,19 @@ def run_one(spec: RunSpec, stop: Callable[[], bool] | None = None) -> dict[str, 
             return None
         metrics = metrics_dict(env.storey, spec.scene, policy, spec.seed, times)
         metrics["policy"] = spec.policy
-        return {"spec": asdict(spec), "ok": True, "metrics": metrics, "wall_s": time.perf_counter() - started}
+        return {
+            "spec": asdict(spec),
+            "ok": True,
+            "metrics": metrics,
+            "wall_s": time.perf_counter() - started,
+            "source_sha256": source,
+            "policy_sha256": checkpoint,
+        }
     except Exception as exc:  # a failed run is recorded, the others go on
         return {
             "spec": asdict(spec),
+            "source_sha256": source,
+            "policy_sha256": checkpoint,
             "ok": False,
             "error": f"{type(exc).__name__}: {exc}",
             "traceback": traceback.format_exc(),
@@ -203,7 +253,7 @@ def run_one(spec: RunSpec, stop: Callable[[], bool] | None = None) -> dict[str, 
 
 def _oracle(scene: str, preset: str = "default", overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     """The oracle's plan of ``scene`` with the grid's scanner and evaluation (never raises)."""
-    setting = {"preset": preset, "overrides": json_form(overrides or {})}
+    setting = {"preset": preset, "overrides": json_form(overrides or {}), "source_sha256": source_digest(scene)}
     try:
         from policies.oracle import oracle_plan
         from scenes import load_scene
@@ -963,16 +1013,20 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
 
     A run is reused when its ``run.json`` holds the same spec (scene, policy name, seed, preset and
     configuration overrides); an oracle when ``oracle.json`` has it for the same preset and
-    overrides. Failed runs are run again. A checkpoint replaced
-    under the same ``ppo:PATH`` is not noticed: use a new ``--out``.
+    overrides, and while the scene's file (:func:`source_digest`) and a ``ppo:PATH`` checkpoint
+    (:func:`policy_digest`) are those it ran on. Failed runs are run again.
     """
     out = Path(out)
     runs: dict[str, Any] = {}
+    digests = {scene: source_digest(scene) for scene in dict.fromkeys(s.scene for s in specs)}
     for spec in specs:
         folder = _run_folder(out, asdict(spec))
         try:
             record = json.loads((folder / "run.json").read_text())
-            if record.get("ok") and record.get("spec") == json_form(asdict(spec)):
+            # An edited building file is another building; a retrained checkpoint another policy.
+            same_file = record.get("source_sha256") == digests[spec.scene]
+            same_file &= record.get("policy_sha256") == policy_digest(spec.policy)
+            if record.get("ok") and record.get("spec") == json_form(asdict(spec)) and same_file:
                 finished = {**record, "metrics": json.loads((folder / "metrics.json").read_text())}
                 summarise([finished], {})  # figures the table can be made of (a `{}` once failed every resume)
                 runs[spec.key] = finished
@@ -989,6 +1043,7 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
             isinstance(plan, dict)
             and plan.get("ok")
             and {"preset": plan.get("preset"), "overrides": plan.get("overrides")} in settings
+            and plan.get("source_sha256") == digests.get(scene)
             and _oracle_usable(plan)
         ):
             oracles[scene] = plan
