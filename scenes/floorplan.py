@@ -605,6 +605,18 @@ def extrude(plan: FloorPlan, *, source: str | None = None, validate: bool = True
             )
         (ea, sa), (eb, sb) = found_a, found_b
         seg = LineString([c - ea.direction * d.width / 2, c + ea.direction * d.width / 2])
+        for j, other in enumerate(plan.doors[:k]):
+            # Two openings in one stretch of wall would cut one hole twice (a duplicated door, or two
+            # drawn over each other): the faces between them overlap.
+            if set(other.rooms) == set(d.rooms):
+                gap = float(np.linalg.norm(np.asarray(other.position, dtype=float) - c))
+                if gap < (other.width + d.width) / 2:
+                    raise PlanGeometryError(
+                        src,
+                        f"door at {_xy(c)} overlaps doors[{j}] at {_xy(other.position)} on the wall shared by "
+                        f"{d.rooms[0]!r} and {d.rooms[1]!r}",
+                        path=f"{path}.position",
+                    )
         if not shared.buffer(1e-4).contains(seg):
             raise PlanGeometryError(
                 src,

@@ -264,3 +264,14 @@ def test_a_number_too_long_to_read_is_bad_json(tmp_path):
     path.write_text('{"format": "nbs-floorplan", "version": ' + "9" * 100_000 + "}")
     with pytest.raises(FloorPlanError, match="a number of more than 4,300 digits"):
         load_plan(path)
+
+
+def test_two_doors_over_one_stretch_of_wall_are_refused():
+    """A door duplicated, or two drawn over each other, cut one opening twice (accepted silently)."""
+    from helpers import two_room_plan
+
+    plan = two_room_plan()
+    door = plan["doors"][0]
+    plan["doors"].append({**door, "position": [door["position"][0], door["position"][1] + door["width"] / 2]})
+    with pytest.raises(PlanGeometryError, match=r"doors\[1\]\.position: door at .* overlaps doors\[0\]"):
+        FloorPlan.from_dict(plan).to_scene()
