@@ -129,7 +129,7 @@ def test_acquisition_time():
         ({"echo_separation": 0.0}, "echo_separation must be > 0"),
         ({"echo_separation": float("nan")}, "echo_separation must be a finite number"),
         ({"instrument_step": 0.0}, "instrument_step must be > 0"),
-        ({"setup_time": -1.0}, "setup_time must be >= 0"),
+        ({"setup_time": -1.0}, "setup_time must be within"),
     ],
 )
 def test_bad_scanner_config(kwargs, message):
