@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import signal
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 import numpy as np
 
 from scenes import FloorPlan, RoomPlan, Scene
@@ -98,3 +102,20 @@ def boxed_storey(walls, floors, ceilings, clutter=(), start=(1.5, 2.0), name="bo
     mesh = trimesh.util.concatenate([m for m, _ in parts])
     labels = np.concatenate([np.full(len(m.faces), c.value) for m, c in parts])
     return Scene(mesh, labels, start=start, name=name)
+
+
+@contextmanager
+def time_limit(seconds: int) -> Iterator[None]:
+    """A ``TimeoutError`` if the block runs longer than ``seconds`` (SIGALRM: the main thread, POSIX):
+    the property tests count a loader or a command that does not answer in time as a hang."""
+
+    def expire(*_):
+        raise TimeoutError(f"no answer within {seconds} s")
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)

@@ -9,16 +9,15 @@ from __future__ import annotations
 
 import copy
 import json
-import signal
 import tempfile
-from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
 hypothesis = pytest.importorskip("hypothesis")
-from helpers import two_room_plan  # noqa: E402
+from helpers import time_limit, two_room_plan  # noqa: E402
 from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
@@ -43,20 +42,6 @@ SETTINGS = settings(
     database=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
 )
-
-
-@contextmanager
-def time_limit(seconds: int):
-    def expire(*_):
-        raise TimeoutError(f"the loader took more than {seconds} s")
-
-    previous = signal.signal(signal.SIGALRM, expire)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, previous)
 
 
 def loads_or_refuses(path: Path, **options) -> Scene | None:
@@ -108,23 +93,29 @@ def broken_plans(draw):
     """The valid plan with one to three of its values replaced or removed: by anything JSON holds
     (type errors, NaN, huge values), or by a number near the one it replaces (geometric edge cases:
     overlapping rooms, doors off their wall, clutter in a doorway)."""
-    plan = copy.deepcopy(PLAN)
+    near = st.tuples(st.floats(-1.0, 3.0), st.floats(-1.0, 1.0)).map(lambda ab: lambda old: old * ab[0] + ab[1])
+    return damaged(draw, copy.deepcopy(PLAN), PLACES, near)
+
+
+def damaged(draw, document, places, number) -> Any:
+    """``document`` with one to three of its ``places`` replaced or removed: a number by ``number``'s
+    function of it (or by anything JSON holds), any value by anything JSON holds, or dropped."""
     for _ in range(draw(st.integers(1, 3))):
-        place = draw(st.sampled_from(PLACES))
-        parent = plan
+        place = draw(st.sampled_from(places))
+        parent = document
         try:
             for key in place[:-1]:
                 parent = parent[key]
             old = parent[place[-1]]
             if isinstance(old, (int, float)) and not isinstance(old, bool) and draw(st.booleans()):
-                parent[place[-1]] = old * draw(st.floats(-1.0, 3.0)) + draw(st.floats(-1.0, 1.0))
+                parent[place[-1]] = draw(number)(old)
             elif draw(st.integers(0, 3)) == 0 and isinstance(parent, dict):
                 parent.pop(place[-1], None)
             else:
                 parent[place[-1]] = draw(VALUES)
         except (KeyError, IndexError, TypeError):
             continue  # an earlier change removed the place
-    return plan
+    return document
 
 
 @SETTINGS
@@ -248,22 +239,8 @@ def broken_checkpoints(draw):
 
         document["sha256"] = hashlib.sha256(weights).hexdigest()
         return document, weights
-    for _ in range(draw(st.integers(1, 3))):
-        place = draw(st.sampled_from(CHECKPOINT_PLACES))
-        parent = document
-        try:
-            for key in place[:-1]:
-                parent = parent[key]
-            old = parent[place[-1]]
-            if isinstance(old, (int, float)) and not isinstance(old, bool) and draw(st.booleans()):
-                parent[place[-1]] = draw(st.sampled_from([0, -1, 10**9, 10**30, 2.5, float("nan")]))
-            elif draw(st.integers(0, 3)) == 0 and isinstance(parent, dict):
-                parent.pop(place[-1], None)
-            else:
-                parent[place[-1]] = draw(VALUES)
-        except (KeyError, IndexError, TypeError):
-            continue
-    return document, weights
+    extremes = st.sampled_from([0, -1, 10**9, 10**30, 2.5, float("nan")]).map(lambda v: lambda old: v)
+    return damaged(draw, document, CHECKPOINT_PLACES, extremes), weights
 
 
 @settings(SETTINGS, max_examples=80)

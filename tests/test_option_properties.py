@@ -11,12 +11,10 @@ default suite.
 
 from __future__ import annotations
 
-import signal
-from contextlib import contextmanager
-
 import pytest
 
 hypothesis = pytest.importorskip("hypothesis")
+from helpers import time_limit  # noqa: E402
 from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
@@ -36,20 +34,6 @@ SECONDS = 30
 
 class ReachedError(Exception):
     """The options were accepted and the work was about to start."""
-
-
-@contextmanager
-def time_limit(seconds: int):
-    def expire(*_):
-        raise TimeoutError(f"the command took more than {seconds} s to accept or refuse its options")
-
-    previous = signal.signal(signal.SIGALRM, expire)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, previous)
 
 
 def numbers() -> st.SearchStrategy[str]:
