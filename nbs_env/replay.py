@@ -783,6 +783,20 @@ def _free_port(host: str) -> int:
         return int(sock.getsockname()[1])
 
 
+def _port_problem(host: str, port: int) -> str | None:
+    """Why a server could not listen on ``host:port`` now ("in use", ...), or None when it could."""
+    import errno
+    import socket
+
+    try:
+        family, kind, proto, _, address = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
+        with socket.socket(family, kind, proto) as sock:
+            sock.bind(address)
+    except OSError as exc:
+        return "in use by another program" if exc.errno == errno.EADDRINUSE else (exc.strerror or str(exc))
+    return None
+
+
 def _url_host(bind: str) -> str:
     """The host a browser on this machine reaches a server bound to ``bind`` at."""
     if bind in ("0.0.0.0", "::", ""):
@@ -849,6 +863,12 @@ def serve_web(
 
     path = check_recording(path)
     binary = rerun_binary()
+    # A port the user named is tried here first: rerun, given one in use, may neither exit nor serve
+    # within the timeout, and the error would blame its start-up instead of the port.
+    for what, wanted in (("the recording's port (--port)", port), ("the web viewer's port (--web-port)", web_port)):
+        problem = _port_problem(bind, wanted) if wanted else None
+        if problem is not None:
+            raise NoViewerError(f"{what} {wanted} on {bind}: {problem}")
     port = port or _free_port(bind)
     web_port = web_port or _free_port(bind)
     host = _url_host(bind)
