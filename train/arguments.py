@@ -340,18 +340,6 @@ def adopt_requirements(overrides: dict[str, Any], requirements: dict[str, tuple[
 MESH_SUFFIXES = (".obj", ".glb", ".gltf", ".ply")
 
 
-def utf8_problem(flag: str, name: object) -> str | None:
-    """Why a path given to ``flag`` cannot be used as a name (None when it can): bytes that are not
-    UTF-8 (Python holds them as surrogates) reach libE57, laspy, matplotlib and rerun, which
-    encode names as UTF-8 and fail halfway through a report."""
-    try:
-        str(name).encode("utf-8")
-    except UnicodeEncodeError:
-        shown = str(name).encode("utf-8", "surrogateescape").decode("utf-8", "replace")
-        return f"{flag} {shown}: the name is not valid UTF-8; rename it"
-    return None
-
-
 def scene_option_error(
     scene: str, storey: object, y_up: bool, ifc_doors: object = None, units: object = None
 ) -> str | None:
@@ -360,6 +348,8 @@ def scene_option_error(
 
     A corpus entry (``corpus:NAME``) carries its own options; only IFC's apply to it. A name that is
     not valid UTF-8 is refused too: the reports, clouds and pictures carry it."""
+    from train.outputs import utf8_problem
+
     problem = utf8_problem("--scene", scene)
     if problem is not None:
         return problem

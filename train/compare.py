@@ -1019,13 +1019,14 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
     out = Path(out)
     runs: dict[str, Any] = {}
     digests = {scene: source_digest(scene) for scene in dict.fromkeys(s.scene for s in specs)}
+    checkpoints = {policy: policy_digest(policy) for policy in dict.fromkeys(s.policy for s in specs)}
     for spec in specs:
         folder = _run_folder(out, asdict(spec))
         try:
             record = json.loads((folder / "run.json").read_text())
             # An edited building file is another building; a retrained checkpoint another policy.
             same_file = record.get("source_sha256") == digests[spec.scene]
-            same_file &= record.get("policy_sha256") == policy_digest(spec.policy)
+            same_file &= record.get("policy_sha256") == checkpoints[spec.policy]
             if record.get("ok") and record.get("spec") == json_form(asdict(spec)) and same_file:
                 finished = {**record, "metrics": json.loads((folder / "metrics.json").read_text())}
                 summarise([finished], {})  # figures the table can be made of (a `{}` once failed every resume)
@@ -1056,7 +1057,7 @@ def _check_scene(scene: str) -> None:
     from scenes.corpus import PREFIX as CORPUS_PREFIX
     from scenes.corpus import corpus_entry
     from scenes.loader import check_source
-    from train.arguments import utf8_problem
+    from train.outputs import utf8_problem
 
     problem = utf8_problem("--scenes", scene)
     if problem is not None:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-__all__ = ["Output", "OutputError", "check_outputs", "output_path"]
+__all__ = ["Output", "OutputError", "check_outputs", "output_path", "utf8_problem"]
 
 
 class OutputError(ValueError):
@@ -108,6 +108,18 @@ def _problem(output: Output) -> str | None:
     return _parent_problem(path.resolve() if path.is_symlink() else path)
 
 
+def utf8_problem(flag: str, name: object, advice: str = "rename it") -> str | None:
+    """Why a path given to ``flag`` cannot be used as a name (None when it can): bytes that are not
+    UTF-8 (Python holds them as surrogates) reach libE57, laspy, matplotlib and rerun, which
+    encode names as UTF-8 and fail halfway through a report."""
+    try:
+        str(name).encode("utf-8")
+    except UnicodeEncodeError:
+        shown = str(name).encode("utf-8", "surrogateescape").decode("utf-8", "replace")
+        return f"{flag} {shown}: the name is not valid UTF-8; {advice}"
+    return None
+
+
 def check_outputs(outputs: Iterable[Output]) -> None:
     """Check every output path of a command before it starts (module docstring); creates nothing.
 
@@ -118,12 +130,9 @@ def check_outputs(outputs: Iterable[Output]) -> None:
         x does not exist"``.
     """
     for output in outputs:
-        try:
-            str(output.path).encode("utf-8")
-        except UnicodeEncodeError:
-            shown = str(output.path).encode("utf-8", "surrogateescape").decode("utf-8", "replace")
-            # libE57, laspy, matplotlib and rerun encode names as UTF-8: the report would stop halfway.
-            raise OutputError(f"{output.flag} {shown}: the name is not valid UTF-8; choose another") from None
+        problem = utf8_problem(output.flag, output.path, "choose another")
+        if problem is not None:
+            raise OutputError(problem)
         try:
             problem = _problem(output)
         except OSError as exc:  # a name too long for the file system, a loop of links
