@@ -9,8 +9,11 @@ string-keyed dicts or other configurations. ``to_dict()`` gives the JSON-safe tr
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
+import numbers
+import re
 import types
 import typing
 from dataclasses import asdict
@@ -31,7 +34,8 @@ def _require(condition: bool, message: str) -> None:
 def _finite(**values: float) -> None:
     for name, value in values.items():
         _require(
-            isinstance(value, (int, float)) and math.isfinite(value), f"{name} must be a finite number, got {value!r}"
+            isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value),
+            f"{name} must be a finite number, got {value!r}",
         )
 
 
@@ -40,13 +44,87 @@ def _finite_fields(config: Any, *names: str) -> None:
     _finite(**{name: getattr(config, name) for name in names})
 
 
-def _integer(config: Any, name: str, least: int) -> None:
-    """Field ``name`` of ``config`` is an integer (not a bool) of at least ``least``."""
+def _integer(config: Any, name: str, least: int, most: int | None = None) -> None:
+    """Field ``name`` of ``config`` is an integer (not a bool) of at least ``least`` (and at most
+    ``most``); any :class:`numbers.Integral` (a numpy integer) is stored as an ``int``."""
     value = getattr(config, name)
+    if isinstance(value, numbers.Integral) and not isinstance(value, (bool, int)):
+        value = int(value)
+        object.__setattr__(config, name, value)
+    within = f">= {least}" if most is None else f"within [{least:,}, {most:,}]"
     _require(
-        isinstance(value, int) and not isinstance(value, bool) and value >= least,
-        f"{name} must be an integer >= {least}, got {value!r}",
+        isinstance(value, int) and not isinstance(value, bool) and value >= least and (most is None or value <= most),
+        f"{name} must be an integer {within}, got {value!r}",
     )
+
+
+def _text(value: float) -> str:
+    """A bound as a message states it: ``10,000``, ``0.05``, ``1e-09``."""
+    if isinstance(value, (int, float)) and math.isfinite(value) and float(value).is_integer() and abs(value) < 1e15:
+        return f"{int(value):,}"
+    return f"{value:g}" if isinstance(value, (int, float)) else repr(value)
+
+
+def _at_most(config: Any, name: str, most: float, unit: str = "") -> None:
+    """Field ``name`` of ``config`` (a number checked already) is at most ``most``."""
+    value = getattr(config, name)
+    _require(value <= most, f"{name} must be at most {_text(most)}{' ' + unit if unit else ''}, got {_text(value)}")
+
+
+def _within(config: Any, name: str, low: float, high: float, unit: str = "", *, open_low: bool = False) -> None:
+    """Field ``name`` of ``config`` is a finite number within [low, high] (``open_low``: (low, high])."""
+    value = getattr(config, name)
+    _finite(**{name: value})
+    inside = (low < value if open_low else low <= value) and value <= high
+    bounds = f"{'(' if open_low else '['}{_text(low)}, {_text(high)}]"
+    _require(inside, f"{name} must be within {bounds}{' ' + unit if unit else ''}, got {value}")
+
+
+@functools.cache
+def _numeric_hints(cls: type) -> dict[str, tuple[bool, bool]]:
+    """Per field of ``cls``, whether its type admits an int and whether it admits a float (also
+    inside a tuple)."""
+    out = {}
+    for name, hint in typing.get_type_hints(cls).items():
+        found: set[Any] = set()
+        stack = [hint]
+        while stack:
+            h = stack.pop()
+            if isinstance(h, types.UnionType) or typing.get_origin(h) in (typing.Union, tuple):
+                stack.extend(a for a in typing.get_args(h) if a is not Ellipsis)
+            else:
+                found.add(h)
+        if int in found or float in found:
+            out[name] = (int in found, float in found)
+    return out
+
+
+def _plain_number(value: Any, takes_int: bool, takes_float: bool) -> Any:
+    """A numpy integer as an ``int``, a numpy float as a ``float`` (a bool, a string or a plain
+    number stays as it is): what JSON writes."""
+    if isinstance(value, bool) or type(value) in (int, float):
+        return value
+    if isinstance(value, numbers.Integral) and (takes_int or takes_float):
+        return int(value)
+    if isinstance(value, numbers.Real) and takes_float:
+        return float(value)
+    return value
+
+
+def _plain_numbers(config: Any) -> None:
+    """Numpy numbers in the numeric fields of ``config`` (and in its tuples of numbers) become
+    plain ``int`` and ``float``, so that the configuration stays JSON-safe; bools are left to the
+    checks, which refuse them where a number is wanted."""
+    for name, (takes_int, takes_float) in _numeric_hints(type(config)).items():
+        value = getattr(config, name)
+        if isinstance(value, (tuple, list)):
+            items = [_plain_number(v, takes_int, takes_float) for v in value]
+            if any(p is not v for p, v in zip(items, value, strict=True)):
+                object.__setattr__(config, name, type(value)(items))
+        else:
+            plain = _plain_number(value, takes_int, takes_float)
+            if plain is not value:
+                object.__setattr__(config, name, plain)
 
 
 def json_form(value: Any) -> Any:
@@ -121,9 +199,19 @@ def _build(cls: type, data: Any, where: str) -> Any:
     try:
         return cls(**values)
     except (TypeError, ValueError) as exc:  # a value of a kind the class's own checks did not expect
-        if isinstance(exc, ConfigError):
+        if isinstance(exc, ConfigError) and not where:
             raise
-        raise ConfigError(f"{where or cls.__name__}: {exc}") from None
+        raise ConfigError(_qualified(str(exc), where or cls.__name__, fields)) from None
+
+
+def _qualified(message: str, where: str, fields: Any) -> str:
+    """``message`` naming its field by its dotted path: ``lattice must be ...`` from the section
+    ``robot.navigation`` reads ``robot.navigation.lattice must be ...``; a message that does not
+    start with one of the section's ``fields`` is prefixed with the section's name."""
+    first = re.match(r"\w+", message)
+    if first is not None and first.group() in fields:
+        return f"{where}.{message}"
+    return f"{where}: {message}"
 
 
 def _from_json(value: Any, hint: Any, where: str) -> Any:
@@ -145,4 +233,4 @@ def _from_json(value: Any, hint: Any, where: str) -> Any:
             return tuple(_from_json(v, inner, where) if inner is not Any else v for v in value)
     if all(isinstance(o, type) and dataclasses.is_dataclass(o) for o in options):
         raise ConfigError(f"{where} must be a JSON object of fields, got {value!r}")
-    return value
+    return _plain_number(value, int in options, float in options)

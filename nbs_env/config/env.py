@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from nbs_env.config.checks import Config, _finite, _integer, _require
+from nbs_env.config.checks import Config, _at_most, _finite, _integer, _plain_numbers, _require, _within
 from nbs_env.config.robot import RobotConfig
-from nbs_env.config.rooms import RoomRules
+from nbs_env.config.rooms import MAX_SCANS, RoomRules
 from scenes.generator import GeneratorConfig
 
 #: The most cells an observation window may have (64× the default 64 × 64 × 16): each is a float per
@@ -41,6 +41,7 @@ class ObservationConfig(Config):
     below_floor: float = 0.2
 
     def __post_init__(self) -> None:
+        _plain_numbers(self)
         _require(
             len(self.shape) == 3 and all(isinstance(n, int) and n >= 1 for n in self.shape),
             f"shape must be three positive integers, got {self.shape}",
@@ -52,6 +53,9 @@ class ObservationConfig(Config):
         )
         _finite(cell=self.cell, below_floor=self.below_floor)
         _require(self.cell > 0, f"cell must be > 0 metres, got {self.cell}")
+        # A window cell pools voxels (at least 1 cm); the window's extent is the cells times the shape.
+        _within(self, "cell", 0.01, 10.0, "metres")
+        _within(self, "below_floor", 0.0, 10.0, "metres")
 
     @property
     def extent(self) -> np.ndarray:
@@ -97,6 +101,7 @@ class QualityConfig(Config):
     density_radius: float = 0.1
 
     def __post_init__(self) -> None:
+        _plain_numbers(self)
         _finite(min_density=self.min_density, max_incidence=self.max_incidence, density_radius=self.density_radius)
         # 10^8 per m² is a 0.1 mm spacing, ten times finer than any terrestrial scanner's finest
         # setting: a larger figure is a typo or a unit mistake, not a quality level.
@@ -139,6 +144,7 @@ class RewardConfig(Config):
     invalid_action_penalty: float = 1.0
 
     def __post_init__(self) -> None:
+        _plain_numbers(self)
         _require(
             self.kind in ("coverage", "mapped", "conversions"),
             f"reward kind must be 'coverage', 'mapped' or 'conversions', got {self.kind!r}",
@@ -146,6 +152,10 @@ class RewardConfig(Config):
         _finite(
             scan_cost=self.scan_cost, metre_cost=self.metre_cost, invalid_action_penalty=self.invalid_action_penalty
         )
+        # Costs are subtracted from a reward in percentage points of the storey's surface.
+        for name in ("scan_cost", "metre_cost", "invalid_action_penalty"):
+            _require(getattr(self, name) >= 0, f"{name} must be >= 0, got {getattr(self, name)}")
+            _at_most(self, name, 1000.0)
 
 
 @dataclass(frozen=True)
@@ -214,10 +224,12 @@ class EnvConfig(Config):
     coverage_meter: bool = True
 
     def __post_init__(self) -> None:
+        _plain_numbers(self)
         _require(
             isinstance(self.scene, str) and self.scene != "", f"scene must be a non-empty string, got {self.scene!r}"
         )
         _integer(self, "max_scans", 1)
+        _require(self.max_scans <= MAX_SCANS, f"max_scans must be at most {MAX_SCANS:,}, got {self.max_scans:,}")
         _finite(
             coverage_spacing=self.coverage_spacing, coverage_radius=self.coverage_radius, travel_speed=self.travel_speed
         )
@@ -226,11 +238,16 @@ class EnvConfig(Config):
             0.01 <= self.coverage_spacing <= 1,
             f"coverage_spacing must be within [0.01, 1] metres, got {self.coverage_spacing}",
         )
+        # The meter's sensing radius: below a centimetre (the spacing's bound) its grid's cells
+        # (radius-sized) overflow their count.
         _require(
-            0 < self.coverage_radius <= 1, f"coverage_radius must be within (0, 1] metres, got {self.coverage_radius}"
+            0.01 <= self.coverage_radius <= 1,
+            f"coverage_radius must be within [0.01, 1] metres, got {self.coverage_radius}",
         )
         _require(isinstance(self.expose_belief, bool), f"expose_belief must be a bool, got {self.expose_belief!r}")
         _require(self.travel_speed > 0, f"travel_speed must be > 0, got {self.travel_speed}")
+        # The travel time is metres over the speed: a millimetre a second is already days per storey.
+        _within(self, "travel_speed", 0.001, 100.0, "m/s")
         _require(isinstance(self.preset, str), f"preset must be a preset's name, got {self.preset!r}")
         _require(isinstance(self.coverage_meter, bool), f"coverage_meter must be a bool, got {self.coverage_meter!r}")
         _require(

@@ -10,9 +10,20 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field
 
-from nbs_env.config.checks import Config, _finite, _finite_fields, _integer, _require
+from nbs_env.config.checks import (
+    Config,
+    _at_most,
+    _finite,
+    _finite_fields,
+    _integer,
+    _plain_numbers,
+    _require,
+    _within,
+)
 
 __all__ = [
+    "MAX_ANGULAR_STEP",
+    "MAX_ICP_ITERATIONS",
     "MAX_RAYS",
     "DoorConfig",
     "GainConfig",
@@ -27,6 +38,13 @@ __all__ = [
 
 #: Patterns above this many rays per scan are refused: they would take minutes and gigabytes.
 MAX_RAYS = 50_000_000
+
+#: The coarsest simulated angular step, degrees: 8 columns over 360°, the fewest the RoI's free-space
+#: outline (at least 4 azimuth bins, capped at the scanner's columns) and the door search work with.
+MAX_ANGULAR_STEP = 45.0
+
+#: Iterations per ICP stage, at most: the default's 40 converge; a million is an hour per scan.
+MAX_ICP_ITERATIONS = 10_000
 
 
 @dataclass(frozen=True)
@@ -112,6 +130,7 @@ class ScannerConfig(Config):
     preset: str | None = None
 
     def __post_init__(self) -> None:
+        _plain_numbers(self)
         _finite(
             angular_step=self.angular_step,
             elevation_min=self.elevation_min,
@@ -129,6 +148,7 @@ class ScannerConfig(Config):
             points_per_second=self.points_per_second,
         )
         _require(self.angular_step > 0, f"angular_step must be > 0 degrees, got {self.angular_step}")
+        _at_most(self, "angular_step", MAX_ANGULAR_STEP, "degrees")
         _require(
             -90.0 <= self.elevation_min < self.elevation_max <= 90.0,
             f"need -90 <= elevation_min < elevation_max <= 90, got {self.elevation_min}, {self.elevation_max}",
@@ -143,6 +163,10 @@ class ScannerConfig(Config):
         _require(self.range_noise >= 0, f"range_noise must be >= 0, got {self.range_noise}")
         _require(self.noise_floor >= 0, f"noise_floor must be >= 0 m, got {self.noise_floor}")
         _require(self.noise_range > 0, f"noise_range must be > 0 m, got {self.noise_range}")
+        # A metre of noise scatters a room's walls over the room; more scatters points past the storey.
+        _at_most(self, "range_noise", 1.0, "metre")
+        _at_most(self, "noise_floor", 1.0, "metre")
+        _at_most(self, "noise_range", 10_000.0, "metres")
         _require(0 <= self.noise_exponent <= 2, f"noise_exponent must be in [0, 2], got {self.noise_exponent}")
         _require(
             0 <= self.beam_divergence <= 0.05, f"beam_divergence must be in [0, 0.05] rad, got {self.beam_divergence}"
@@ -151,18 +175,27 @@ class ScannerConfig(Config):
         if self.echo_separation is not None:
             _finite(echo_separation=self.echo_separation)
             _require(self.echo_separation > 0, f"echo_separation must be > 0 m or None, got {self.echo_separation}")
+            _at_most(self, "echo_separation", 100.0, "metres")
         if self.instrument_step is not None:
             _finite(instrument_step=self.instrument_step)
             _require(
                 self.instrument_step > 0, f"instrument_step must be > 0 degrees or None, got {self.instrument_step}"
             )
+            # The finest real step is the VZ-400's 0.0024°: (angular_step / instrument_step)² weighs
+            # each return, and a step of 1e-300° makes it infinite.
+            _within(self, "instrument_step", 0.001, MAX_ANGULAR_STEP, "degrees")
         _require(
             0 <= self.setup_time <= 86_400, f"setup_time must be within [0, 86,400] seconds, got {self.setup_time}"
         )
         _require(self.points_per_second > 0, f"points_per_second must be > 0, got {self.points_per_second}")
+        # Times are points over the rate: below one a second, a scan's time overflows to infinity.
+        _within(self, "points_per_second", 1.0, 1e9, "points per second")
+        # The optical centre: above the floor, below any storey's ceiling (the storey limits' 50 m).
+        _within(self, "height", 0.0, 10.0, "metres", open_low=True)
         if self.station_time is not None:
             _finite(station_time=self.station_time)
             _require(self.station_time > 0, f"station_time must be > 0 seconds or None, got {self.station_time}")
+            _at_most(self, "station_time", 86_400.0, "seconds")
         _require(
             self.preset is None or isinstance(self.preset, str), f"preset must be a name or None, got {self.preset!r}"
         )
@@ -222,6 +255,7 @@ class OdometryConfig(Config):
     sigma_tilt_deg: float = 0.2
 
     def __post_init__(self) -> None:
+        _plain_numbers(self)
         _finite(
             sigma_xy_per_m=self.sigma_xy_per_m,
             sigma_yaw_deg_per_m=self.sigma_yaw_deg_per_m,
@@ -229,6 +263,11 @@ class OdometryConfig(Config):
         )
         for name, value in asdict(self).items():
             _require(value >= 0, f"{name} must be >= 0, got {value}")
+        # Drift of a metre per metre driven, half a turn per metre, or a scanner tilted past 45°
+        # are no odometry.
+        _at_most(self, "sigma_xy_per_m", 1.0, "metre per metre")
+        _at_most(self, "sigma_yaw_deg_per_m", 180.0, "degrees per metre")
+        _at_most(self, "sigma_tilt_deg", 45.0, "degrees")
 
 
 @dataclass(frozen=True)
@@ -346,6 +385,7 @@ class RegistrationConfig(Config):
     convergence: float = 1e-4
 
     def __post_init__(self) -> None:
+        _plain_numbers(self)
         _finite(
             convergence=self.convergence,
             voxel_size=self.voxel_size,
@@ -353,15 +393,29 @@ class RegistrationConfig(Config):
             max_rmse=self.max_rmse,
             max_correction_m=self.max_correction_m,
             max_correction_deg=self.max_correction_deg,
+            correction_per_metre_m=self.correction_per_metre_m,
+            correction_per_metre_deg=self.correction_per_metre_deg,
             target_radius=self.target_radius,
             min_constraint=self.min_constraint,
             overlap_distance=self.overlap_distance,
             plane_tolerance=self.plane_tolerance,
             heading_check_deg=self.heading_check_deg,
         )
+        for name in ("deterministic", "exclude_rejected"):
+            _require(isinstance(getattr(self, name), bool), f"{name} must be a bool, got {getattr(self, name)!r}")
         _require(self.overlap_distance > 0, f"overlap_distance must be > 0, got {self.overlap_distance}")
         _require(self.plane_tolerance > 0, f"plane_tolerance must be > 0, got {self.plane_tolerance}")
         _require(self.heading_check_deg >= 0, f"heading_check_deg must be >= 0, got {self.heading_check_deg}")
+        _at_most(self, "overlap_distance", 10.0, "metres")
+        _at_most(self, "plane_tolerance", 10.0, "metres")
+        _at_most(self, "heading_check_deg", 180.0, "degrees")
+        _within(self, "max_rmse", 0.0, 10.0, "metres", open_low=True)
+        _within(self, "max_correction_m", 0.0, 1000.0, "metres")
+        _within(self, "max_correction_deg", 0.0, 180.0, "degrees")
+        _within(self, "correction_per_metre_m", 0.0, 10.0, "metres per metre")
+        _within(self, "correction_per_metre_deg", 0.0, 180.0, "degrees per metre")
+        # The scanner's range is at most 10 km (ScannerConfig.max_range).
+        _within(self, "target_radius", 0.0, 10_000.0, "metres", open_low=True)
         if self.max_see_through is not None:
             _finite(max_see_through=self.max_see_through)
             _require(
@@ -371,32 +425,49 @@ class RegistrationConfig(Config):
         if self.crop_margin is not None:
             _finite(crop_margin=self.crop_margin)
             _require(self.crop_margin >= 0, f"crop_margin must be >= 0 or None, got {self.crop_margin}")
+            _at_most(self, "crop_margin", 10_000.0, "metres")
         _require(
             self.method in ("plane", "gicp", "open3d"),
             f"method must be 'plane', 'gicp' or 'open3d', got {self.method!r}",
         )
-        _integer(self, "neighbours", 5)
-        _integer(self, "min_points", 0)
-        _integer(self, "min_inliers", 0)
+        # Neighbours per point for the normals and covariances: the k-d tree's query is sized by it
+        # (a thousand is a point's whole room at the working copies' 10 cm).
+        _integer(self, "neighbours", 5, 1000)
+        # A scan has at most MAX_RAYS returns: a larger least count refuses every scan.
+        _integer(self, "min_points", 0, MAX_RAYS)
+        _integer(self, "min_inliers", 0, MAX_RAYS)
         if self.min_agreement is not None:
             _finite(min_agreement=self.min_agreement)
             _require(
                 0 <= self.min_agreement <= 1, f"min_agreement is a share in [0, 1] or None, got {self.min_agreement}"
             )
         _require(self.min_constraint >= 0, f"min_constraint must be >= 0, got {self.min_constraint}")
+        _at_most(self, "min_constraint", float(MAX_RAYS), "point-equivalents")
         _require(self.voxel_size > 0, f"voxel_size must be > 0, got {self.voxel_size}")
+        # The working copies' voxels: below a centimetre they hold every point of a scan (and the
+        # downsampling's voxel keys overflow); above 2 m a room is a handful of points.
+        _within(self, "voxel_size", 0.01, 2.0, "metres")
+        correspondence = tuple(self.max_correspondence)
         _require(
-            len(self.max_correspondence) > 0 and all(d > 0 for d in self.max_correspondence),
-            f"max_correspondence must be positive distances, got {self.max_correspondence}",
+            0 < len(correspondence) <= 10
+            and all(
+                isinstance(d, (int, float)) and not isinstance(d, bool) and math.isfinite(d) and 0 < d <= 100
+                for d in correspondence
+            ),
+            f"max_correspondence must be 1 to 10 distances within (0, 100] metres, got {self.max_correspondence}",
         )
-        _require(self.max_iterations >= 1, f"max_iterations must be >= 1, got {self.max_iterations}")
+        _integer(self, "max_iterations", 1, MAX_ICP_ITERATIONS)
         _require(self.convergence > 0, f"convergence must be > 0, got {self.convergence}")
+        _at_most(self, "convergence", 1.0, "(radians and metres)")
         if self.stage_voxels is not None:
             _require(
                 len(self.stage_voxels) == len(self.max_correspondence)
-                and all(isinstance(v, (int, float)) and math.isfinite(v) for v in self.stage_voxels)
-                and all(v >= self.voxel_size for v in self.stage_voxels),
-                f"stage_voxels must give one voxel size of at least voxel_size ({self.voxel_size}) per stage "
+                and all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                    for v in self.stage_voxels
+                )
+                and all(self.voxel_size <= v <= 2.0 for v in self.stage_voxels),
+                f"stage_voxels must give one voxel size within [voxel_size ({self.voxel_size}), 2] metres per stage "
                 f"of max_correspondence ({len(self.max_correspondence)}), got {self.stage_voxels}",
             )
         _require(0 <= self.min_fitness <= 1, f"min_fitness is a share in [0, 1], got {self.min_fitness}")
@@ -443,6 +514,7 @@ class NavigationConfig(Config):
     snap: bool = True
 
     def __post_init__(self) -> None:
+        _plain_numbers(self)
         _finite(
             robot_radius=self.robot_radius,
             safety_distance=self.safety_distance,
@@ -471,6 +543,12 @@ class NavigationConfig(Config):
         )
         _require(self.min_distance >= 0, f"min_distance must be >= 0, got {self.min_distance}")
         _require(isinstance(self.snap, bool), f"snap must be a bool, got {self.snap!r}")
+        # Footprints are discs of voxels: a radius of kilometres is a kernel larger than memory.
+        _at_most(self, "robot_radius", 5.0, "metres")
+        _at_most(self, "safety_distance", 5.0, "metres")
+        _at_most(self, "floor_clearance", 5.0, "metres")
+        _at_most(self, "robot_height", 10.0, "metres")
+        _at_most(self, "min_distance", 1000.0, "metres")
 
     @property
     def required_clearance(self) -> float:
@@ -508,6 +586,7 @@ class GainConfig(Config):
     group: int = 2
 
     def __post_init__(self) -> None:
+        _plain_numbers(self)
         _require(
             isinstance(self.model, str) and self.model != "", f"model must be a gain model's name, got {self.model!r}"
         )
@@ -517,7 +596,9 @@ class GainConfig(Config):
         )
         _finite_fields(self, "tolerance_voxels")
         _require(self.tolerance_voxels >= 0, f"tolerance_voxels must be >= 0, got {self.tolerance_voxels}")
+        _at_most(self, "tolerance_voxels", 100.0, "voxels")
         _integer(self, "group", 1)
+        _require(self.group <= 64, f"group must be at most 64 voxels, got {self.group}")
 
 
 @dataclass(frozen=True)
@@ -557,6 +638,7 @@ class RoIConfig(Config):
     collinear_deg: float = 8.0
 
     def __post_init__(self) -> None:
+        _plain_numbers(self)
         lengths = ("pixel", "histogram_bin", "band_above_floor", "max_range")
         _finite_fields(self, *lengths, "band_below_ceiling", "corner_distance", "collinear_deg")
         for name in lengths:
@@ -571,6 +653,9 @@ class RoIConfig(Config):
         _require(self.band_below_ceiling >= 0, f"band_below_ceiling must be >= 0, got {self.band_below_ceiling}")
         _require(self.corner_distance >= 0, f"corner_distance must be >= 0, got {self.corner_distance}")
         _require(0 <= self.collinear_deg < 90, f"collinear_deg must be in [0, 90), got {self.collinear_deg}")
+        _at_most(self, "band_above_floor", 10.0, "metres")
+        _at_most(self, "band_below_ceiling", 10.0, "metres")
+        _at_most(self, "corner_distance", 100.0, "metres")
         _integer(self, "azimuth_bins", 4)
         _require(self.azimuth_bins <= 36_000, f"azimuth_bins must be at most 36,000, got {self.azimuth_bins}")
 
@@ -632,6 +717,7 @@ class DoorConfig(Config):
     max_extension: float = 8.0
 
     def __post_init__(self) -> None:
+        _plain_numbers(self)
         _finite_fields(
             self,
             "min_width",
@@ -670,6 +756,15 @@ class DoorConfig(Config):
             f"need 0 <= fill_gap < min_width, got {self.fill_gap}, {self.min_width}",
         )
         _require(self.max_extension >= 0, f"max_extension must be >= 0 metres, got {self.max_extension}")
+        # Openings and distances of a building: a storey is at most 500 m across (scenes.limits).
+        _at_most(self, "max_width", 100.0, "metres")
+        _at_most(self, "max_height", 100.0, "metres")
+        _at_most(self, "floor_gap", 10.0, "metres")
+        _at_most(self, "behind", 100.0, "metres")
+        _at_most(self, "max_extension", 1000.0, "metres")
+        # A scan has at most MAX_RAYS returns: larger least counts refuse every door.
+        _at_most(self, "min_behind_points", MAX_RAYS)
+        _at_most(self, "min_rising_rays", MAX_RAYS)
 
 
 @dataclass(frozen=True)
@@ -694,6 +789,11 @@ class PlanningConfig(Config):
     navigation: NavigationConfig = field(default_factory=NavigationConfig)
     gain: GainConfig = field(default_factory=GainConfig)
     predict_gains: bool = True
+
+    def __post_init__(self) -> None:
+        _require(
+            isinstance(self.predict_gains, bool), f"predict_gains must be true or false, got {self.predict_gains!r}"
+        )
 
 
 @dataclass(frozen=True)
@@ -739,6 +839,7 @@ class RobotConfig(Config):
     predict_gains: bool = True
 
     def __post_init__(self) -> None:
+        _plain_numbers(self)
         _finite(voxel_size=self.voxel_size)
         _require(0.01 <= self.voxel_size <= 1.0, f"voxel_size must be within [0.01, 1] metres, got {self.voxel_size}")
         for name in ("perfect_localisation", "predict_gains"):

@@ -8,12 +8,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from nbs_env.config.checks import Config, _finite_fields, _integer, _require
+from nbs_env.config.checks import Config, _at_most, _finite_fields, _integer, _plain_numbers, _require, _within
+from nbs_env.config.robot import MAX_RAYS
 
-__all__ = ["COMPLETIONS", "RoomRules", "WallSearchConfig"]
+__all__ = ["COMPLETIONS", "MAX_SCANS", "MAX_SEARCH_SCANS", "RoomRules", "WallSearchConfig"]
 
 #: Who decides that a room is complete (:attr:`RoomRules.completion`).
 COMPLETIONS = ("gain", "policy")
+
+#: Scans per room and per episode, at most: each is a scan cycle of seconds, so a million is days.
+MAX_SEARCH_SCANS = 1000
+MAX_SCANS = 100_000
 
 
 @dataclass(frozen=True)
@@ -93,9 +98,10 @@ class WallSearchConfig(Config):
     doors: bool = True
 
     def __post_init__(self) -> None:
+        _plain_numbers(self)
         for name in ("narrow", "doors"):
             value = getattr(self, name)
-            _require(isinstance(value, bool), f"wall search: {name} must be a bool, got {value!r}")
+            _require(isinstance(value, bool), f"{name} must be a bool, got {value!r}")
         _finite_fields(
             self,
             "step",
@@ -110,21 +116,38 @@ class WallSearchConfig(Config):
             "approach",
         )
         _integer(self, "scans", 0)
+        _require(self.scans <= MAX_SEARCH_SCANS, f"scans must be at most {MAX_SEARCH_SCANS}, got {self.scans}")
         _integer(self, "min_rays", 0)
+        _require(self.min_rays <= MAX_RAYS, f"min_rays must be at most {MAX_RAYS:,}, got {self.min_rays}")
         for name in ("step", "max_range", "beyond", "min_run", "opening_width", "opening_height"):
-            _require(getattr(self, name) > 0, f"wall search: {name} must be > 0 metres, got {getattr(self, name)}")
-        _require(self.inset >= 0, f"wall search: inset must be >= 0 metres, got {self.inset}")
-        _require(self.approach >= 0, f"wall search: approach must be >= 0 metres, got {self.approach}")
-        _require(
-            self.wall_thickness >= 0, f"wall search: wall_thickness must be >= 0 metres, got {self.wall_thickness}"
-        )
-        _require(
-            0 < self.incidence_deg < 90, f"wall search: incidence_deg must be in (0, 90), got {self.incidence_deg}"
-        )
+            _require(getattr(self, name) > 0, f"{name} must be > 0 metres, got {getattr(self, name)}")
+        # Columns are sampled every ``step`` along every wall face (and cast to from every NVP):
+        # below a centimetre their count outgrows memory (1e-9 m asked for 58 GiB).
+        _within(self, "step", 0.01, 5.0, "metres")
+        _require(self.inset >= 0, f"inset must be >= 0 metres, got {self.inset}")
+        _require(self.approach >= 0, f"approach must be >= 0 metres, got {self.approach}")
+        _require(self.wall_thickness >= 0, f"wall_thickness must be >= 0 metres, got {self.wall_thickness}")
+        _require(0 < self.incidence_deg < 90, f"incidence_deg must be in (0, 90), got {self.incidence_deg}")
+        # Distances within a storey (at most 500 m across, scenes.limits) and a building's openings.
+        for name, most in (
+            ("max_range", 10_000.0),
+            ("beyond", 100.0),
+            ("min_run", 100.0),
+            ("approach", 1000.0),
+            ("inset", 10.0),
+            ("opening_width", 100.0),
+            ("opening_height", 100.0),
+            ("wall_thickness", 10.0),
+        ):
+            _at_most(self, name, most, "metres")
         heights = tuple(self.heights)
         _require(
-            len(heights) > 0 and all(isinstance(h, int | float) and math.isfinite(h) and h > 0 for h in heights),
-            f"wall search: heights must be positive numbers of metres, got {self.heights!r}",
+            0 < len(heights) <= 100
+            and all(
+                isinstance(h, int | float) and not isinstance(h, bool) and math.isfinite(h) and 0 < h <= 100
+                for h in heights
+            ),
+            f"heights must be 1 to 100 heights within (0, 100] metres, got {self.heights!r}",
         )
         object.__setattr__(self, "heights", tuple(float(h) for h in heights))
 
@@ -161,6 +184,7 @@ class RoomRules(Config):
     wall_search: WallSearchConfig = field(default_factory=WallSearchConfig)
 
     def __post_init__(self) -> None:
+        _plain_numbers(self)
         _require(self.completion in COMPLETIONS, f"completion must be 'gain' or 'policy', got {self.completion!r}")
         _finite_fields(self, "completion_fraction")
         _require(
@@ -168,3 +192,7 @@ class RoomRules(Config):
             f"completion_fraction is a share in [0, 1), got {self.completion_fraction}",
         )
         _integer(self, "max_scans_per_room", 1)
+        _require(
+            self.max_scans_per_room <= MAX_SCANS,
+            f"max_scans_per_room must be at most {MAX_SCANS:,}, got {self.max_scans_per_room}",
+        )
