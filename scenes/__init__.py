@@ -14,7 +14,7 @@ Everything a :class:`Scene` holds is ground truth: only the simulator and evalua
 
 from __future__ import annotations
 
-from pathlib import Path
+import os
 from typing import Any
 
 from scenes.corpus import PREFIX as CORPUS_PREFIX
@@ -37,6 +37,7 @@ from scenes.floorplan import ClutterPlan, DoorPlan, FloorPlan, RoomPlan, WindowP
 from scenes.generator import GeneratorConfig, generate_plan, generate_storey
 from scenes.loader import MESH_EXTENSIONS as MESH_EXTENSIONS
 from scenes.loader import SUPPORTED_EXTENSIONS as SUPPORTED_EXTENSIONS
+from scenes.loader import as_spec as _as_spec
 from scenes.loader import bundled_plan, list_scenes, load_source
 from scenes.model import STRUCTURAL_CLASSES, Door, Room, Scene, StructureSamples, SurfaceClass
 
@@ -75,12 +76,12 @@ __all__ = [
 ]
 
 
-def load_scene(spec: str | Path | FloorPlan, **options: Any) -> Scene:
+def load_scene(spec: str | os.PathLike[str] | FloorPlan, **options: Any) -> Scene:
     """Load a building from any supported source.
 
     Parameters
     ----------
-    spec : str, Path or FloorPlan
+    spec : str, os.PathLike (a Path) or FloorPlan
         A bundled name, a file path (``.json``, ``.obj``, ``.glb``, ``.gltf``, ``.ply``, ``.ifc``),
         ``"generated:SEED"``, or a :class:`FloorPlan`.
     **options
@@ -101,7 +102,8 @@ def load_scene(spec: str | Path | FloorPlan, **options: Any) -> Scene:
     SceneError
         A subclass naming the source and the problem: :class:`UnknownSceneError`,
         :class:`SceneFileError`, :class:`UnsupportedFormatError`, :class:`InvalidMeshError`,
-        :class:`StoreySizeError` (larger than :mod:`scenes.limits` allows: a file in millimetres?),
+        :class:`StoreySizeError` (beyond the limits of :mod:`scenes.limits`: a file in millimetres,
+        a georeferenced file far from the origin, a flattened model, two storeys in one file?),
         :class:`MissingStructureError`, :class:`FloorPlanError`, :class:`PlanGeometryError`,
         :class:`StoreyValidationError`, :class:`IfcError` or :class:`MissingDependencyError`.
     TypeError
@@ -116,8 +118,9 @@ def load_scene(spec: str | Path | FloorPlan, **options: Any) -> Scene:
     return scene
 
 
-def _load(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene:
+def _load(spec: str | os.PathLike[str] | FloorPlan, options: dict[str, Any]) -> Scene:
+    spec = _as_spec(spec)
     # Corpus entries are loaded through scenes.loader, so the corpus spec is told apart here, above both.
-    if isinstance(spec, (str, Path)) and str(spec).startswith(CORPUS_PREFIX):
+    if not isinstance(spec, FloorPlan) and str(spec).startswith(CORPUS_PREFIX):
         return load_corpus_scene(str(spec)[len(CORPUS_PREFIX) :], **options)
     return load_source(spec, options)

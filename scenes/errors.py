@@ -45,8 +45,9 @@ class InvalidMeshError(SceneError, ValueError):
 
 
 class StoreySizeError(SceneError, ValueError):
-    """A storey beyond the limits of :mod:`scenes.limits`: too wide, too high or too many faces. Most
-    often a file drawn in millimetres or centimetres read as metres; the message names the likely unit."""
+    """A storey beyond the limits of :mod:`scenes.limits`: too wide, too high, too many faces, too
+    small, too low, too far from the origin, or two storeys in one. Most often a file drawn in
+    millimetres or centimetres read as metres; the message names the likely unit or cause."""
 
 
 class MissingStructureError(SceneError, ValueError):

@@ -36,11 +36,14 @@ All lengths in metres, angles in degrees, x/y horizontal, the floor at z = 0::
   inner face, so no ray leaves the building.
 - **Clutter** ``kind`` is one of :data:`CLUTTER_KINDS`. ``position`` is the centre of the footprint;
   ``size`` is ``[length, depth, height]`` in the object's frame; ``yaw`` turns the length axis from +x
-  counter-clockwise. Objects that stand against a wall have their back on the local +y side.
+  counter-clockwise. Objects that stand against a wall have their back on the local +y side. No
+  object may be taller than the ceiling; a ``column`` always reaches it, whatever its height says.
 - Only the inner faces of the building are built (no outside faces): nothing outside is ever seen,
   and the structural area must not count surfaces no scanner can reach.
-- **Bounds**: coordinates within ±100 km (:data:`MAX_COORDINATE`), sizes and door or window
-  dimensions at most 100 m (:data:`MAX_LENGTH`), ceilings at most 30 m, walls at most 3 m thick;
+- **Bounds**: coordinates within ±100 km (:data:`MAX_COORDINATE`; :func:`scenes.load_scene` loads
+  storeys within 10 km of the origin, :data:`scenes.limits.MAX_ORIGIN_DISTANCE`), sizes and door or window
+  dimensions at most 100 m (:data:`MAX_LENGTH`), ceilings at most 30 m (and, when loaded, at least
+  1.5 m: :data:`scenes.limits.MIN_STOREY_HEIGHT`), walls at most 3 m thick;
   NaN and infinities are refused with the rest.
 """
 
@@ -62,6 +65,7 @@ from shapely.geometry.polygon import orient
 from scenes.errors import FloorPlanError, PlanGeometryError, SceneFileError
 from scenes.geometry import STOREY_CLEARANCE
 from scenes.jsonio import read_json
+from scenes.limits import MIN_STOREY_HEIGHT
 from scenes.model import Door, Room, Scene, SurfaceClass
 from scenes.validation import validate_plan_scene
 
@@ -547,14 +551,22 @@ def extrude(plan: FloorPlan, *, source: str | None = None, validate: bool = True
     Raises
     ------
     PlanGeometryError
-        A self-intersecting or too narrow room, a door not on a wall shared by its two rooms, a
-        window not on an outside wall, clutter outside every room or blocking a door.
+        A ceiling lower than :data:`scenes.limits.MIN_STOREY_HEIGHT`, a self-intersecting or too
+        narrow room, a door not on a wall shared by its two rooms, a window not on an outside wall,
+        clutter taller than the ceiling, outside every room or blocking a door.
     StoreyValidationError
         When ``validate`` and the storey fails a check.
     """
     src = source or plan.name
     t = plan.wall_thickness
     height = plan.ceiling_height
+    if height < MIN_STOREY_HEIGHT:
+        raise PlanGeometryError(
+            src,
+            f"the ceiling is {height:g} m high; a storey is at least {MIN_STOREY_HEIGHT:g} m high "
+            "(scenes.limits.MIN_STOREY_HEIGHT): raise the plan's ceiling_height",
+            path="ceiling_height",
+        )
     names = [r.name for r in plan.rooms]
     centre = [_simple_polygon(r.polygon, src, f"rooms[{i}].polygon") for i, r in enumerate(plan.rooms)]
     for i in range(len(centre)):
@@ -714,6 +726,13 @@ def extrude(plan: FloorPlan, *, source: str | None = None, validate: bool = True
 
     for k, c in enumerate(plan.clutter):
         path = f"clutter[{k}]"
+        # Before the footprint test: a tall piece is no wall-crosser, and saying so would mislead.
+        if c.kind != "column" and c.size[2] > height:
+            raise PlanGeometryError(
+                src,
+                f"{c.kind} at {c.position} is {c.size[2]:g} m high, taller than the {height:g} m ceiling",
+                path=f"{path}.size[2]",
+            )
         foot = c.footprint()
         inside = [i for i, clear in enumerate(inner) if clear.buffer(1e-6).contains(foot)]
         if not inside:
@@ -727,7 +746,7 @@ def extrude(plan: FloorPlan, *, source: str | None = None, validate: bool = True
                     f"{c.kind} at {c.position} blocks door doors[{j}] (keep {DOOR_CLEARANCE} m clear on both sides)",
                     path=path,
                 )
-        h = min(c.size[2], height) if c.kind != "column" else height
+        h = c.size[2] if c.kind != "column" else height
         builder.add_mesh(
             clutter_mesh(c.kind, c.size[0], c.size[1], h, c.position, c.yaw), SurfaceClass.CLUTTER, inside[0]
         )

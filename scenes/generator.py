@@ -94,18 +94,73 @@ class GeneratorConfig:
     max_attempts: int = 200
 
     def __post_init__(self) -> None:
-        lo, hi = self.room_range
-        if not 1 <= lo <= hi <= 8:
-            raise ValueError(f"rooms must be within 1..8, got {self.rooms}")
-        if not (isinstance(self.clutter_density, (int, float)) and 0 <= self.clutter_density <= MAX_CLUTTER_DENSITY):
+        import numbers
+        from collections.abc import Callable
+
+        def plain(value: object) -> object:  # a numpy number as the int or float JSON writes
+            if type(value) in (int, float):
+                return value
+            return int(value) if integer(value) else float(value)  # type: ignore[arg-type]
+
+        def integer(value: object) -> bool:
+            return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+        def number(value: object) -> bool:
+            return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+
+        def pair(name: str, check: Callable[[object], bool], low: float, high: float, kind: str) -> tuple:
+            value = getattr(self, name)
+            if not (
+                isinstance(value, (tuple, list))
+                and len(value) == 2
+                and all(check(v) for v in value)
+                and low <= value[0] <= value[1] <= high
+            ):
+                raise ValueError(
+                    f"{name} must be a pair [low, high] of {kind} with {low:g} <= low <= high <= {high:g}, "
+                    f"got {value!r}"
+                )
+            return (plain(value[0]), plain(value[1]))
+
+        if integer(self.rooms):
+            if not 1 <= self.rooms <= 8:
+                raise ValueError(f"rooms must be within 1..8, got {self.rooms}")
+            object.__setattr__(self, "rooms", plain(self.rooms))
+        elif isinstance(self.rooms, (tuple, list)) and len(self.rooms) == 2 and all(integer(v) for v in self.rooms):
+            if not 1 <= self.rooms[0] <= self.rooms[1] <= 8:
+                raise ValueError(f"rooms must be within 1..8 (a pair [low, high] with low <= high), got {self.rooms}")
+            object.__setattr__(self, "rooms", (plain(self.rooms[0]), plain(self.rooms[1])))
+        else:
+            raise ValueError(
+                f"rooms must be within 1..8: an integer or a pair [low, high] of integers, got {self.rooms!r}"
+            )
+        if not (number(self.clutter_density) and 0 <= self.clutter_density <= MAX_CLUTTER_DENSITY):
             raise ValueError(
                 f"clutter_density must be a number within 0..{MAX_CLUTTER_DENSITY:g}, got {self.clutter_density}"
             )
         for name in ("wall_standing", "nonorthogonal", "irregular_outline", "extra_doors", "windows"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(f"{name} is a probability in [0, 1], got {getattr(self, name)}")
-        if self.cell_size[0] < 1.8:
-            raise ValueError("cell_size below 1.8 m leaves rooms too narrow for the robot")
+            if not (number(getattr(self, name)) and 0.0 <= getattr(self, name) <= 1.0):
+                raise ValueError(f"{name} is a probability in [0, 1], got {getattr(self, name)!r}")
+        # Below 1.8 m a room is too narrow for the robot; above 10 m a storey of 8 rooms passes the
+        # storeys' size limits' spirit (train.ppo's --cell-size has the same bounds).
+        object.__setattr__(self, "cell_size", pair("cell_size", number, 1.8, 10.0, "metres"))
+        # The floor plans' own limits (scenes.floorplan): ceilings up to 30 m, walls up to 3 m.
+        object.__setattr__(self, "ceiling_height", pair("ceiling_height", number, 2.0, 30.0, "metres"))
+        object.__setattr__(self, "wall_thickness", pair("wall_thickness", number, 0.01, 3.0, "metres"))
+        object.__setattr__(self, "door_width", pair("door_width", number, 0.5, 10.0, "metres"))
+        object.__setattr__(self, "door_height", pair("door_height", number, 1.0, 30.0, "metres"))
+        if not (integer(self.max_attempts) and 1 <= self.max_attempts <= 100_000):
+            raise ValueError(f"max_attempts must be an integer within [1, 100,000], got {self.max_attempts!r}")
+        object.__setattr__(self, "max_attempts", plain(self.max_attempts))
+        for name in (
+            "clutter_density",
+            "wall_standing",
+            "nonorthogonal",
+            "irregular_outline",
+            "extra_doors",
+            "windows",
+        ):
+            object.__setattr__(self, name, plain(getattr(self, name)))
 
     @property
     def room_range(self) -> tuple[int, int]:
@@ -441,7 +496,8 @@ def _place_clutter(
         (l0, l1), (d0, d1), (h0, h1) = _SIZES[kind]
         for _try in range(25):
             length, depth = float(rng.uniform(l0, l1)), float(rng.uniform(d0, d1))
-            h = height if kind == "column" else float(rng.uniform(h0, h1))
+            # A plan refuses clutter taller than its ceiling; a low ceiling_height option bounds it.
+            h = height if kind == "column" else min(float(rng.uniform(h0, h1)), height)
             if against:
                 a, b = edges[int(rng.integers(len(edges)))]
                 seg = b - a

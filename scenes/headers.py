@@ -111,12 +111,17 @@ _MAX_EMPTY_ACCESSOR = 3 * MAX_FACES
 #: (5 million faces) fit in a tenth of it. The buffers are read whole, so a file declaring (and
 #: holding, sparse) 6 GiB once reached memory.
 MAX_BUFFER_BYTES = 2 << 30
+#: Prefixes of the glTF extensions a file may require: they change only how it looks (materials,
+#: textures, lights), and only its geometry is read.
+APPEARANCE_EXTENSIONS = ("KHR_materials_", "KHR_texture_", "EXT_texture_", "KHR_lights_", "EXT_lights_")
 
 
 def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
     """Refuse a GLB or glTF file whose declared sizes exceed the bytes it has.
 
-    Checked: the GLB header's length and every chunk's length against the file; every buffer's
+    Checked first: every extension the file requires is one that changes only its look
+    (:data:`APPEARANCE_EXTENSIONS`), and no mesh's positions or indices are a sparse accessor. Then:
+    the GLB header's length and every chunk's length against the file; every buffer's
     ``byteLength`` against the bytes behind it (the GLB's BIN chunk, a ``data:`` URI, a side file);
     every bufferView within its buffer; every accessor within its bufferView, or, without one, at
     most three elements per face of the largest storey. The JSON is read with bounded nesting.
@@ -124,7 +129,8 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
     Raises
     ------
     InvalidMeshError
-        Naming the declaration (``accessors[3].count``) and the bytes it needs and has.
+        Naming the declaration (``accessors[3].count``) and the bytes it needs and has, the
+        extension required, or the sparse accessor.
     """
     if path.suffix.lower() == ".glb":
         text, bin_length = _glb_chunks(source, data)
@@ -138,6 +144,10 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
         raise InvalidMeshError(source, f"invalid glTF JSON: {exc}") from None
     if not isinstance(doc, dict):
         raise InvalidMeshError(source, "the glTF JSON is not an object")
+    # Before anything is read: trimesh skips what it cannot decode (printing a line of its own) and
+    # would load the file's fallback or placeholder data as the geometry.
+    _check_extensions(source, doc)
+    _check_sparse(source, doc)
     buffers = _items(source, doc, "buffers")
     views = _items(source, doc, "bufferViews")
     for i, image in enumerate(_items(source, doc, "images")):
@@ -200,6 +210,55 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
                 f"{where} declares {count:,} elements, which need {need:,} bytes, but bufferViews[{view}] "
                 f"has {length:,}",
             )
+
+
+def _check_extensions(source: str, doc: dict) -> None:
+    """Refuse a file that requires an extension the reader cannot apply to the geometry.
+
+    Required extensions that only change the look (materials, textures, lights) are fine, since only
+    the geometry is read; any other (``KHR_draco_mesh_compression``, ``EXT_meshopt_compression``,
+    ``KHR_mesh_quantization``, ...) changes what the buffers mean, and trimesh's reader ignores it.
+    """
+    required = doc.get("extensionsRequired", [])
+    if not isinstance(required, list) or not all(isinstance(x, str) for x in required):
+        raise InvalidMeshError(source, "extensionsRequired must be a list of extension names")
+    unsupported = [x for x in required if not x.startswith(APPEARANCE_EXTENSIONS)]
+    if unsupported:
+        names = ", ".join(repr(x[:80]) for x in unsupported[:5]) + (" ..." if len(unsupported) > 5 else "")
+        raise InvalidMeshError(
+            source,
+            f"the file requires glTF extension(s) {names}, which nbs-env cannot read (compressed or "
+            "quantized geometry); export it without them",
+        )
+
+
+def _check_sparse(source: str, doc: dict) -> None:
+    """Refuse sparse accessors among a mesh's positions or indices: trimesh reads only the dense base
+    (zeros, or the bufferView) and drops the sparse values, so the geometry would be wrong."""
+    accessors = _items(source, doc, "accessors")
+    for m, mesh in enumerate(_items(source, doc, "meshes")):
+        primitives = mesh.get("primitives", [])
+        if not isinstance(primitives, list):
+            continue
+        for p, primitive in enumerate(primitives):
+            if not isinstance(primitive, dict):
+                continue
+            attributes = primitive.get("attributes")
+            used = {"indices": primitive.get("indices")}
+            if isinstance(attributes, dict):
+                used["POSITION"] = attributes.get("POSITION")
+            for role, index in used.items():
+                if (
+                    isinstance(index, int)
+                    and not isinstance(index, bool)
+                    and 0 <= index < len(accessors)
+                    and "sparse" in accessors[index]
+                ):
+                    raise InvalidMeshError(
+                        source,
+                        f"accessors[{index}] ({role} of meshes[{m}].primitives[{p}]) is sparse, which nbs-env "
+                        "cannot read (its sparse values would be dropped); export the file without sparse accessors",
+                    )
 
 
 def _glb_chunks(source: str, data: bytes) -> tuple[bytes, int]:

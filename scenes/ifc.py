@@ -204,7 +204,8 @@ def load_ifc_scene(
         ``Name`` or ``LongName`` of the storey, or its index in the storeys sorted by elevation
         (negative counts from the top). Default: the storey nearest elevation 0. A string names a
         storey first: ``"1"`` is the storey named ``1`` where there is one, else the index 1 (the
-        command line's ``--storey`` passes its text so); an int is always an index.
+        command line's ``--storey`` passes its text so); an int is always an index. A name that
+        several storeys carry is refused: pass the index.
     class_map : mapping, optional
         Entries merged over :data:`DEFAULT_CLASS_MAP` (IFC class or ``Class.PREDEFINEDTYPE`` ->
         SurfaceClass, or None to leave such elements out).
@@ -228,7 +229,7 @@ def load_ifc_scene(
     SceneFileError
         The file does not exist.
     IfcError
-        The file is not IFC, has no storey, the storey is unknown, ``class_map`` names an unknown
+        The file is not IFC, has no storey, the storey is unknown or its name ambiguous, ``class_map`` names an unknown
         class, or the storey has no wall faces.
     MissingStructureError
         The storey has walls but no floor faces.
@@ -369,9 +370,15 @@ def _select_storey(source: str, storeys: list[_Storey], storey: str | int | None
     if isinstance(storey, str):
         # A name that matches exactly wins; only then is text that reads as an integer an index, so that
         # "--storey 1" reaches a storey named "1" and the second storey of a file that names none so.
-        for i, s in enumerate(storeys):
-            if storey in (s.name, s.long_name):
-                return i
+        named = [i for i, s in enumerate(storeys) if storey in (s.name, s.long_name)]
+        if len(named) > 1:
+            raise IfcError(
+                source,
+                f"{len(named)} storeys are named {storey!r}, indices {', '.join(map(str, named))}: pass the index "
+                f"instead (--storey {named[0]}, load_scene's storey={named[0]}); storeys: {listing}",
+            )
+        if named:
+            return named[0]
         try:
             index = int(storey)
         except ValueError:

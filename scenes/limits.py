@@ -1,4 +1,4 @@
-"""The largest storey nbs-env loads, stated once, and the units a mesh file's coordinates may be in.
+"""The largest (and the smallest) storey nbs-env loads, stated once, and the units a mesh file's coordinates may be in.
 
 A building drawn in millimetres and read as metres is a thousand times too large in every direction:
 the ground-truth samples of its surfaces (one per 25 cm²) and the grids sized from its bounds would
@@ -21,6 +21,24 @@ Limits
     A detailed storey is 10^4 to 10^6 triangles; the per-face work of loading (room outlines,
     interior probes, the ray caster's tree) grows with the count, and beyond this it runs to minutes
     and gigabytes for a model no scan plan needs at that detail.
+:data:`MIN_STOREY_WIDTH`, 1 m across, for files (mesh, IFC)
+    No room is under a metre across; a file in metres read as millimetres (or an IFC file whose
+    ``IfcUnitAssignment`` says millimetres for coordinates in metres) is a thousand times too small.
+:data:`MAX_ORIGIN_DISTANCE`, 10 km from the origin (every source, checked by :func:`scenes.load_scene`)
+    The simulator casts rays and bins points in float32 and on voxel grids of at most 2^20 cells
+    from the origin: at 10 km a float32 step is about 1 mm, beyond it the scans lose millimetres and
+    a 1 cm grid runs out of cells. Georeferenced files (coordinates of 10^5 to 10^6 m) must be moved
+    near the origin first. :func:`scenes.importers.load_mesh_scene` and
+    :func:`scenes.ifc.load_ifc_scene` keep the coordinates as they are (an export round trip keeps
+    them exactly); :func:`scenes.load_scene` refuses them.
+:data:`MIN_STOREY_HEIGHT`, 1.5 m from the floor to the top of the walls and ceilings (checked, with
+:data:`STOREY_GAP`, by :func:`scenes.load_scene` for every source)
+    Nothing lower is a storey a robot scans (a flattened model, z and y swapped); nor is one whose
+    walls have no area (:func:`check_storey_shape`).
+:data:`STOREY_GAP`, 2 m, and :data:`STOREY_SHARE`, 10%
+    A storey's floor faces may lie on several levels (split levels, a sunken room, stairs and ramps
+    labelled floor), but floor levels more than :data:`STOREY_GAP` apart with no floor between them,
+    each holding at least :data:`STOREY_SHARE` of the floor area, are two storeys in one file.
 """
 
 from __future__ import annotations
@@ -29,14 +47,22 @@ import math
 
 import numpy as np
 
-from scenes.errors import StoreySizeError
+from scenes.errors import MissingStructureError, StoreySizeError
+from scenes.labels import SurfaceClass
 
 __all__ = [
     "MAX_FACES",
+    "MAX_ORIGIN_DISTANCE",
     "MAX_STOREY_HEIGHT",
     "MAX_STOREY_WIDTH",
+    "MIN_STOREY_HEIGHT",
+    "MIN_STOREY_WIDTH",
+    "STOREY_GAP",
+    "STOREY_SHARE",
     "UNITS",
     "check_face_count",
+    "check_origin_distance",
+    "check_storey_shape",
     "check_storey_size",
     "unit_scale",
 ]
@@ -44,6 +70,11 @@ __all__ = [
 MAX_STOREY_WIDTH = 500.0
 MAX_STOREY_HEIGHT = 50.0
 MAX_FACES = 5_000_000
+MIN_STOREY_WIDTH = 1.0
+MAX_ORIGIN_DISTANCE = 10_000.0
+MIN_STOREY_HEIGHT = 1.5
+STOREY_GAP = 2.0
+STOREY_SHARE = 0.10
 
 #: Length units of a mesh file's coordinates: metres per unit.
 UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "ft": 0.3048, "in": 0.0254}
@@ -51,6 +82,8 @@ _UNIT_WORDS = {"m": "metres", "cm": "centimetres", "mm": "millimetres", "ft": "f
 #: The height of an ordinary storey, metres: the unit that brings a storey's height nearest to it is
 #: the likely one of a file that is too large.
 _TYPICAL_HEIGHT = 3.0
+#: The likely cause of a storey lower than MIN_STOREY_HEIGHT, unless the caller knows better.
+_LOW_HINT = "is the model flattened?"
 
 
 def unit_scale(units: str) -> float:
@@ -108,22 +141,138 @@ def check_storey_size(
     with np.errstate(over="ignore", invalid="ignore"):  # 1e308 - (-1e308) is inf: still too large
         extent = v.max(axis=0) - v.min(axis=0)
     width, height = float(max(extent[0], extent[1])), float(extent[2])
-    if width <= MAX_STOREY_WIDTH and height <= MAX_STOREY_HEIGHT:
+    # Too small only for files: a unit slip. Scenes built in code (tests, tools) may be any size.
+    too_small = (units is not None or stated) and width < MIN_STOREY_WIDTH
+    if width <= MAX_STOREY_WIDTH and height <= MAX_STOREY_HEIGHT and not too_small:
         return
-    sizes = (
-        f"the storey is {_metres(width)} across and {_metres(height)} high (the most nbs-env loads is "
-        f"{MAX_STOREY_WIDTH:g} m across and {MAX_STOREY_HEIGHT:g} m high)"
-    )
+    if too_small:
+        sizes = (
+            f"the storey is {_metres(width)} across and {_metres(height)} high (the least nbs-env loads is "
+            f"{MIN_STOREY_WIDTH:g} m across)"
+        )
+    else:
+        sizes = (
+            f"the storey is {_metres(width)} across and {_metres(height)} high (the most nbs-env loads is "
+            f"{MAX_STOREY_WIDTH:g} m across and {MAX_STOREY_HEIGHT:g} m high)"
+        )
     guess = _likely_unit(width, height, units or "m")
     if stated:
-        cause = "read in the length unit the file states: check its IfcUnitAssignment"
+        doubt = "is the file's unit right? " if too_small else ""
+        cause = f"{doubt}the coordinates were read in the length unit the file states: check its IfcUnitAssignment"
     elif units is not None and guess is not None:
         cause = f"is the file in {_UNIT_WORDS[guess]}? pass --units {guess} (load_scene's units={guess!r})"
     elif guess is not None:
         cause = f"are its lengths in {_UNIT_WORDS[guess]}? they must be metres"
+    elif too_small:
+        cause = f"is the file's unit right? its coordinates were read as {_UNIT_WORDS[units or 'm']}"
     else:
         cause = "is there geometry far from the building, or are the coordinates broken?"
     raise StoreySizeError(source, f"{sizes}: {cause}")
+
+
+def check_origin_distance(source: str, vertices: np.ndarray) -> None:
+    """Refuse a storey farther than :data:`MAX_ORIGIN_DISTANCE` from the origin (a georeferenced file).
+
+    The distance is that of the bounding box's farthest corner: every surface point must lie within
+    the limit for the ray caster's float32 to keep millimetres.
+
+    Raises
+    ------
+    StoreySizeError
+        Naming the distance, the limit, why, and the fix (move the model near the origin).
+    """
+    v = np.asarray(vertices, dtype=float).reshape(-1, 3)
+    if len(v) == 0:
+        return
+    with np.errstate(over="ignore", invalid="ignore"):
+        corner = np.maximum(np.abs(v.min(axis=0)), np.abs(v.max(axis=0)))
+        distance = float(np.linalg.norm(corner))
+    if distance <= MAX_ORIGIN_DISTANCE:
+        return
+    raise StoreySizeError(
+        source,
+        f"the storey lies up to {_metres(distance)} from the origin (nbs-env loads storeys within "
+        f"{MAX_ORIGIN_DISTANCE:,.0f} m of it: beyond that float32 ray casting loses millimetres); "
+        "move the model near the origin (subtract its site or survey offset) and load it again",
+    )
+
+
+def check_storey_shape(
+    source: str, vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray, *, low_hint: str = _LOW_HINT
+) -> None:
+    """Refuse what is no single storey: lower than :data:`MIN_STOREY_HEIGHT`, walls of no area, or
+    floors on two levels more than :data:`STOREY_GAP` apart (module docstring).
+
+    Parameters
+    ----------
+    vertices : (V, 3) float
+        Metres, z up.
+    faces : (F, 3) int
+    labels : (F,) int
+        One :class:`~scenes.labels.SurfaceClass` per face.
+    low_hint : str
+        The likely cause of a storey that is too low, for the message.
+
+    Raises
+    ------
+    StoreySizeError
+        The storey is too low, or holds several storeys (the message lists the floor levels).
+    MissingStructureError
+        The wall faces have no area.
+    """
+    v = np.asarray(vertices, dtype=float).reshape(-1, 3)
+    tri = v[np.asarray(faces, dtype=np.int64).reshape(-1, 3)]
+    labels = np.asarray(labels).reshape(-1)
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    norm = np.linalg.norm(cross, axis=1)
+    area = 0.5 * norm
+    z = tri[..., 2].mean(axis=1)
+    floor = labels == SurfaceClass.FLOOR
+    if not floor.any():
+        return  # the loaders refuse it with their own message
+    # The floor's levels: its level faces (either way up: files do not agree on normals), by height.
+    level = floor & (np.abs(cross[:, 2]) > 0.5 * norm) & (area > 0)
+    if not level.any():
+        level = floor
+    order = np.flatnonzero(level)[np.argsort(z[level], kind="stable")]
+    breaks = np.flatnonzero(np.diff(z[order]) > STOREY_GAP) + 1
+    groups = np.split(order, breaks)
+    total = float(area[order].sum())
+    main = max(groups, key=lambda g: float(area[g].sum()))
+    floor_z = _weighted_median(z[main], area[main])
+    top_faces = np.isin(labels, [SurfaceClass.WALL, SurfaceClass.CEILING])
+    top = float(tri[top_faces][..., 2].max()) if top_faces.any() else floor_z
+    if top - floor_z < MIN_STOREY_HEIGHT:
+        raise StoreySizeError(
+            source,
+            f"the storey is {_metres(max(top - floor_z, 0.0))} high from its floor (at {floor_z:.2f} m) to the top "
+            f"of its walls and ceilings (at least {MIN_STOREY_HEIGHT:g} m): {low_hint}",
+        )
+    walls = labels == SurfaceClass.WALL
+    if walls.any() and float(area[walls].sum()) <= 1e-6:
+        raise MissingStructureError(
+            source,
+            f"the {int(walls.sum()):,} wall faces have no area (every one is a line or a point): nothing to scan",
+        )
+    if total > 0 and len(groups) > 1:
+        shares = [(float(area[g].sum()) / total, _weighted_median(z[g], area[g])) for g in groups]
+        storeys = [(share, at) for share, at in shares if share >= STOREY_SHARE]
+        if len(storeys) > 1:
+            found = "; ".join(f"{at:.2f} m: {share:.0%}" for share, at in storeys)
+            raise StoreySizeError(
+                source,
+                f"the floor faces lie on {len(storeys)} levels more than {STOREY_GAP:g} m apart (elevation: share "
+                f"of the floor area; {found}): the file holds several storeys; load one storey per file (the "
+                f"floors of a split level or a stair rise less than {STOREY_GAP:g} m from one face to the next)",
+            )
+
+
+def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
+    order = np.argsort(values, kind="stable")
+    cumulative = np.cumsum(weights[order])
+    if cumulative[-1] <= 0:
+        return float(np.median(values))
+    return float(values[order[np.searchsorted(cumulative, 0.5 * cumulative[-1])]])
 
 
 def _likely_unit(width: float, height: float, read_as: str) -> str | None:
@@ -136,7 +285,7 @@ def _likely_unit(width: float, height: float, read_as: str) -> str | None:
         factor = scale / UNITS[read_as]
         w, h = width * factor, height * factor
         # A unit that leaves the storey under a metre high is not the file's.
-        if w > MAX_STOREY_WIDTH or h > MAX_STOREY_HEIGHT or h < 1.0:
+        if w > MAX_STOREY_WIDTH or h > MAX_STOREY_HEIGHT or h < 1.0 or w < MIN_STOREY_WIDTH:
             continue
         score = abs(math.log(h / _TYPICAL_HEIGHT))
         if score < best_score:

@@ -8,6 +8,7 @@ module must not know the corpus.
 from __future__ import annotations
 
 import json
+import os
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -15,9 +16,18 @@ from typing import Any
 from scenes.errors import SceneError, SceneFileError, UnknownSceneError, UnsupportedFormatError
 from scenes.floorplan import FloorPlan, extrude, load_plan
 from scenes.generator import GeneratorConfig, generate_storey
+from scenes.limits import check_origin_distance, check_storey_shape
 from scenes.model import Scene
 
-__all__ = ["MESH_EXTENSIONS", "SUPPORTED_EXTENSIONS", "bundled_plan", "check_source", "list_scenes", "load_source"]
+__all__ = [
+    "MESH_EXTENSIONS",
+    "SUPPORTED_EXTENSIONS",
+    "as_spec",
+    "bundled_plan",
+    "check_source",
+    "list_scenes",
+    "load_source",
+]
 
 MESH_EXTENSIONS = (".obj", ".glb", ".gltf", ".ply")
 SUPPORTED_EXTENSIONS = (".json", *MESH_EXTENSIONS, ".ifc")
@@ -44,13 +54,19 @@ def bundled_plan(name: str) -> FloorPlan:
     return FloorPlan.from_dict(json.loads(text), source=f"{name} (bundled)")
 
 
-def load_source(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene:
+def load_source(spec: str | os.PathLike[str] | FloorPlan, options: dict[str, Any]) -> Scene:
     """Load a building from any source but a corpus entry: what :func:`scenes.load_scene` does for
     every other spec, with the ``start`` option already taken out.
 
+    Every source, whatever its format, is then checked in one place against the limits of
+    :mod:`scenes.limits` that the format loaders leave to it: a storey farther than
+    :data:`~scenes.limits.MAX_ORIGIN_DISTANCE` from the origin, lower than
+    :data:`~scenes.limits.MIN_STOREY_HEIGHT`, with walls of no area, or with floors on two storeys'
+    levels is refused.
+
     Parameters
     ----------
-    spec : str, Path or FloorPlan
+    spec : str, os.PathLike or FloorPlan
         A bundled name, a file path, ``"generated:SEED"`` or a :class:`FloorPlan`.
     options : dict
         The options of :func:`scenes.load_scene` that the kind of source takes; the dict may be changed.
@@ -65,10 +81,47 @@ def load_source(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene:
     SceneError, TypeError
         As :func:`scenes.load_scene`: a source that cannot be loaded, an option it does not take.
     """
+    spec = as_spec(spec)
+    scene = _load_source(spec, options)
+    if isinstance(spec, FloorPlan):
+        source, hint = scene.name, _PLAN_LOW_HINT
+    else:
+        text = str(spec)
+        suffix = Path(text).suffix.lower()
+        # A file is named as the user spelled it (a name= option must not hide which file it was).
+        source = scene.name if suffix not in (*MESH_EXTENSIONS, ".ifc") else text
+        if suffix == ".ifc" and scene.metadata.get("storey") is not None:
+            source = f"{text}#{scene.metadata['storey']}"
+        hint = _MESH_LOW_HINT if suffix in MESH_EXTENSIONS else _IFC_LOW_HINT if suffix == ".ifc" else _PLAN_LOW_HINT
+    vertices = scene.mesh.vertices
+    check_origin_distance(source, vertices)
+    check_storey_shape(source, vertices, scene.mesh.faces, scene.face_labels, low_hint=hint)
+    return scene
+
+
+_MESH_LOW_HINT = "is the model flattened, or is its up axis y (pass --y-up, load_scene's y_up=True)?"
+_IFC_LOW_HINT = "does the storey hold its walls and slabs, and is the file's unit right?"
+_PLAN_LOW_HINT = "raise the plan's ceiling_height"
+
+
+def as_spec(spec: Any) -> str | Path | FloorPlan:
+    """``spec`` as :func:`load_source` reads it: any ``os.PathLike`` becomes a :class:`~pathlib.Path`.
+
+    Raises
+    ------
+    TypeError
+        ``spec`` is no str, path-like object or FloorPlan.
+    """
+    if isinstance(spec, (str, Path, FloorPlan)):
+        return spec
+    if isinstance(spec, os.PathLike):
+        return Path(os.fsdecode(os.fspath(spec)))
+    raise TypeError(f"scene spec must be a str, os.PathLike or FloorPlan, got {type(spec).__name__}")
+
+
+def _load_source(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene:
     if isinstance(spec, FloorPlan):
         return extrude(spec, **_take(options, ("validate",), "floor plan"))
-    if not isinstance(spec, (str, Path)):
-        raise TypeError(f"scene spec must be a str, Path or FloorPlan, got {type(spec).__name__}")
     text = str(spec)
     check_source(text)
     if text.startswith(_GENERATED):
