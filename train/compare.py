@@ -44,6 +44,7 @@ import re
 import sys
 import time
 import traceback
+import warnings
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -62,6 +63,7 @@ __all__ = [
     "RunSpec",
     "WorkerLostError",
     "expand_scenes",
+    "record_problem",
     "run_grid",
     "run_one",
     "summarise",
@@ -807,7 +809,7 @@ def _plots(results: list[dict[str, Any]], oracles: dict[str, dict[str, Any]], ou
     ax.set_ylabel("structural surface sensed (%)")
     ax.set_ylim(0, 100)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="lower right")
+    _legend(ax)
     ax.set_title("Coverage against scans (mean over runs; band: min to max)")
     _save(fig, out / "coverage_vs_scans.png")
     _quality_plot(ok, policies, out)
@@ -829,6 +831,12 @@ def _plots(results: list[dict[str, Any]], oracles: dict[str, dict[str, Any]], ou
     fig.suptitle("Path length and time per run (mean ± std)")
     fig.tight_layout()
     _save(fig, out / "path_time.png")
+
+
+def _legend(ax: Any) -> None:
+    """The plot's legend, when it has a labelled curve (none when every run failed: matplotlib warns)."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=8, loc="lower right")
 
 
 def _save(fig: Any, path: Path) -> None:
@@ -878,7 +886,7 @@ def _quality_plot(ok: list[dict[str, Any]], policies: list[str], out: Path) -> N
         ax.grid(alpha=0.3)
         ax.set_title(title, fontsize=9)
         if k == 0:
-            ax.legend(fontsize=8, loc="lower right")
+            _legend(ax)
     fig.suptitle("Coverage meeting the quality thresholds against scans (dotted: all coverage)")
     fig.tight_layout()
     _save(fig, out / "quality_vs_scans.png")
@@ -912,9 +920,16 @@ def write_outputs(
         raise  # a file that could not be written (a full disk): its own message names it
     except Exception as exc:  # the runs are on disk; say what failed and where they are
         write_text(out / "summary_error.txt", f"{type(exc).__name__}: {exc}\n\n{traceback.format_exc()}")
+        bad = _culprits(results, out)
+        if bad:  # --resume runs these again (load_finished refuses them) and reuses the others
+            named = "; ".join(f"{path}: {reason}" for path, reason in bad[:3])
+            more = f" (and {len(bad) - 3} more)" if len(bad) > 3 else ""
+            advice = f"{named}{more}; rerun with --resume to run {'it' if len(bad) == 1 else 'them'} again"
+        else:
+            advice = "rerun with --resume to reuse the runs"
         raise CompareError(
             f"the runs are in {out}/runs, but the summary failed ({type(exc).__name__}: {exc}); "
-            f"see {out / 'summary_error.txt'}; rerun with --resume to reuse the runs"
+            f"see {out / 'summary_error.txt'}; {advice}"
         ) from exc
     (out / "summary_error.txt").unlink(missing_ok=True)
     return rows
@@ -1012,27 +1027,63 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
     """The successful runs and oracles an earlier ``nbs compare --out OUT`` left, for ``--resume``.
 
     A run is reused when its ``run.json`` holds the same spec (scene, policy name, seed, preset and
-    configuration overrides); an oracle when ``oracle.json`` has it for the same preset and
+    configuration overrides) and its ``metrics.json`` is a record the table can be made of
+    (:func:`record_problem`); an oracle when ``oracle.json`` has it for the same preset and
     overrides, and while the scene's file (:func:`source_digest`) and a ``ppo:PATH`` checkpoint
-    (:func:`policy_digest`) are those it ran on. Failed runs are run again.
+    (:func:`policy_digest`) are those it ran on. Failed runs are run again, and so are damaged
+    records: each of those is named on stderr with the reason, in one line.
     """
     out = Path(out)
     runs: dict[str, Any] = {}
+    paths: dict[str, Path] = {}
     digests = {scene: source_digest(scene) for scene in dict.fromkeys(s.scene for s in specs)}
     checkpoints = {policy: policy_digest(policy) for policy in dict.fromkeys(s.policy for s in specs)}
+
+    def damaged(path: Path, reason: str) -> None:
+        print(f"nbs compare: {path}: {reason}; running it again", file=sys.stderr)
+
     for spec in specs:
         folder = _run_folder(out, asdict(spec))
         try:
-            record = json.loads((folder / "run.json").read_text())
-            # An edited building file is another building; a retrained checkpoint another policy.
-            same_file = record.get("source_sha256") == digests[spec.scene]
-            same_file &= record.get("policy_sha256") == checkpoints[spec.policy]
-            if record.get("ok") and record.get("spec") == json_form(asdict(spec)) and same_file:
-                finished = {**record, "metrics": json.loads((folder / "metrics.json").read_text())}
-                summarise([finished], {})  # figures the table can be made of (a `{}` once failed every resume)
-                runs[spec.key] = finished
-        except Exception:  # not there, unreadable, or figures the table cannot use: run it again
+            text = (folder / "run.json").read_text()
+        except (OSError, UnicodeDecodeError):  # not there (not finished), or not a file: writing it says so
             continue
+        try:
+            record = json.loads(text)
+        except ValueError as exc:
+            damaged(folder / "run.json", f"not JSON ({exc})")
+            continue
+        if not isinstance(record, dict):
+            damaged(folder / "run.json", f"holds {_shown(record)}, not a run's record")
+            continue
+        # An edited building file is another building; a retrained checkpoint another policy.
+        same_file = record.get("source_sha256") == digests[spec.scene]
+        same_file &= record.get("policy_sha256") == checkpoints[spec.policy]
+        stored = record.get("spec")
+        identity = {"scene": spec.scene, "policy": spec.policy, "seed": spec.seed}
+        if isinstance(stored, dict) and any(stored.get(k) != v for k, v in identity.items()):
+            other = ", ".join(f"{k} {_shown(stored.get(k))}" for k in identity)
+            damaged(folder / "run.json", f"it is the record of {other}, not of the run whose folder it is in")
+            continue
+        if not (record.get("ok") is True and stored == json_form(asdict(spec)) and same_file):
+            continue  # a failed run, or another grid's: run it again
+        path = folder / "metrics.json"
+        try:
+            finished = {**record, "metrics": json.loads(path.read_text())}
+        except FileNotFoundError:
+            damaged(path, "missing")
+            continue
+        except (OSError, UnicodeDecodeError, ValueError) as exc:
+            damaged(path, f"cannot be read ({type(exc).__name__}: {exc})")
+            continue
+        problem = record_problem(finished)
+        if problem is not None:
+            damaged(path, problem)
+            continue
+        runs[spec.key], paths[spec.key] = finished, path
+    for key, problem in _odd_rooms(runs).items():
+        damaged(paths[key], problem)
+        del runs[key]
     oracles: dict[str, Any] = {}
     settings = [{"preset": s.preset, "overrides": json_form(s.overrides)} for s in specs]
     try:
@@ -1049,6 +1100,174 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
         ):
             oracles[scene] = plan
     return {"runs": runs, "oracles": oracles}
+
+
+# ---------------------------------------------------------------------- a run's record, checked
+#: No figure of a run (scans, points, metres, seconds) comes near this: the table's means and
+#: spreads of larger ones overflow (a hand-edited 1e308).
+MAX_FIGURE = 1e15
+
+
+class _BadRecordError(ValueError):
+    """Why a run's ``metrics.json`` cannot go into the table (:func:`record_problem`)."""
+
+
+def _shown(value: Any) -> str:
+    """``value`` for a message, bounded: a record may hold a 300-digit number or a huge string."""
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _number(record: dict[str, Any], key: str, where: str, *, high: float = MAX_FIGURE, **kind: bool) -> None:
+    """``record[key]`` is a number in [0, high]: ``integer``, an int; ``optional``, or absent;
+    ``nullable``, or None or absent (what the summary reads only when it is not None)."""
+    name = f"{where}{key}"
+    if key not in record:
+        if kind.get("optional") or kind.get("nullable"):
+            return
+        raise _BadRecordError(f"{name} is missing")
+    value = record[key]
+    if value is None and kind.get("nullable"):
+        return
+    integer = kind.get("integer", False)
+    if isinstance(value, bool) or not isinstance(value, int if integer else (int, float)):
+        raise _BadRecordError(f"{name} is {_shown(value)}, not {'an integer' if integer else 'a number'}")
+    if not 0 <= value <= high:  # NaN and ±inf fail too
+        raise _BadRecordError(f"{name} is {_shown(value)}, not within [0, {high:g}]")
+
+
+def _entries(record: dict[str, Any], key: str, where: str = "", *, optional: bool = False) -> list[dict[str, Any]]:
+    """``record[key]``: a list of objects (``optional``: or absent, an empty list)."""
+    if key not in record and optional:
+        return []
+    value = record.get(key)
+    if not isinstance(value, list):
+        raise _BadRecordError(f"{where}{key} is {_shown(value)}, not a list")
+    for k, entry in enumerate(value):
+        if not isinstance(entry, dict):
+            raise _BadRecordError(f"{where}{key}[{k}] is {_shown(entry)}, not an object")
+    return value
+
+
+def _text(record: dict[str, Any], key: str, where: str) -> None:
+    if not isinstance(record.get(key), str):
+        raise _BadRecordError(f"{where}{key} is {_shown(record.get(key))}, not a string")
+
+
+def _check_metrics(m: Any, spec: dict[str, Any]) -> None:
+    """Raise :class:`_BadRecordError` unless ``m`` holds, of the right type and within its meaning, every
+    figure the tables and plots read of a run, and says it is the run of ``spec``."""
+    if not isinstance(m, dict):
+        raise _BadRecordError(f"it holds {_shown(m)}, not a run's figures")
+    for key in ("scene", "policy", "seed"):  # the record of another run, copied or edited in
+        want, have = spec[key], m.get(key)
+        if type(have) is not type(want) or have != want:
+            raise _BadRecordError(f"it is the record of {key} {_shown(have)}, but it sits in the run of {key} {want!r}")
+    pct = {"high": 100.0}
+    _number(m, "scans", "", integer=True)
+    _number(m, "structure_sensed_pct", "", **pct)
+    _number(m, "processed_points", "", integer=True)
+    for key in ("path_length_m", "processing_time_s", "acquisition_time_s", "travel_time_s"):
+        _number(m, key, "")
+    if not isinstance(m.get("complete"), bool):
+        raise _BadRecordError(f"complete is {_shown(m.get('complete'))}, not true or false")
+    for k, room in enumerate(_entries(m, "rooms")):
+        where = f"rooms[{k}]."
+        _number(room, "id", where, integer=True)
+        _text(room, "name", where)
+        _number(room, "scans", where, integer=True)
+        _number(room, "structure_sensed_pct", where, **pct)
+        _number(room, "processed_points", where, integer=True)
+        _number(room, "path_length_m", where)
+    steps = _entries(m, "steps")
+    if len(steps) != m["scans"] or not steps:
+        raise _BadRecordError(f"it has {len(steps)} steps for {m['scans']} scans")
+    for k, step in enumerate(steps):
+        _number(step, "structure_sensed_pct", f"steps[{k}].", **pct)
+        for key in ("dense_pct", "incidence_pct"):  # the quality curves: every step's, or none
+            _number(step, key, f"steps[{k}].", nullable=steps[0].get(key) is None, **pct)
+    for k, end in enumerate(_entries(m, "room_ends", optional=True)):
+        _text(end, "reason", f"room_ends[{k}].")
+        _number(end, "scans", f"room_ends[{k}].", integer=True)
+        _number(end, "standing_room", f"room_ends[{k}].", optional=True)
+    for k, event in enumerate(_entries(m, "door_events", optional=True)):
+        _text(event, "event", f"door_events[{k}].")
+        if event["event"] == "abandoned":
+            _text(event, "reason", f"door_events[{k}].")
+    parts = {"registration_error": False, "quality": True, "registrability": True}  # part: may be null
+    for part, nullable in parts.items():
+        if part in m and not (isinstance(m[part], dict) or (nullable and m[part] is None)):
+            raise _BadRecordError(f"{part} is {_shown(m[part])}, not an object")
+    if "registration_error" in m:
+        for key in ("mean_m", "max_m"):
+            _number(m["registration_error"], key, "registration_error.")
+    quality = m.get("quality") or {}
+    if quality:  # the thresholds head quality.md and title the quality plot
+        for key in ("min_density_per_m2", "max_incidence_deg", "density_radius_m"):
+            _number(quality, key, "quality.")
+    for key in ("dense_pct", "incidence_pct", "quality_pct"):
+        _number(quality, key, "quality.", nullable=True, **pct)
+    registrability = m.get("registrability") or {}
+    for key in ("mean_overlap", "min_overlap", "min_fitness"):  # shares
+        _number(registrability, key, "registrability.", high=1.0, nullable=True)
+    _number(registrability, "refused", "registrability.", integer=True, optional=True)  # read when there
+
+
+def record_problem(record: dict[str, Any], *, summary: bool = True) -> str | None:
+    """Why a finished run (``{"spec", "ok", "metrics"}``) cannot go into the table, or None.
+
+    Its ``metrics.json`` must hold every figure the tables and plots read, of the right type and
+    within its meaning (percentages in [0, 100], counts integers, lengths and times finite and not
+    negative, the steps' curves), and name the scene, policy and seed of the run it sits in. Then
+    (``summary``) the table is made of it alone, warnings as errors: what the summary would choke on
+    is found here, not after the grid.
+    """
+    try:
+        _check_metrics(record.get("metrics"), record["spec"])
+        if summary:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")
+                summarise([record], {})
+    except _BadRecordError as exc:
+        return str(exc)
+    except Exception as exc:
+        return f"the table cannot be made of it ({type(exc).__name__}: {_shown(str(exc))})"
+    return None
+
+
+def _odd_rooms(runs: dict[str, dict[str, Any]]) -> dict[str, str]:
+    """The runs whose rooms are not those most runs of their scene list: the table lines up every
+    run's rooms with the first's (a record edited or copied from another scene's)."""
+    rooms: dict[str, dict[str, tuple]] = {}
+    for key, r in runs.items():
+        rooms.setdefault(r["spec"]["scene"], {})[key] = tuple((p["id"], p["name"]) for p in r["metrics"]["rooms"])
+    odd = {}
+    for scene_rooms in rooms.values():
+        counts: dict[tuple, int] = {}
+        for names in scene_rooms.values():
+            counts[names] = counts.get(names, 0) + 1
+        ranked = sorted(counts.values(), reverse=True)
+        # The rooms most runs list; with no such list (a tie), none can be told right: all run again.
+        usual = max(counts, key=counts.__getitem__) if len(ranked) == 1 or ranked[0] > ranked[1] else None
+        for key, names in scene_rooms.items():
+            if usual is None:
+                odd[key] = f"its {len(names)} rooms are not those of the scene's other runs"
+            elif names != usual:
+                odd[key] = f"its {len(names)} rooms are not the {len(usual)} of the scene's other runs"
+    return odd
+
+
+def _culprits(results: Sequence[dict[str, Any]], out: Path) -> list[tuple[Path, str]]:
+    """The ``metrics.json`` files (and why) of the runs the summary could not be made of, as far as
+    they can be told: a summary that fails on every run alike names none."""
+    ok = {str(k): r for k, r in enumerate(results) if r.get("ok") and isinstance(r.get("spec"), dict)}
+    found = {k: p for k, r in ok.items() if (p := record_problem(r, summary=False)) is not None}
+    if not found:  # every record is well-formed: are they unlike each other, or does one alone fail?
+        found = _odd_rooms(ok)
+    if not found:
+        found = {k: p for k, r in ok.items() if (p := record_problem(r)) is not None}
+        found = found if len(found) < len(ok) else {}
+    return [(_run_folder(out, ok[k]["spec"]) / "metrics.json", problem) for k, problem in found.items()]
 
 
 def _check_scene(scene: str) -> None:
