@@ -9,6 +9,7 @@ top-down: env → storey → robot → sensing and belief → planner.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import gymnasium as gym
@@ -213,6 +214,8 @@ class NBSEnv(gym.Env):
             The start is not free floor of the storey.
         """
         super().reset(seed=seed)
+        if options is not None and not isinstance(options, Mapping):
+            raise ConfigError(f"reset options must be a dict (or None), got {type(options).__name__}")
         options = dict(options or {})
         unknown = sorted(set(options) - {"scene", "start"})
         if unknown:

@@ -83,6 +83,9 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import os
+import shutil
+import tempfile
 import time
 import uuid
 from dataclasses import dataclass
@@ -1089,8 +1092,9 @@ def write_report(
         After an episode. Its top-down picture is drawn as with ``render_mode="rgb_array"``
         whatever the env's render mode.
     out_dir : str or Path
-        Created if missing; existing report files are overwritten. Each file is written whole or
-        not at all (:mod:`nbs_env.atomic`): a full disk or a signal leaves the previous file.
+        Created if missing; existing report files are replaced. The files are written into a
+        temporary folder inside it, then renamed over the earlier ones: a full disk or an error
+        part way leaves the earlier report as it was (the folder needs room for both meanwhile).
     scene_name, policy, seed, policy_times
         As for :func:`nbs_env.report.metrics_dict`.
     run_started : float, optional
@@ -1119,14 +1123,47 @@ def write_report(
     point's direction in the scan that first measured it), as ``cloud.laz`` holds them by default.
     The full cloud is in the scans' order, each scan's points in its pattern's (as the E57 records).
     """
-    import matplotlib.pyplot as plt
-
     log = env.storey.scan_log
     if full_cloud and not log:
         raise ValueError("full_cloud needs the env's kept scans: make the env with keep_scans=True")
     run_started = time.time() if run_started is None else float(run_started)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    final = Path(out_dir)
+    final.mkdir(parents=True, exist_ok=True)
+    # The files are written beside the folder's, then renamed over them together: a full disk or an
+    # error part way leaves the earlier report whole, never one of mixed runs.
+    out = Path(tempfile.mkdtemp(prefix=".report-", dir=final))
+    try:
+        try:
+            metrics = _write_report_files(env, out, scene_name, policy, seed, policy_times, run_started, full_cloud)
+        except OSError as exc:  # named as the report's file, not the temporary folder's
+            if exc.filename is not None and Path(exc.filename).parent == out:
+                exc.filename = str(final / Path(exc.filename).name)
+            raise
+        written = {p.name for p in out.iterdir()}
+        for name in sorted(written):
+            os.replace(out / name, final / name)
+        for name in set(REPORT_FILES) - written:  # an earlier report's scans.e57, not this run's
+            with contextlib.suppress(FileNotFoundError):
+                (final / name).unlink()
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+    return metrics
+
+
+def _write_report_files(
+    env: NBSEnv,
+    out: Path,
+    scene_name: str,
+    policy: str,
+    seed: int | None,
+    policy_times: dict[int, float] | None,
+    run_started: float,
+    full_cloud: bool,
+) -> dict[str, Any]:
+    """:func:`write_report`'s files, into the empty folder ``out``."""
+    import matplotlib.pyplot as plt
+
+    log = env.storey.scan_log
     metrics = metrics_dict(env.storey, scene_name, policy, seed, policy_times)
     write_text(out / "metrics.json", json.dumps(metrics, indent=1) + "\n")
 

@@ -22,6 +22,7 @@ No gymnasium import: :class:`~nbs_env.env.NBSEnv` puts spaces, reward and observ
 from __future__ import annotations
 
 import copy
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -221,6 +222,17 @@ def resolve_scene(
         robot is put down).
     """
     cache = {} if cache is None else cache
+    if isinstance(spec, os.PathLike) and not isinstance(spec, Path):
+        spec = Path(os.fspath(spec))
+    if start is not None:
+        given = start
+        try:
+            start = np.asarray(start, dtype=float)
+        except (TypeError, ValueError):
+            start = np.full(1, np.nan)
+        if start.shape not in ((2,), (3,)) or not np.isfinite(start).all():
+            shown = repr(given)[:80]
+            raise ConfigError(f"options['start'] must be 2 or 3 finite numbers in metres (x, y[, z]), got {shown}")
     if isinstance(spec, Scene):
         scene = spec
     elif isinstance(spec, FloorPlan):

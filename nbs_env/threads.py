@@ -20,18 +20,42 @@ _POOL_SIZE = 0
 _BESIDE: ThreadPoolExecutor | None = None
 
 
-def cores() -> int:
-    """Threads for the kernels: ``NBS_THREADS`` when set, else the cores the process may use."""
-    value = os.environ.get("NBS_THREADS")
-    if value:
-        try:
-            return max(1, int(value))
-        except ValueError:
-            raise ValueError(f"NBS_THREADS must be a whole number of threads, got {value!r}") from None
+#: ``NBS_THREADS`` may ask for at most this many threads per core the process may use: more only
+#: share the same cores, and each takes a stack (10⁵ threads crashed the process).
+THREADS_PER_CORE = 4
+
+
+def _available() -> int:
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - not Linux
         return max(1, os.cpu_count() or 1)
+
+
+def cores() -> int:
+    """Threads for the kernels: ``NBS_THREADS`` when set, else the cores the process may use.
+
+    Raises
+    ------
+    ValueError
+        ``NBS_THREADS`` is not a whole number within 1 .. :data:`THREADS_PER_CORE` × the cores.
+    """
+    value = os.environ.get("NBS_THREADS")
+    available = _available()
+    if value:
+        most = THREADS_PER_CORE * available
+        try:
+            n = int(value.strip()) if len(value) <= 20 else -1
+        except ValueError:
+            n = -1
+        if not 1 <= n <= most:
+            shown = value if len(value) <= 40 else value[:40] + "…"
+            raise ValueError(
+                f"NBS_THREADS must be a whole number of threads within 1..{most} ({THREADS_PER_CORE} per core "
+                f"of the {available} this process may use), got {shown!r}"
+            )
+        return n
+    return available
 
 
 def split(

@@ -452,3 +452,70 @@ def test_an_ifc_storey_named_1_is_the_one_storey_1_loads(tmp_path, capsys):
     assert info["name"].endswith("#1") and len(info["rooms"]) == 2
     code, err = run_cli(f"scenes info {path} --storey OG", capsys)
     assert code == EXIT_SCENE_ERROR and "no wall faces" in err
+
+
+# ------------------------------------------------------------- the environment the command runs in
+@pytest.mark.parametrize("value", ["100000", "abc", "1.5", "99999999999999999999", "0"])
+def test_a_bad_nbs_threads_is_refused_before_any_work(tmp_path, monkeypatch, capsys, value):
+    """10⁵ threads once crashed the process (a segfault, a report of metrics.json alone)."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("NBS_THREADS", value)
+    code, err = run_cli(f"scan --scene l_room --preset fast --max-scans 1 --quiet --out {tmp_path / 'r'}", capsys)
+    assert code == EXIT_USAGE and err.startswith("nbs: error: NBS_THREADS must be") and err.count("\n") == 1, err
+    assert not any(tmp_path.iterdir())
+
+
+def test_a_bad_mplbackend_is_one_line(monkeypatch, capsys):
+    import subprocess
+    import sys
+
+    env = {**__import__("os").environ, "MPLBACKEND": "zzz"}
+    root = Path(__file__).resolve().parents[1]
+    p = subprocess.run(
+        [sys.executable, "-m", "train", "scenes", "list"], cwd=root, env=env, capture_output=True, text=True
+    )
+    assert p.returncode == EXIT_USAGE and p.stderr.startswith("nbs: error: MPLBACKEND='zzz'"), p.stderr
+    assert p.stderr.count("\n") == 1 and "Traceback" not in p.stderr
+
+
+def test_a_closed_pipe_ends_the_command_quietly():
+    """`nbs scenes list | head -1`: exit 141 (128 + SIGPIPE) as `cat` does, no error line."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    p = subprocess.Popen(
+        [sys.executable, "-m", "train", "scenes", "list"], cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    p.stdout.close()  # the reader is gone before the command writes
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=120) == 141 and err == "", err
+
+
+def test_warnings_and_long_errors_are_single_bounded_lines(tmp_path, monkeypatch, capsys):
+    """A library's warning is one `nbs: warning:` line (not two with a source line); an error that
+    quotes a file's content is cut to MAX_STDERR_LINE characters."""
+    from train.cli import MAX_STDERR_LINE
+
+    unlabelled = tmp_path / "parts.obj"
+    unlabelled.write_text(
+        "o floor_a\nv 0 0 0\nv 4 0 0\nv 4 4 0\nv 0 4 0\nf 1 2 3\nf 1 3 4\no lamp\nv 1 1 1\nv 2 1 1\nv 2 2 1\nf 5 6 7\n"
+    )
+    code, err = run_cli(f"scenes info {unlabelled}", capsys)
+    lines = err.splitlines()
+    assert code == EXIT_SCENE_ERROR and all(line.startswith("nbs: ") for line in lines), err
+    assert any(line.startswith("nbs: warning: ") and "lamp" in line for line in lines), err
+
+    plan = json.loads(json.dumps(_plan()))
+    plan["rooms"][0]["name"] = "x" * 100_000
+    path = tmp_path / "named.json"
+    path.write_text(json.dumps(plan))
+    code, err = run_cli(f"scenes info {path}", capsys)
+    assert code == EXIT_SCENE_ERROR and err.count("\n") == 1, err[:300]
+    assert len(err) <= MAX_STDERR_LINE + 1 and "characters left out" in err
+
+
+def _plan() -> dict:
+    from scenes.generator import generate_storey
+
+    return generate_storey(1)[0].to_dict()

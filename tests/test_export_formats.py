@@ -295,3 +295,43 @@ def test_full_cloud_needs_the_kept_scans(tmp_path):
     with pytest.raises(ValueError, match="keep_scans"):
         write_report(env, tmp_path / "r", "five_rooms", "greedy", 0, full_cloud=True)
     assert not (tmp_path / "r").exists()
+
+
+def test_a_report_that_fails_part_way_leaves_the_earlier_one_whole(tmp_path, monkeypatch):
+    """The report's files are renamed into the folder together, after all are written: a full disk
+    at the fourth file leaves the earlier report's files as they were (not some of each run) and no
+    temporary folder; a report without scans then removes the earlier one's scans.e57."""
+    import errno
+
+    import nbs_env.export as export
+
+    env = NBSEnv(make_config("fast", scene="l_room", keep_scans=True, max_scans=2))
+    obs, info = env.reset(seed=0)
+    env.step(GreedyPolicy().act(obs, info))
+    out = tmp_path / "r"
+    write_report(env, out, "l_room", "greedy", 0)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert "scans.e57" in before and json_scans(out) == 2
+
+    env.step(GreedyPolicy().act(*env.reset(seed=1)))
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device", str(out / "model.obj"))
+
+    with monkeypatch.context() as patch:
+        patch.setattr(export, "write_model_obj", full)
+        with pytest.raises(OSError):
+            write_report(env, out, "l_room", "greedy", 1)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+    bare = NBSEnv(make_config("fast", scene="l_room", max_scans=1))  # keeps no scans: no scans.e57
+    obs, info = bare.reset(seed=0)
+    write_report(bare, out, "l_room", "greedy", 0)
+    assert not (out / "scans.e57").exists() and json_scans(out) == 1
+    assert sorted(p.name for p in out.iterdir()) == sorted(set(export.REPORT_FILES) - {"scans.e57"})
+
+
+def json_scans(folder: Path) -> int:
+    import json
+
+    return json.loads((folder / "metrics.json").read_text())["scans"]

@@ -243,7 +243,9 @@ def _start(args: list[str], folder: Path, ready: str) -> subprocess.Popen:
 needs_proc = pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="reads processes from Linux's /proc")
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize(
+    "sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=["SIGINT", "SIGTERM", "SIGHUP (terminal closed)"]
+)
 def test_a_signal_during_nbs_scan_writes_the_report_of_the_scans_taken(tmp_path, sig):
     out = tmp_path / "report"
     args = ["scan", "--scene", "l_room", "--preset", "fast", "--max-scans", "30", "--quiet", "--out", str(out)]
@@ -259,6 +261,22 @@ def test_a_signal_during_nbs_scan_writes_the_report_of_the_scans_taken(tmp_path,
     for file in ("scans.e57", "cloud.laz", "cloud.ply", "samples.npz", "topdown.png"):
         assert (out / file).stat().st_size > 0, file
     assert len(list((out / "steps").glob("step_*.png"))) == metrics["scans"] and leftovers(out) == []
+
+
+def test_a_second_signal_waits_while_the_work_writes_what_it_keeps():
+    """Outside ``hold()`` a second signal raises at once (the user will not wait); inside it, it is
+    only noted, so a report or a training state is not left half-written."""
+    from train.stopping import StopRequest
+
+    with StopRequest() as stop:
+        with stop.hold():
+            os.kill(os.getpid(), signal.SIGINT)
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)
+        assert stop.signal == signal.SIGINT
+        with pytest.raises(KeyboardInterrupt):
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)
 
 
 def test_a_stop_between_runs_keeps_the_finished_ones(tmp_path):

@@ -287,6 +287,42 @@ def test_a_signal_stops_a_run_with_its_state_saved(tmp_path):
     assert json.loads((out / "training_state.json").read_text())["timesteps"] == done + 16
 
 
+def test_a_second_signal_mid_rollout_keeps_the_last_update(tmp_path, monkeypatch):
+    """A second Ctrl-C does not wait for the rollout's end, yet the run keeps what it learned: the
+    weights and Adam's state are the last update's until the rollout ends, so they are saved with
+    that update's count of steps (the rollout under way is collected again by --resume)."""
+    pytest.importorskip("sb3_contrib")
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from train.ppo import latest_state, train
+
+    original, calls = DummyVecEnv.step_wait, []
+
+    def step_wait(self):
+        calls.append(1)
+        if len(calls) == 8 + 3:  # 3 steps into the second rollout of 8
+            raise KeyboardInterrupt
+        return original(self)
+
+    monkeypatch.setattr(DummyVecEnv, "step_wait", step_wait)
+    with pytest.raises(KeyboardInterrupt):
+        train(_tiny(n_steps=8, timesteps=64, checkpoint_every=0, eval_every=0), tmp_path / "run")
+    folder, state = latest_state(tmp_path / "run")
+    assert folder == tmp_path / "run" and state["timesteps"] == 8
+
+
+@pytest.mark.parametrize("steps", [-5, True, 10**13, 1.5])
+def test_a_saved_state_with_an_impossible_step_count_is_refused(tmp_path, steps):
+    from nbs_env.errors import ModelFileError
+    from train.ppo import STATE_FORMAT, STATE_JSON, latest_state
+
+    (tmp_path / STATE_JSON).write_text(
+        json.dumps({"format": STATE_FORMAT, "version": 1, "timesteps": steps, "run": {}, "tensors": "x.pt"})
+    )
+    with pytest.raises(ModelFileError, match="timesteps"):
+        latest_state(tmp_path)
+
+
 # ---------------------------------------------------------------------- Ray
 @pytest.mark.expensive
 def test_rollouts_on_a_local_ray_instance(tmp_path):

@@ -4,14 +4,16 @@ Exit codes: 0 success; 1 a scene could not be loaded or built (the message says 
 or ``nbs scan`` could not run it (a start inside a wall or outside the building), a file could not
 be written (a full disk), or ``nbs view`` found no readable recording; 2 a bad command line (unknown
 flag, bad value, unknown policy, a configuration value out of range, an output path that cannot be
-written or holds an earlier run's: :mod:`train.outputs`); 3 ``nbs view`` could start no viewer (no
-display, or rerun's viewer or web server failed); 128 + the signal (130 Ctrl-C, 143 SIGTERM) ``nbs
-scan`` or ``nbs compare`` stopped by a signal, what was done kept (:mod:`train.stopping`).
+written or holds an earlier run's: :mod:`train.outputs`, a bad ``NBS_THREADS`` or ``MPLBACKEND``);
+3 ``nbs view`` could start no viewer (no display, or rerun's viewer or web server failed); 128 + the
+signal (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP) a command stopped by a signal, what was done kept
+(:mod:`train.stopping`); 141 the reader of stdout went away.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -19,6 +21,7 @@ import re
 import signal
 import sys
 import time
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -581,7 +584,8 @@ def run_scan(args: argparse.Namespace) -> int:
         except OSError as exc:  # a file of the report that could not be written (a full disk)
             return _scan_error(_os_error(exc), EXIT_SCENE_ERROR)
         except KeyboardInterrupt:  # before the scan began, or a second signal: no report waited for
-            print("nbs scan: interrupted", file=sys.stderr)
+            again = " a second time, during a scan" if stop.signal is not None else ""
+            print(f"nbs scan: interrupted{again}; no report of this run was written to {out}/", file=sys.stderr)
             return exit_code(stop.signal or signal.SIGINT)
 
 
@@ -642,9 +646,10 @@ def _scan(args: argparse.Namespace, policy, out: Path, cfg, stop: StopRequest) -
         finally:
             if recorder is not None:
                 recorder.close()  # what was recorded stays readable, whatever ended the run
-    metrics = write_report(
-        env, out, args.scene, policy, args.seed, policy_times, run_started=started, full_cloud=args.full_cloud
-    )
+    with stop.hold():  # a second Ctrl-C now would cost the report the first one asked for
+        metrics = write_report(
+            env, out, args.scene, policy, args.seed, policy_times, run_started=started, full_cloud=args.full_cloud
+        )
     files = [*REPORT_FILES, *([] if args.no_steps else [f"steps/ ({k + 1} pictures)"])]
     if not env.storey.scan_log:
         files.remove("scans.e57")
@@ -702,18 +707,83 @@ def run_view(args: argparse.Namespace) -> int:
         return EXIT_NO_VIEWER
 
 
+def _environment_problem() -> str | None:
+    """What is wrong with the environment variables the commands read, before any work: the
+    kernels' ``NBS_THREADS`` and matplotlib's ``MPLBACKEND`` (which fails its import)."""
+    from nbs_env.threads import cores
+
+    try:
+        cores()
+    except ValueError as exc:
+        return str(exc)
+    if "MPLBACKEND" in os.environ:
+        try:
+            import matplotlib  # noqa: F401  (it reads MPLBACKEND on import)
+        except ValueError:
+            shown = os.environ["MPLBACKEND"][:40]
+            return f"MPLBACKEND={shown!r} is not a matplotlib backend: unset it (nbs draws its pictures with Agg)"
+    return None
+
+
+#: The longest line a command writes to stderr: an error that quotes a file's content (a room name
+#: of a million characters) is cut to this, with the count of what was left out.
+MAX_STDERR_LINE = 2000
+
+
+class _BoundedLines:
+    """stderr with each line cut to :data:`MAX_STDERR_LINE` characters."""
+
+    def __init__(self, stream) -> None:
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        lines = text.split("\n")
+        for k, line in enumerate(lines):
+            if len(line) > MAX_STDERR_LINE:
+                keep = MAX_STDERR_LINE - 60
+                lines[k] = f"{line[:keep]}… ({len(line) - keep:,} characters left out)"
+        return self._stream.write("\n".join(lines))
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A library's warning as one line (``warnings.showwarning``), not two with a source line."""
+    print(f"nbs: warning: {' '.join(str(message).split())}", file=sys.stderr)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """``nbs``: every command's errors end here as one line and an exit code, never a traceback:
     Ctrl-C before a command's own handler is in place (while modules load) exits 130, and a file
     the system refuses (a name too long, a loop of links) exits 1 naming it."""
-    from train.stopping import defer_signals, pending_signal
+    from train.stopping import defer_signals
 
     defer_signals()
+    stderr, showwarning = sys.stderr, warnings.showwarning
+    sys.stderr, warnings.showwarning = _BoundedLines(stderr), _show_warning
+    try:
+        return _checked_main(argv)
+    finally:  # a caller in the same process (a test, a notebook) gets its own back
+        sys.stderr, warnings.showwarning = stderr, showwarning
+
+
+def _checked_main(argv: Sequence[str] | None) -> int:
+    from train.stopping import pending_signal
+
+    problem = _environment_problem()
+    if problem is not None:
+        print(f"nbs: error: {problem}", file=sys.stderr)
+        return EXIT_USAGE
     try:
         code = _main(argv)
     except KeyboardInterrupt:
         print("nbs: interrupted", file=sys.stderr)
         return exit_code(pending_signal() or signal.SIGINT)
+    except BrokenPipeError:  # the reader of stdout went away (`nbs scenes list | head -1`): as `cat` does
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
+        return exit_code(signal.SIGPIPE)
     except OSError as exc:
         print(f"nbs: error: {_os_error(exc)}", file=sys.stderr)
         return EXIT_SCENE_ERROR
@@ -749,6 +819,8 @@ def _main(argv: Sequence[str] | None = None) -> int:
     except SceneError as exc:
         print(f"nbs: error: {exc}", file=sys.stderr)
         return EXIT_SCENE_ERROR
+    except BrokenPipeError:  # not a file of ours: main's
+        raise
     except OSError as exc:  # a file that could not be written (a full disk), named
         print(f"nbs: error: {_os_error(exc)}", file=sys.stderr)
         return EXIT_SCENE_ERROR

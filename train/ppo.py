@@ -343,13 +343,15 @@ def _env_factory(run: TrainConfig):
         from stable_baselines3.common.monitor import Monitor
 
         if multiprocessing.parent_process() is not None:
-            # A worker process: Ctrl-C (sent by the terminal to the whole process group) and SIGTERM
+            # A worker process: Ctrl-C and SIGHUP (sent by the terminal to the whole process group) and SIGTERM
             # (sent to the group by `timeout`, a batch system or a container's stop) are the
             # learner's to handle: it saves the run, then closes the workers. A worker that died of
             # them mid-step would leave the learner a broken pipe instead of a saved run.
             import signal
 
-            for sig in (signal.SIGINT, signal.SIGTERM):
+            from train.stopping import STOP_SIGNALS
+
+            for sig in STOP_SIGNALS:
                 signal.signal(sig, signal.SIG_IGN)
         config = run.env_config()
         # Monitor puts each episode's return in info["episode"], for the learning-curve log.
@@ -522,6 +524,8 @@ STATE_FILE = "training_state.pt"
 #: Its description: the format, the timesteps it holds, the run's settings and the tensors' checksum.
 STATE_JSON = "training_state.json"
 STATE_FORMAT = "nbs-env-training-state"
+#: The most steps a saved state may claim (10¹², ten thousand times the largest runs in the field).
+MAX_STATE_TIMESTEPS = 10**12
 
 
 def save_training_state(model, folder: str | Path, run: TrainConfig) -> Path:
@@ -589,8 +593,11 @@ def latest_state(run_folder: str | Path) -> tuple[Path, dict]:
             raise ModelFileError(f"{path}: not a JSON training state ({exc})") from None
         if not isinstance(document, dict) or document.get("format") != STATE_FORMAT or document.get("version") != 1:
             raise ModelFileError(f"{path}: not an {STATE_FORMAT!r} file of version 1")
-        if not isinstance(document.get("timesteps"), int) or not isinstance(document.get("run"), dict):
+        steps = document.get("timesteps")
+        if type(steps) is not int or not isinstance(document.get("run"), dict):
             raise ModelFileError(f"{path}: malformed training state (timesteps, run)")
+        if not 0 <= steps <= MAX_STATE_TIMESTEPS:
+            raise ModelFileError(f"{path}: timesteps {steps} is not a count of steps (0..{MAX_STATE_TIMESTEPS:,})")
         found.append((document["timesteps"], path.parent, document))
     if not found:
         raise ModelFileError(
@@ -805,6 +812,14 @@ def train(
             if config.eval_every and warm is not None and done_before == 0:
                 self._evaluate(0)  # the behaviour-cloned start
 
+        def _on_rollout_start(self) -> None:
+            # Until the rollout's update, the weights and Adam's state are the last update's: a
+            # state saved now with this count of steps is one the run could have saved then.
+            self.rollout_start: int | None = self.model.num_timesteps
+
+        def _on_rollout_end(self) -> None:
+            self.rollout_start = None
+
         def _on_step(self) -> bool:
             self.bar.update(self.training_env.num_envs)
             for info in self.locals.get("infos", []):
@@ -842,6 +857,7 @@ def train(
 
     started = time.time()
     warm = None
+    progress_callback = None
     try:
         with StopRequest() as stop:
             if config.bc_steps and state is None:
@@ -857,11 +873,25 @@ def train(
                     checkpoint(0)
             elif state is not None and (out / "behaviour_cloning.json").is_file():
                 warm = json.loads((out / "behaviour_cloning.json").read_text())
+            progress_callback = Progress()
+            progress_callback.rollout_start = None
             model.learn(
                 total_timesteps=max(0, config.timesteps - done_before),
-                callback=Progress(),
+                callback=progress_callback,
                 reset_num_timesteps=state is None,
             )
+    except KeyboardInterrupt:  # a second signal, that would not wait for the rollout's end
+        import signal
+
+        with StopRequest() as again, again.hold():
+            again.signal = signal.SIGINT  # as if received: a third one is held too while the state is written
+            start = None if progress_callback is None else progress_callback.rollout_start
+            if start is not None and start > done_before:
+                model.num_timesteps = start  # the rollout under way is dropped: it would be collected again
+                save_training_state(model, out, config)
+            with contextlib.suppress(Exception):
+                venv.close()
+        raise
     except BaseException:  # a file that could not be written, a failed worker: end the workers too
         with contextlib.suppress(Exception):
             venv.close()
@@ -1166,16 +1196,16 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"nbs train: error: {exc}", file=sys.stderr)
         return 2
+    problem = _output_problem("--out", args.out)  # first: a name the system refuses fails every test
+    if problem is not None:
+        print(f"nbs train: error: {problem}", file=sys.stderr)
+        return 2
     if args.out.is_dir() and any(args.out.glob("**/training_state.json")):
         print(
             f"nbs train: error: --out {args.out} holds a run already; continue it with --resume {args.out}, "
             "or name another folder",
             file=sys.stderr,
         )
-        return 2
-    problem = _output_problem("--out", args.out)
-    if problem is not None:
-        print(f"nbs train: error: {problem}", file=sys.stderr)
         return 2
     return _run(config, args.out, args, resume=False)
 
@@ -1225,8 +1255,11 @@ def _run(config: TrainConfig, out: Path, args, resume: bool) -> int:
         return 2
     except KeyboardInterrupt:  # before the run's steps began, or a second signal that would not wait
         try:
-            latest_state(out)
-            kept = f"the run keeps its last saved state: continue it with nbs train --resume {out}"
+            _, saved = latest_state(out)
+            kept = (
+                f"the run keeps its last saved state ({saved['timesteps']} timesteps): continue it with "
+                f"nbs train --resume {out}"
+            )
         except ModelFileError:
             kept = "nothing was saved to continue from"
         print(f"nbs train: interrupted; {kept}", file=sys.stderr)

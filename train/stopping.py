@@ -1,17 +1,22 @@
-"""Ctrl-C and SIGTERM during ``nbs scan`` and ``nbs compare``: stop at the next step, keep what is done.
+"""Ctrl-C, SIGTERM and SIGHUP during ``nbs scan``, ``nbs compare`` and ``nbs train``: stop at the
+next step, keep what is done.
 
-The design of ``nbs train``'s (:mod:`train.ppo`): the signal handler only sets a flag, and the work
-looks at it between its steps, so that a signal never lands in the middle of a write. ``nbs scan``
-then writes the report of the scans taken, ``nbs compare`` stops its workers and keeps the runs
-already recorded; both exit with ``128 + the signal`` (130 for SIGINT, 143 for SIGTERM), as a shell
-reports a process the signal ended. A second signal does not wait for the next step: it raises
-:class:`KeyboardInterrupt` at once.
+The signal handler only sets a flag, and the work looks at it between its steps, so that a signal
+never lands in the middle of a write. ``nbs scan`` then writes the report of the scans taken,
+``nbs compare`` stops its workers and keeps the runs already recorded, ``nbs train`` saves its
+state; each exits with ``128 + the signal`` (130 for SIGINT, 143 for SIGTERM, 129 for SIGHUP: the
+terminal or the SSH session closed), as a shell reports a process the signal ended. A second
+signal does not wait for the next step: it raises :class:`KeyboardInterrupt` at once, except while
+the work writes what it keeps (:meth:`StopRequest.hold`). SIGQUIT keeps its meaning, a debugging
+stop with no clean-up.
 """
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import threading
+from collections.abc import Iterator
 from types import FrameType
 from typing import Any
 
@@ -26,7 +31,7 @@ __all__ = [
 ]
 
 #: The signals a :class:`StopRequest` catches.
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, *([signal.SIGHUP] if hasattr(signal, "SIGHUP") else []))
 
 
 def exit_code(sig: int) -> int:
@@ -35,10 +40,12 @@ def exit_code(sig: int) -> int:
 
 
 def ignore_interrupts() -> None:
-    """In a worker process: Ctrl-C, sent by the terminal to the whole process group, is the parent
-    process's to handle (it keeps the finished work, then ends the workers), not a worker's to die
-    of with a traceback."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    """In a worker process: Ctrl-C and a closed terminal's SIGHUP, sent to the whole process group,
+    are the parent process's to handle (it keeps the finished work, then ends the workers), not a
+    worker's to die of with a traceback."""
+    for sig in STOP_SIGNALS:
+        if sig != signal.SIGTERM:  # the parent ends its workers with SIGTERM
+            signal.signal(sig, signal.SIG_IGN)
 
 
 #: A signal received while a command was still starting (:func:`defer_signals`), not yet acted on.
@@ -69,8 +76,8 @@ def undefer_signals() -> None:
     """Python's own handling of SIGINT and SIGTERM again, for a command that waits for Ctrl-C itself
     (``nbs view --web``); a signal recorded meanwhile is raised now as ``KeyboardInterrupt``."""
     if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        for sig in STOP_SIGNALS:
+            signal.signal(sig, signal.default_int_handler if sig == signal.SIGINT else signal.SIG_DFL)
     if _pending is not None:
         raise KeyboardInterrupt
 
@@ -95,6 +102,7 @@ class StopRequest:
     def __init__(self) -> None:
         self.signal: int | None = None
         self._previous: dict[int, Any] = {}
+        self._holding = False
 
     def __enter__(self) -> StopRequest:
         global _pending
@@ -118,8 +126,21 @@ class StopRequest:
         """The signal's name (``"SIGINT"``), or ``""``."""
         return "" if self.signal is None else signal.Signals(self.signal).name
 
+    @contextlib.contextmanager
+    def hold(self) -> Iterator[None]:
+        """While in this context, a second signal is not raised either: the work is writing what it
+        keeps (a report, a training state), which takes seconds and which a second Ctrl-C would
+        leave half-written."""
+        self._holding = True
+        try:
+            yield
+        finally:
+            self._holding = False
+
     def _handle(self, sig: int, frame: FrameType | None) -> None:
         if self.signal is not None:
+            if self._holding:
+                return
             # Asked twice: the user will not wait for the step to end.
             raise KeyboardInterrupt
         self.signal = sig
