@@ -9,6 +9,12 @@ no file, and no partial one: the temporary file is removed whatever stopped the 
 :func:`write_bytes` and :func:`write_text` write what is in memory; :func:`replacing` lends a
 temporary path to a library that writes the file itself (libE57, laspy, matplotlib). An ``OSError``
 names the file that was being written, never the temporary one.
+
+A path that is a symbolic link is written through by default: a file the user named
+(``--out plan.json``, a link to where the plans live) is the link's target. A file a command owns
+inside its own folder (``nbs compare``'s ``metrics.json``, ``table.md``) is written with
+``follow_links=False``: a link found there is replaced by the file, and what it pointed to, perhaps
+outside the folder, is left as it was.
 """
 
 from __future__ import annotations
@@ -71,7 +77,9 @@ def _fsync_folder(folder: Path) -> None:
 
 
 @contextlib.contextmanager
-def replacing(path: str | os.PathLike[str], writer_errors: tuple[type[Exception], ...] = ()) -> Iterator[Path]:
+def replacing(
+    path: str | os.PathLike[str], writer_errors: tuple[type[Exception], ...] = (), *, follow_links: bool = True
+) -> Iterator[Path]:
     """A temporary path beside ``path`` to write the file to; renamed onto ``path`` on success.
 
     Parameters
@@ -82,6 +90,9 @@ def replacing(path: str | os.PathLike[str], writer_errors: tuple[type[Exception]
         The errors by which the library writing the file reports that it could not (libE57's
         ``E57Exception``, lazrs' ``LazrsError``): raised as an ``OSError`` naming ``path``,
         ``errno.ENOSPC`` where the disk is (nearly) full, ``errno.EIO`` otherwise.
+    follow_links : bool
+        True: a link at ``path`` is written through (its target is replaced). False: the link itself
+        is replaced by the new file and its target left alone (the files of a folder the command owns).
 
     Yields
     ------
@@ -96,8 +107,8 @@ def replacing(path: str | os.PathLike[str], writer_errors: tuple[type[Exception]
         and ``path`` left as it was.
     """
     # Through a link to its file: renamed onto the link itself, the new file would replace the link.
-    path = Path(os.path.realpath(path))
-    if path.exists() and not path.is_file():
+    path = Path(os.path.realpath(path)) if follow_links else Path(path)
+    if (follow_links or not path.is_symlink()) and path.exists() and not path.is_file():
         raise OSError(errno.EINVAL, "not a regular file (a device, a fifo or a socket): nothing is written", str(path))
     temporary = _temporary(path)
     try:
@@ -123,8 +134,12 @@ def replacing(path: str | os.PathLike[str], writer_errors: tuple[type[Exception]
     _fsync_folder(path.parent)
 
 
-def write_bytes(path: str | os.PathLike[str], data: bytes | bytearray | memoryview) -> Path:
+def write_bytes(
+    path: str | os.PathLike[str], data: bytes | bytearray | memoryview, *, follow_links: bool = True
+) -> Path:
     """Write ``data`` to ``path`` whole or not at all (module docstring); returns ``path``.
+
+    ``follow_links=False``: a link at ``path`` is replaced, not written through (:func:`replacing`).
 
     Raises
     ------
@@ -133,7 +148,7 @@ def write_bytes(path: str | os.PathLike[str], data: bytes | bytearray | memoryvi
     """
     path = Path(path)
     view = memoryview(data).cast("B")
-    with replacing(path) as temporary:
+    with replacing(path, follow_links=follow_links) as temporary:
         fd = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
         try:
             done = 0
@@ -144,6 +159,6 @@ def write_bytes(path: str | os.PathLike[str], data: bytes | bytearray | memoryvi
     return path
 
 
-def write_text(path: str | os.PathLike[str], text: str) -> Path:
+def write_text(path: str | os.PathLike[str], text: str, *, follow_links: bool = True) -> Path:
     """Write ``text`` as UTF-8 to ``path`` whole or not at all (:func:`write_bytes`); returns ``path``."""
-    return write_bytes(path, text.encode("utf-8"))
+    return write_bytes(path, text.encode("utf-8"), follow_links=follow_links)

@@ -54,6 +54,7 @@ recorder is made or a recording is viewed.
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import uuid
@@ -281,13 +282,16 @@ class RunRecorder:
         self.scene_name = str(scene_name)
         self.max_points_per_scan = int(max_points_per_scan)
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        # Written under a temporary name beside it and renamed by close(): until then no file at
+        # ``path`` passes for a whole recording (nbs view would serve half of one).
+        self._partial = self.path.with_name(f".{self.path.name}.{uuid.uuid4().hex[:8]}.partial")
         # A stream of its own (never the global one), with a fresh id: two recorders never mix.
         self._rec = rr.RecordingStream(application_id=APPLICATION_ID, recording_id=uuid.uuid4())
         # Rows carry the scan timeline only: wall-clock and tick stamps would make a replay of the
         # same episode differ, and offer the viewer timelines that mean nothing here.
         self._rec.set_log_time_enabled(False)
         self._rec.set_log_tick_enabled(False)
-        self._rec.save(self.path)
+        self._rec.save(self._partial)
         self._rec.send_recording_name(self.scene_name)
         self._storey: Storey | None = None
         self._scans = 0  # scans logged
@@ -355,13 +359,20 @@ class RunRecorder:
         self._log_room_models(storey)
         self._log_doors(storey)
 
-    def close(self) -> None:
-        """Flush and close the file (the recording is complete, with its footer). Idempotent."""
+    def close(self, keep: bool = True) -> None:
+        """Flush and close the recording, with its footer, and rename it to :attr:`path` (an earlier
+        file there is replaced); ``keep=False`` removes it instead (a run that failed). Idempotent."""
         if self._closed:
             return
         self._closed = True
-        self._rec.flush()
-        self._rec.disconnect()
+        try:
+            self._rec.flush()
+            self._rec.disconnect()
+            if keep:
+                os.replace(self._partial, self.path)
+        finally:
+            if self._partial.exists():
+                self._partial.unlink()
 
     # ------------------------------------------------------------------ inside
     def _at(self, t: int) -> None:

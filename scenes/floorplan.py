@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import json
 import math
+import unicodedata
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -272,6 +273,13 @@ class FloorPlan:
             With ``path`` set to the offending field (e.g. ``rooms[1].polygon[2]``).
         """
         _validate_schema(data, source)
+        named = [("name", data.get("name", ""))]
+        named += [(f"rooms[{i}].name", r["name"]) for i, r in enumerate(data["rooms"])]
+        for where, text in named:
+            bad = next((c for c in text if unicodedata.category(c) == "Cc" or c in _BIDI_CONTROLS), None)
+            if bad is not None:
+                # A name is printed in tables and messages: a newline or a NUL there breaks them.
+                raise FloorPlanError(source, f"a name may not hold the control character U+{ord(bad):04X}", path=where)
         rooms = tuple(RoomPlan(r["name"], tuple((float(x), float(y)) for x, y in r["polygon"])) for r in data["rooms"])
         names = [r.name for r in rooms]
         for i, name in enumerate(names):
@@ -405,6 +413,10 @@ def load_plan(path: str | Path) -> FloorPlan:
     except ValueError as exc:
         raise FloorPlanError(str(path), f"invalid JSON: {exc}") from None
     return FloorPlan.from_dict(data, source=str(path))
+
+
+#: Characters that reorder the text printed after them (a name could make a table read backwards).
+_BIDI_CONTROLS = frozenset("\u202a\u202b\u202c\u202d\u202e\u2066\u2067\u2068\u2069")
 
 
 def _reject_constant(name: str) -> float:

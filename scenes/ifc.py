@@ -186,6 +186,23 @@ def _check_complete(source: str, path: Path) -> None:
         raise IfcError(source, f"cannot read as IFC: truncated, {ending}")
 
 
+def _check_placements(source: str, model: Any) -> None:
+    """Every ``IfcLocalPlacement`` chain (``PlacementRelTo``) ends: one that comes back on itself
+    sent ifcopenshell's placement into a RecursionError."""
+    ended: set[int] = set()
+    for placement in model.by_type("IfcLocalPlacement"):
+        chain: list[int] = []
+        node = placement
+        while node is not None and node.id() not in ended:
+            if node.id() in chain:
+                raise IfcError(
+                    source, f"the placement #{node.id()} is relative to itself: PlacementRelTo forms a cycle"
+                )
+            chain.append(node.id())
+            node = getattr(node, "PlacementRelTo", None)
+        ended.update(chain)
+
+
 def load_ifc_scene(
     path: str | Path,
     *,
@@ -253,6 +270,7 @@ def load_ifc_scene(
         model = ifcopenshell.open(str(path))
     except Exception as exc:  # ifcopenshell raises its own error types, or OSError, for bad input
         raise IfcError(source, f"cannot read as IFC: {type(exc).__name__}: {exc}") from exc
+    _check_placements(source, model)
 
     scale = float(ifcopenshell.util.unit.calculate_unit_scale(model))
     mapping = _merge_class_map(source, model, class_map)

@@ -308,7 +308,8 @@ def _read_obj(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
         line = raw.strip()
         if not line or line[0] == "#":
             continue
-        key, _, rest = line.partition(" ")
+        key, *tail = line.split(None, 1)  # any whitespace: tabs separate as spaces do
+        rest = tail[0] if tail else ""
         if key == "v":
             xyz = rest.split()
             if len(xyz) < 3:

@@ -185,3 +185,19 @@ def test_bools_and_numpy_floats_are_no_integers():
             make_config("fast", max_scans=value)
     with pytest.raises(ConfigError, match="coverage_spacing"):
         make_config("fast", coverage_spacing=False)
+
+
+@pytest.mark.parametrize(
+    "key", ["rooms.wall_search.heights", "robot.registration.max_correspondence", "observation.shape"]
+)
+def test_a_number_where_a_list_is_wanted_names_the_key(key):
+    """It was Python's "'float' object is not iterable", naming the section."""
+    with pytest.raises(ConfigError, match=f"^{key} must be a list, got 1.0$"):
+        make_config("fast", **{key: 1.0})
+
+
+@pytest.mark.parametrize("preset", ["nope", "", "rtc360:1mm"])
+def test_a_scanner_preset_must_be_a_datasheet_setting(preset):
+    """metrics.json recorded "nope" as the scanner a run simulated."""
+    with pytest.raises(ConfigError, match=r"robot\.scanner\.preset must be None or a datasheet scanner's NAME:SETTING"):
+        make_config("fast", **{"robot.scanner.preset": preset})

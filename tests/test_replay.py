@@ -16,6 +16,7 @@ from nbs_env.replay import (
     INSTALL_HINT,
     NotARecordingError,
     RunRecorder,
+    check_recording,
     downsample,
     gain_colours,
     prism_strips,
@@ -228,3 +229,20 @@ def test_nbs_scan_record_writes_one_timeline_entry_per_scan(tmp_path, capsys):
     (tmp_path / "bad.rrd").write_text("not a recording")
     assert main(["view", str(tmp_path / "bad.rrd")]) == 1
     assert "not a rerun recording" in capsys.readouterr().err
+
+
+def test_a_recording_is_at_its_name_only_once_whole(tmp_path, monkeypatch, capsys):
+    """The recording is written under a temporary name and renamed when the run ends: a run that
+    fails leaves no file at --record (nbs view served half a recording; the same command then
+    refused to run again because the file existed), a run that ends leaves a whole one."""
+    pytest.importorskip("rerun")
+    from train.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    failing = ["scan", "--scene", "l_room", "--preset", "fast", "--max-scans", "2", "--quiet", "--no-steps"]
+    code = main([*failing, "--out", "bad", "--record", "bad.rrd", "--start", "500,500"])  # outside the building
+    assert code == 1 and "not free floor" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # no recording, no temporary file
+    assert main([*failing, "--out", "good", "--record", "good.rrd"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["good", "good.rrd"]
+    assert check_recording(tmp_path / "good.rrd") == tmp_path / "good.rrd"

@@ -121,7 +121,8 @@ def test_acquisition_time():
         ({"min_range": 10.0, "max_range": 5.0}, "min_range .* must be below max_range"),
         ({"range_noise": float("nan")}, "range_noise must be a finite number"),
         ({"noise_floor": -0.001}, "noise_floor must be >= 0"),
-        ({"noise_range": 0.0}, "noise_range must be > 0"),
+        ({"noise_range": 0.0}, "noise_range must be >= 0.1"),
+        ({"noise_range": 1e-300}, "noise_range must be >= 0.1"),  # a ZeroDivisionError in the scan once
         ({"noise_exponent": 3.0}, r"noise_exponent must be in \[0, 2\]"),
         ({"beam_divergence": -0.001}, "beam_divergence must be in"),
         ({"beam_divergence": 1.0}, "beam_divergence must be in"),

@@ -307,3 +307,47 @@ def test_any_path_like_object_is_a_scene_spec(tmp_path):
     assert scene.name == str(path) and len(scene.mesh.faces) == 12
     with pytest.raises(TypeError, match=r"str, os\.PathLike or FloorPlan, got int"):
         load_scene(3)
+
+
+def test_an_obj_separated_by_tabs_loads_as_with_spaces(tmp_path):
+    """Tabs are whitespace in OBJ; the file was refused as "empty (no faces)"."""
+    from scenes import load_scene
+    from scenes.importers import export_scene
+
+    spaced = tmp_path / "l.obj"
+    export_scene(load_scene("l_room"), spaced)
+    tabbed = tmp_path / "tabs.obj"
+    tabbed.write_text(spaced.read_text().replace(" ", "\t"))
+    a, b = load_scene(spaced), load_scene(tabbed)
+    assert len(b.mesh.faces) == len(a.mesh.faces) > 0
+    assert np.allclose(b.mesh.vertices, a.mesh.vertices)
+
+
+@pytest.mark.parametrize("name", ["a\nb", "nul\u0000", "tab\there", "rtl\u202eevil"])
+def test_a_plan_name_with_a_control_character_is_refused(name):
+    """A newline or a NUL in a room name broke the room table of nbs scan and reached the terminal."""
+    from scenes.errors import FloorPlanError
+    from scenes.floorplan import FloorPlan
+    from scenes.generator import generate_storey
+
+    plan = generate_storey(1)[0].to_dict()
+    plan["rooms"][0]["name"] = name
+    with pytest.raises(FloorPlanError, match="control character"):
+        FloorPlan.from_dict(plan)
+
+
+def test_an_ifc_placement_cycle_is_refused(tmp_path):
+    """ifcopenshell's placement recursed without end (a 57-line RecursionError)."""
+    import ifcopenshell
+
+    from scenes.errors import IfcError
+
+    source = Path(__file__).parent / "data" / "two_rooms.ifc"
+    model = ifcopenshell.open(str(source))
+    placements = [p for p in model.by_type("IfcLocalPlacement") if p.PlacementRelTo is not None]
+    inner = placements[0]
+    inner.PlacementRelTo.PlacementRelTo = inner  # two placements relative to each other
+    broken = tmp_path / "cycle.ifc"
+    model.write(str(broken))
+    with pytest.raises(IfcError, match="PlacementRelTo forms a cycle"):
+        load_scene(broken)

@@ -135,11 +135,28 @@ def storey_name(text: str) -> str:
 
 
 def _assignment(text: str) -> tuple[str, Any]:
+    """``--set KEY=VALUE``: the value as JSON, else the bare word as a string.
+
+    The JSON is read with its nesting bounded (:func:`scenes.jsonio.read_json`): Python's decoder
+    recurses once per level, and a value nested some thousand levels deep ended in a RecursionError.
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        No ``=`` or no key, or a value nested deeper than :data:`scenes.jsonio.MAX_JSON_DEPTH` levels.
+    """
     key, eq, value = text.partition("=")
     if not eq or not key.strip():
         raise argparse.ArgumentTypeError(f"expected KEY=VALUE (e.g. rooms.completion_fraction=0.05), got {text!r}")
+    from scenes.jsonio import MAX_JSON_DEPTH, JSONNestingError, read_json
+
     try:
-        parsed = json.loads(value)
+        parsed = read_json(value)
+    except JSONNestingError:
+        raise argparse.ArgumentTypeError(
+            f"{key.strip()}: the value nests arrays or objects deeper than {MAX_JSON_DEPTH} levels, "
+            f"the most --set reads"
+        ) from None
     except ValueError:
         parsed = value  # a bare word: a string
     return key.strip(), parsed

@@ -26,7 +26,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from train.arguments import add_robot_arguments, add_scene_arguments, integer_from, scene_option_error
-from train.outputs import Output, OutputError, check_outputs, output_path
+from train.outputs import NamedStream, Output, OutputError, check_outputs, output_path
 from train.stopping import StopRequest, exit_code
 
 EXIT_SCENE_ERROR = 1
@@ -636,16 +636,20 @@ def _scan(args: argparse.Namespace, policy, out: Path, cfg, stop: StopRequest) -
             recorder.log_step(env)
 
     started = time.time()
+    ran = False
     with bar:
         try:
             policy_times = run_episode(env, policy, args.seed, options, on_step_recorded, stop=stop)
             cut_short = stop()  # else the signal came after the episode's end: the report is whole
+            ran = True
         except RuntimeError as exc:
             bar.close()
             return _scan_error(exc, EXIT_SCENE_ERROR)
         finally:
             if recorder is not None:
-                recorder.close()  # what was recorded stays readable, whatever ended the run
+                # Renamed into place for a run that ended or was stopped (its report says so), removed
+                # for one that failed: no recording then passes for a run that has no report.
+                recorder.close(keep=ran)
     with stop.hold():  # a second Ctrl-C now would cost the report the first one asked for
         metrics = write_report(
             env, out, args.scene, policy, args.seed, policy_times, run_started=started, full_cloud=args.full_cloud
@@ -760,12 +764,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     from train.stopping import defer_signals
 
     defer_signals()
-    stderr, showwarning = sys.stderr, warnings.showwarning
+    stderr, stdout, showwarning = sys.stderr, sys.stdout, warnings.showwarning
     sys.stderr, warnings.showwarning = _BoundedLines(stderr), _show_warning
+    sys.stdout = NamedStream(stdout, "stdout")  # a full disk under `> file` is named as stdout's
     try:
         return _checked_main(argv)
     finally:  # a caller in the same process (a test, a notebook) gets its own back
-        sys.stderr, warnings.showwarning = stderr, showwarning
+        sys.stderr, sys.stdout, warnings.showwarning = stderr, stdout, showwarning
 
 
 def _checked_main(argv: Sequence[str] | None) -> int:
@@ -777,6 +782,7 @@ def _checked_main(argv: Sequence[str] | None) -> int:
         return EXIT_USAGE
     try:
         code = _main(argv)
+        sys.stdout.flush()  # output still buffered fails here, named, not at the interpreter's exit
     except KeyboardInterrupt:
         print("nbs: interrupted", file=sys.stderr)
         return exit_code(pending_signal() or signal.SIGINT)

@@ -40,6 +40,7 @@ import io
 import json
 import math
 import multiprocessing
+import os
 import re
 import sys
 import time
@@ -54,7 +55,8 @@ from typing import Any
 
 import numpy as np
 
-from nbs_env.atomic import replacing, write_text
+from nbs_env.atomic import replacing
+from nbs_env.atomic import write_text as _write_text
 from nbs_env.config import json_form
 from train.arguments import MAX_RUNS, parse_range
 
@@ -776,7 +778,7 @@ def _csv(rows: list[dict[str, Any]], path: Path) -> None:
             mean, std = r.get(k, ("", ""))
             out[f"{k}_mean"], out[f"{k}_std"] = mean, std
         writer.writerow(out)
-    write_text(path, text.getvalue())
+    _write_own(path, text.getvalue())
 
 
 def _plots(results: list[dict[str, Any]], oracles: dict[str, dict[str, Any]], out: Path) -> None:
@@ -839,9 +841,16 @@ def _legend(ax: Any) -> None:
         ax.legend(fontsize=8, loc="lower right")
 
 
+def _write_own(path: Path, text: str) -> None:
+    """Write one of the folder's files whole or not at all (:mod:`nbs_env.atomic`). The folder is the
+    grid's own: a link found in a file's place is replaced by the file, never written through (to a
+    file outside ``--out``)."""
+    _write_text(path, text, follow_links=False)
+
+
 def _save(fig: Any, path: Path) -> None:
-    """Save a figure whole or not at all (:func:`nbs_env.atomic.replacing`)."""
-    with replacing(path) as temporary:
+    """Save a figure whole or not at all (:func:`nbs_env.atomic.replacing`); a link there is replaced."""
+    with replacing(path, follow_links=False) as temporary:
         fig.savefig(temporary)
 
 
@@ -906,20 +915,20 @@ def write_outputs(
     out.mkdir(parents=True, exist_ok=True)
     for r in results:
         write_record(out, "run", r)
-    write_text(out / "oracle.json", json.dumps(oracles, indent=1))
+    _write_own(out / "oracle.json", json.dumps(oracles, indent=1))
     try:
         rows = summarise(results, oracles)
         _csv(rows, out / "table.csv")
-        write_text(out / "table.md", _markdown(rows))
-        write_text(out / "storeys.md", _storeys_markdown(rows))
-        write_text(out / "methods.md", _methods_markdown(results, oracles))
+        _write_own(out / "table.md", _markdown(rows))
+        _write_own(out / "storeys.md", _storeys_markdown(rows))
+        _write_own(out / "methods.md", _methods_markdown(results, oracles))
         thresholds = next((r["metrics"].get("quality") for r in results if r["ok"] and "quality" in r["metrics"]), None)
-        write_text(out / "quality.md", _quality_markdown(rows, thresholds))
+        _write_own(out / "quality.md", _quality_markdown(rows, thresholds))
         _plots(results, oracles, out)
     except OSError:
         raise  # a file that could not be written (a full disk): its own message names it
     except Exception as exc:  # the runs are on disk; say what failed and where they are
-        write_text(out / "summary_error.txt", f"{type(exc).__name__}: {exc}\n\n{traceback.format_exc()}")
+        _write_own(out / "summary_error.txt", f"{type(exc).__name__}: {exc}\n\n{traceback.format_exc()}")
         bad = _culprits(results, out)
         if bad:  # --resume runs these again (load_finished refuses them) and reuses the others
             named = "; ".join(f"{path}: {reason}" for path, reason in bad[:3])
@@ -949,7 +958,8 @@ def check_out_dir(out: str | Path, *, keep: bool = False) -> Path:
     ------
     CompareError
         ``out`` is a file, its folder does not exist, it cannot be created or written, or it is not
-        empty and ``keep`` is False (:func:`train.outputs.check_outputs`).
+        empty and ``keep`` is False (:func:`train.outputs.check_outputs`); or a file or folder in
+        it is a symbolic link (the grid would read and write through it).
     """
     from train.outputs import Output, OutputError, check_outputs
 
@@ -969,7 +979,26 @@ def check_out_dir(out: str | Path, *, keep: bool = False) -> Path:
         if path.exists() and path.is_dir() != folder:
             what = "is not a folder" if folder else "is a folder"
             raise CompareError(f"--out {out}: {path} {what}; move it away or choose another --out")
+    # Every file under the folder is the grid's own: a link there (to a file outside it) would be
+    # read as a finished run and written through, overwriting what it points to.
+    link = _first_link(out)
+    if link is not None:
+        raise CompareError(
+            f"--out {out}: {link} is a symbolic link; the comparison's files must be its own: "
+            "replace it by the file or remove it, or choose another --out"
+        )
     return out
+
+
+def _first_link(folder: Path) -> Path | None:
+    """The first symbolic link under ``folder`` (in name order, not following links), or None."""
+    for root, folders, files in os.walk(folder):
+        folders.sort()
+        for name in sorted(folders + files):
+            path = Path(root) / name
+            if path.is_symlink():
+                return path
+    return None
 
 
 def write_record(out: str | Path, kind: str, record: dict[str, Any]) -> None:
@@ -983,24 +1012,26 @@ def write_record(out: str | Path, kind: str, record: dict[str, Any]) -> None:
     if kind == "oracle":
         path = out / "oracle.json"
         try:
+            if path.is_symlink():  # not the folder's own: replaced, never read or written through
+                raise ValueError(path)
             stored = json.loads(path.read_text())
         except (OSError, ValueError):
             stored = {}
         if not isinstance(stored, dict):  # a file damaged or edited into something else: start it afresh
             stored = {}
         stored[record["scene"]] = record
-        write_text(path, json.dumps(stored, indent=1))
+        _write_own(path, json.dumps(stored, indent=1))
         return
     folder = _run_folder(out, record["spec"])
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "run.json").unlink(missing_ok=True)  # until the new run's files are all written
     if record["ok"]:
-        write_text(folder / "metrics.json", json.dumps(record["metrics"], indent=1))
+        _write_own(folder / "metrics.json", json.dumps(record["metrics"], indent=1))
         (folder / "error.txt").unlink(missing_ok=True)  # an earlier failure of the same run
     else:
-        write_text(folder / "error.txt", record["error"] + "\n\n" + record.get("traceback", ""))
+        _write_own(folder / "error.txt", record["error"] + "\n\n" + record.get("traceback", ""))
         (folder / "metrics.json").unlink(missing_ok=True)
-    write_text(folder / "run.json", json.dumps({k: v for k, v in record.items() if k != "metrics"}, indent=1))
+    _write_own(folder / "run.json", json.dumps({k: v for k, v in record.items() if k != "metrics"}, indent=1))
 
 
 def folder_name(name: str) -> str:

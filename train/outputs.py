@@ -3,22 +3,24 @@
 A scan or a grid can run for hours; a path it cannot write, found when it writes, loses that work.
 :func:`check_outputs` looks at every output path a command was given, at its start, without
 creating anything: a folder (``--out``) must be a folder or not exist yet, in a folder that exists;
-a file (``--record``) must not be a folder and its folder must exist; each folder it would be written
-in must take a file (one is created there and removed: permission bits say nothing for root or on a
-read-only mount); and what an earlier run left there (a non-empty folder, an existing file) is
-refused unless the command was told to replace it. The message names the flag and the path.
+a file (``--record``) must not be a folder, nor be typed as one (``gdir/``), and its folder must
+exist; each folder it would be written in must take a file (one is created there and removed:
+permission bits say nothing for root or on a read-only mount); and what an earlier run left there
+(a non-empty folder, an existing file) is refused unless the command was told to replace it. The
+message names the flag and the path.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import tempfile
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-__all__ = ["Output", "OutputError", "check_outputs", "output_path", "utf8_problem"]
+__all__ = ["NamedStream", "Output", "OutputError", "check_outputs", "output_path", "utf8_problem"]
 
 
 class OutputError(ValueError):
@@ -51,12 +53,30 @@ class Output:
     example: str = ""
 
 
+class _FolderLike(type(Path())):  # type: ignore[misc]  # PosixPath or WindowsPath
+    """A path typed with a trailing separator (``gdir/``): the user means a folder, which ``Path``
+    forgets by dropping the separator. ``given`` is the text as typed, for the message; paths made
+    from it (``.parent``, ``/``) do not carry it."""
+
+    given: str | None = None
+
+
 def output_path(text: str) -> Path:
     """argparse type of an output path: an empty one (``--out ''``) names no file or folder, and
-    ``Path('')`` would quietly be the working folder."""
+    ``Path('')`` would quietly be the working folder. One that ends with a separator keeps that it
+    does (:class:`_FolderLike`): where a file is wanted, :func:`check_outputs` refuses it."""
     if not text.strip():
         raise argparse.ArgumentTypeError("an empty path names no file or folder")
+    if text.endswith(tuple(sep for sep in (os.sep, os.altsep) if sep)):
+        path = _FolderLike(text)
+        path.given = text
+        return path
     return Path(text)
+
+
+def _shown(path: Path) -> str:
+    """``path`` as the user typed it, a trailing separator included."""
+    return getattr(path, "given", None) or str(path)
 
 
 def _write_problem(folder: Path) -> str | None:
@@ -100,6 +120,10 @@ def _problem(output: Output) -> str | None:
     if path.is_dir():
         example = f" (e.g. {path / output.example})" if output.example else ""
         return f"is a folder; name a file in it{example}"
+    if getattr(path, "given", None):
+        # `--out gdir/` would quietly write a file named gdir where the user meant a folder.
+        advice = f"name a file in it (e.g. {path / output.example})" if output.example else "name a file"
+        return f"ends with a separator, so it names a folder, not a file; {advice}"
     if path.exists() and not path.is_file():
         # Renamed over, a device (/dev/full), a fifo or a socket would be replaced by a plain file.
         return "is not a regular file (a device, a fifo or a socket); name a file"
@@ -138,4 +162,40 @@ def check_outputs(outputs: Iterable[Output]) -> None:
         except OSError as exc:  # a name too long for the file system, a loop of links
             problem = f"cannot be used ({exc.strerror or exc})"
         if problem is not None:
-            raise OutputError(f"{output.flag} {output.path}: {problem}")
+            raise OutputError(f"{output.flag} {_shown(output.path)}: {problem}")
+
+
+class NamedStream:
+    """A text stream (``sys.stdout``) whose write errors name it: ``nbs scenes list > full/x`` on a
+    full disk says ``stdout: No space left on device``, not ``[Errno 28] No space left on device``.
+
+    ``write`` and ``flush`` raise an ``OSError`` of the same errno (so of the same subclass: a reader
+    gone away stays a ``BrokenPipeError``) with ``filename`` the stream's name; the rest is the
+    stream's own.
+    """
+
+    def __init__(self, stream, name: str = "stdout") -> None:
+        self._stream = stream
+        self._name = name
+
+    def _named(self, exc: OSError) -> OSError:
+        if exc.filename is not None or exc.errno is None:
+            return exc
+        named = OSError(exc.errno, exc.strerror or str(exc), self._name)
+        named.__cause__ = exc
+        return named
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except OSError as exc:
+            raise self._named(exc)  # noqa: B904  # its cause is set when it is another exception
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except OSError as exc:
+            raise self._named(exc)  # noqa: B904
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)

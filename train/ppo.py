@@ -17,6 +17,7 @@ import contextlib
 import dataclasses
 import json
 import os
+import re
 import sys
 import time
 from dataclasses import dataclass, field
@@ -607,6 +608,28 @@ def latest_state(run_folder: str | Path) -> tuple[Path, dict]:
     return folder, document
 
 
+#: The learning curve every run folder holds from its start (a checkpoint folder holds none).
+CURVE = "learning_curve.jsonl"
+
+
+def checkpoint_problem(folder: str | Path) -> str | None:
+    """Why ``folder`` cannot be resumed as a run: it is a ``checkpoint_N`` folder inside a run folder
+    (None when it is not). :func:`latest_state` reads a checkpoint as it reads a run, for
+    :func:`load_model`; resumed as a run, its checkpoints would be written inside it."""
+    folder = Path(folder)
+    real = folder.resolve()
+    if not re.fullmatch(r"checkpoint_\d+", real.name) or (real / CURVE).exists():
+        return None  # a run folder named checkpoint_N holds its own curve
+    parent = real.parent
+    if not ((parent / CURVE).is_file() or (parent / STATE_JSON).is_file()):
+        return None
+    run = folder.parent if folder.name == real.name else parent
+    return (
+        f"{folder} is a checkpoint of the run {run}: continue the run with --resume {run} (it resumes from its "
+        f"newest checkpoint), or start a new run from its weights with --init {folder} --out NEW"
+    )
+
+
 def resume_config(run_folder: str | Path, timesteps: int | None = None) -> TrainConfig:
     """The settings of the run in ``run_folder``, with a new total of ``timesteps`` if given.
 
@@ -748,6 +771,8 @@ def train(
         raise ConfigError(f"backend must be 'local' or 'ray', got {backend!r}")
     network = config.network
     out = Path(out)
+    if resume and (problem := checkpoint_problem(out)) is not None:
+        raise ModelFileError(problem)
     state = latest_state(out) if resume else None
     # Checked before anything is built or written: what the options claim, and where Ray would run.
     check_memory(config, backend, behaviour_cloning=bool(config.bc_steps) and state is None)
@@ -774,7 +799,7 @@ def train(
     # Every checkpoint records the run and the full configuration its envs ran with: what a user of
     # it reproduces, and the room rules the policy then requires (policies.learned.trained_rules).
     recorded = {**config.to_dict(), "config": config.env_config().to_dict()}
-    log = out / "learning_curve.jsonl"
+    log = out / CURVE
     if state is None:
         write_text(log, "")
     greedy = GreedyPolicy()
@@ -1225,6 +1250,29 @@ def _output_problem(flag: str, folder: Path) -> str | None:
 def _resume(args) -> int:
     if args.out is not None and Path(args.out) != Path(args.resume):
         print("nbs train: error: --resume continues in its own folder; leave out --out", file=sys.stderr)
+        return 2
+    problem = checkpoint_problem(args.resume)
+    if problem is not None:  # refused before any work: its checkpoints would be written inside it
+        print(f"nbs train: error: --resume {problem}", file=sys.stderr)
+        return 2
+    try:
+        folder, document = latest_state(args.resume)
+    except ModelFileError as exc:
+        print(f"nbs train: error: --resume: {exc}", file=sys.stderr)
+        return 2
+    done = int(document["timesteps"])
+    # A total below the steps done would rewrite the policy and leave a state that says both; one
+    # equal to them has nothing left to do, unless the run's own final state was never written (a full
+    # disk at its end: its newest state is a checkpoint's, and resuming writes the final policy).
+    if args.timesteps is not None and (
+        args.timesteps < done or (args.timesteps == done and folder == Path(args.resume))
+    ):
+        more = done + max(done, 1)
+        print(
+            f"nbs train: error: --timesteps {args.timesteps}: the run has done {done} steps already; "
+            f"ask for more (e.g. --timesteps {more})",
+            file=sys.stderr,
+        )
         return 2
     try:
         config = resume_config(args.resume, args.timesteps)

@@ -216,6 +216,8 @@ def _qualified(message: str, where: str, fields: Any) -> str:
 
 def _from_json(value: Any, hint: Any, where: str) -> Any:
     """``value`` read as the type ``hint`` declares: a configuration from a dict, a tuple from a list."""
+    if type(value).__module__ == "numpy" and getattr(value, "ndim", 0) >= 1:
+        value = value.tolist()  # an array where a list is wanted
     options = (
         typing.get_args(hint)
         if isinstance(hint, types.UnionType) or typing.get_origin(hint) is typing.Union
@@ -233,4 +235,7 @@ def _from_json(value: Any, hint: Any, where: str) -> Any:
             return tuple(_from_json(v, inner, where) if inner is not Any else v for v in value)
     if all(isinstance(o, type) and dataclasses.is_dataclass(o) for o in options):
         raise ConfigError(f"{where} must be a JSON object of fields, got {value!r}")
+    lists = [o for o in options if typing.get_origin(o) is tuple]
+    if lists and value is not None and len(lists) == len([o for o in options if o is not type(None)]):
+        raise ConfigError(f"{where} must be a list, got {repr(value)[:60]}")
     return _plain_number(value, int in options, float in options)

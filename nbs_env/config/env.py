@@ -12,6 +12,7 @@ import numpy as np
 from nbs_env.config.checks import Config, _at_most, _finite, _integer, _plain_numbers, _require, _within
 from nbs_env.config.robot import RobotConfig
 from nbs_env.config.rooms import MAX_SCANS, RoomRules
+from nbs_env.config.scanners import SCANNERS
 from scenes.generator import GeneratorConfig
 
 #: The most cells an observation window may have (64× the default 64 × 64 × 16): each is a float per
@@ -245,6 +246,15 @@ class EnvConfig(Config):
             f"coverage_radius must be within [0.01, 1] metres, got {self.coverage_radius}",
         )
         _require(isinstance(self.expose_belief, bool), f"expose_belief must be a bool, got {self.expose_belief!r}")
+        preset = self.robot.scanner.preset
+        if preset is not None:
+            # metrics.json records it as the scanner the run simulated: only a datasheet's setting.
+            presets = [f"{m.name}:{st.name}" for m in SCANNERS.values() for st in m.settings]
+            _require(
+                preset in presets,
+                f"robot.scanner.preset must be None or a datasheet scanner's NAME:SETTING ({', '.join(presets)}), "
+                f"got {repr(preset)[:60]}",
+            )
         _require(self.travel_speed > 0, f"travel_speed must be > 0, got {self.travel_speed}")
         # The travel time is metres over the speed: a millimetre a second is already days per storey.
         _within(self, "travel_speed", 0.001, 100.0, "m/s")

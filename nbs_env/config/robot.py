@@ -162,7 +162,9 @@ class ScannerConfig(Config):
         )
         _require(self.range_noise >= 0, f"range_noise must be >= 0, got {self.range_noise}")
         _require(self.noise_floor >= 0, f"noise_floor must be >= 0 m, got {self.noise_floor}")
-        _require(self.noise_range > 0, f"noise_range must be > 0 m, got {self.noise_range}")
+        # The range a datasheet's noise figure is given at: 10 m, 100 m. Below a decimetre its square
+        # divides the noise model by nearly nothing (1e-300 m overflowed to a ZeroDivisionError).
+        _require(self.noise_range >= 0.1, f"noise_range must be >= 0.1 m, got {self.noise_range}")
         # A metre of noise scatters a room's walls over the room; more scatters points past the storey.
         _at_most(self, "range_noise", 1.0, "metre")
         _at_most(self, "noise_floor", 1.0, "metre")
