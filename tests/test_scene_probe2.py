@@ -351,3 +351,22 @@ def test_an_ifc_placement_cycle_is_refused(tmp_path):
     model.write(str(broken))
     with pytest.raises(IfcError, match="PlacementRelTo forms a cycle"):
         load_scene(broken)
+
+
+def test_a_mesh_whose_faces_need_more_memory_than_is_left_is_refused_before_reading(monkeypatch):
+    """A 4.9 M-face PLY, under MAX_FACES, aborted inside glibc under a 4 GB address-space limit."""
+    import scenes.limits as limits
+    from scenes.errors import StoreySizeError
+
+    monkeypatch.setattr(limits, "memory_left", lambda: (2**30, "its address-space limit, ulimit -v"))
+    with pytest.raises(StoreySizeError, match=r"4,000,000 faces takes about 3\.0 GiB.*1\.0 GiB more"):
+        limits.check_face_count("big.ply", 4_000_000)
+    limits.check_face_count("small.ply", 1_000_000)  # 0.7 GiB: fits
+
+
+@pytest.mark.skipif(not Path("/proc/meminfo").is_file(), reason="reads Linux's /proc")
+def test_the_memory_left_is_read_from_the_system():
+    from scenes.limits import memory_left
+
+    left, why = memory_left()
+    assert left > 2**26 and why
