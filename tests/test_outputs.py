@@ -266,17 +266,31 @@ def test_a_signal_during_nbs_scan_writes_the_report_of_the_scans_taken(tmp_path,
 def test_a_second_signal_waits_while_the_work_writes_what_it_keeps():
     """Outside ``hold()`` a second signal raises at once (the user will not wait); inside it, it is
     only noted, so a report or a training state is not left half-written."""
-    from train.stopping import StopRequest
+    from train.stopping import DUPLICATE_S, StopRequest
 
     with StopRequest() as stop:
         with stop.hold():
             os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(2 * DUPLICATE_S)
             os.kill(os.getpid(), signal.SIGINT)
             time.sleep(0.05)
         assert stop.signal == signal.SIGINT
         with pytest.raises(KeyboardInterrupt):
             os.kill(os.getpid(), signal.SIGINT)
             time.sleep(0.05)
+
+
+def test_one_signal_delivered_twice_is_one_request():
+    """`timeout` and a closing terminal send the signal to the process and then to its group: the
+    two deliveries, handled apart, once read as a second Ctrl-C (a KeyboardInterrupt mid-shutdown,
+    then a segmentation fault). The same signal again within DUPLICATE_S is the same request."""
+    from train.stopping import StopRequest
+
+    with StopRequest() as stop:
+        os.kill(os.getpid(), signal.SIGHUP)
+        os.kill(os.getpid(), signal.SIGHUP)
+        time.sleep(0.01)
+        assert stop.signal == signal.SIGHUP
 
 
 def test_a_stop_between_runs_keeps_the_finished_ones(tmp_path):

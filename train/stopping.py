@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import signal
 import threading
+import time
 from collections.abc import Iterator
 from types import FrameType
 from typing import Any
@@ -50,13 +51,26 @@ def ignore_interrupts() -> None:
 
 #: A signal received while a command was still starting (:func:`defer_signals`), not yet acted on.
 _pending: int | None = None
+_pending_at = 0.0
+
+#: The same signal again within this many seconds is the same request delivered twice, not a second
+#: one: `timeout` and a closing terminal signal the process itself and then its whole group, and
+#: Python runs the handler for each when the two fall either side of a bytecode. A person's second
+#: Ctrl-C comes later.
+DUPLICATE_S = 0.1
+
+
+def _again(first: int | None, first_at: float, sig: int) -> bool:
+    """Whether ``sig`` asks again (``first`` came at ``first_at``), not the same request delivered twice."""
+    return first is not None and not (sig == first and time.monotonic() - first_at < DUPLICATE_S)
 
 
 def _record(sig: int, frame: FrameType | None) -> None:
-    global _pending
-    if _pending is not None:  # asked twice: do not wait
+    global _pending, _pending_at
+    if _again(_pending, _pending_at, sig):  # asked twice: do not wait
         raise KeyboardInterrupt
-    _pending = sig
+    if _pending is None:
+        _pending, _pending_at = sig, time.monotonic()
 
 
 def defer_signals() -> None:
@@ -103,6 +117,7 @@ class StopRequest:
         self.signal: int | None = None
         self._previous: dict[int, Any] = {}
         self._holding = False
+        self._at = 0.0
 
     def __enter__(self) -> StopRequest:
         global _pending
@@ -110,7 +125,7 @@ class StopRequest:
             for sig in STOP_SIGNALS:
                 self._previous[sig] = signal.signal(sig, self._handle)
         if _pending is not None:  # asked while the command was starting: stop at the first step
-            self.signal, _pending = _pending, None
+            self.signal, self._at, _pending = _pending, _pending_at, None
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -139,8 +154,8 @@ class StopRequest:
 
     def _handle(self, sig: int, frame: FrameType | None) -> None:
         if self.signal is not None:
-            if self._holding:
+            if self._holding or not _again(self.signal, self._at, sig):
                 return
             # Asked twice: the user will not wait for the step to end.
             raise KeyboardInterrupt
-        self.signal = sig
+        self.signal, self._at = sig, time.monotonic()
