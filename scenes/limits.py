@@ -70,6 +70,8 @@ __all__ = [
     "check_origin_distance",
     "check_storey_shape",
     "check_storey_size",
+    "machine_memory",
+    "memory_left",
     "unit_scale",
 ]
 
@@ -124,6 +126,26 @@ def check_face_count(source: str, n_faces: int) -> None:
             f"loading the mesh's {n_faces:,} faces takes about {need / 2**30:.1f} GiB, and this process may "
             f"allocate {max(left[0], 0) / 2**30:.1f} GiB more ({left[1]}): simplify or split the model, or free memory",
         )
+
+
+#: Where the machine's memory cannot be read (not Linux nor another POSIX system): a workstation's.
+_FALLBACK_MEMORY = 16 * 2**30
+
+
+def machine_memory() -> int:
+    """Bytes of memory this process may use: the machine's, or its container's limit where lower."""
+    try:
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):
+        total = _FALLBACK_MEMORY
+    try:  # a cgroup v2 container's limit ("max" where none is set)
+        with open("/sys/fs/cgroup/memory.max") as f:
+            limit = f.read().strip()
+        if limit.isdigit():
+            total = min(total, int(limit))
+    except OSError:
+        pass
+    return total
 
 
 def memory_left() -> tuple[int, str] | None:

@@ -232,23 +232,6 @@ class TrainConfig(Config):
 #: for what the estimate leaves out and cannot bound from the options alone: the env workers (about
 #: 1 GiB each with their storeys and maps), torch and PPO's minibatches, and the rest of the machine.
 MEMORY_SHARE = 0.5
-#: Where the machine's memory cannot be read (not Linux nor another POSIX system): a workstation's.
-_FALLBACK_MEMORY = 16 * 2**30
-
-
-def _machine_memory() -> int:
-    """Bytes of memory this process may use: the machine's, or its container's limit where lower."""
-    try:
-        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (AttributeError, ValueError, OSError):
-        total = _FALLBACK_MEMORY
-    try:  # a cgroup v2 container's limit ("max" where none is set)
-        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
-        if limit.isdigit():
-            total = min(total, int(limit))
-    except OSError:
-        pass
-    return total
 
 
 def _bytes(n: float) -> str:
@@ -311,8 +294,10 @@ def check_memory(config: TrainConfig, backend: str = "local", behaviour_cloning:
     ConfigError
         The run claims too much; the message names the options to lower and what they claim.
     """
+    from scenes.limits import machine_memory
+
     claim = memory_claim(config, backend, behaviour_cloning)
-    budget = MEMORY_SHARE * _machine_memory()
+    budget = MEMORY_SHARE * machine_memory()
     total = claim["rollout"] + claim["cloning"]
     if total <= budget:
         return
@@ -329,7 +314,7 @@ def check_memory(config: TrainConfig, backend: str = "local", behaviour_cloning:
     in_all = f", {_bytes(total)} in all" if min(claim["rollout"], claim["cloning"]) > 0.01 * total else ""
     raise ConfigError(
         f"{options} asks for {what}{in_all}, more than {MEMORY_SHARE:.0%} of this machine's "
-        f"{_bytes(_machine_memory())} of memory: lower {lower}"
+        f"{_bytes(machine_memory())} of memory: lower {lower}"
     )
 
 
