@@ -1,7 +1,7 @@
 """Files written whole or not at all: the report's and ``nbs compare``'s outputs.
 
-Every file goes to a temporary file in its own folder (``.NAME.XXXXXXXX.tmp.SUFFIX``: hidden, and
-with the final suffix, by which matplotlib and laspy choose the format), is flushed to the disk
+Every file goes to a temporary file in its own folder (``.STEM.XXXXXXXX.tmp.SUFFIX``, :func:`temporary_path`:
+hidden, and with the final suffix, by which matplotlib and laspy choose the format), is flushed to the disk
 (``fsync``) and then renamed onto its name (``os.replace``, atomic on POSIX and Windows within one
 file system). A full disk, a signal or a crash while writing leaves the previous file as it was, or
 no file, and no partial one: the temporary file is removed whatever stopped the write.
@@ -27,7 +27,7 @@ import shutil
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["replacing", "write_bytes", "write_text"]
+__all__ = ["replacing", "temporary_path", "write_bytes", "write_text"]
 
 #: Bytes per ``os.write`` call: large enough to be fast, small enough that a failure leaves a
 #: short partial temporary file to remove.
@@ -39,8 +39,42 @@ def _write(fd: int, data: memoryview) -> int:
     return os.write(fd, data)
 
 
-def _temporary(path: Path) -> Path:
-    return path.with_name(f".{path.stem}.{secrets.token_hex(4)}.tmp{path.suffix}")
+#: The longest file name most file systems take (ext4, XFS, APFS, NTFS: 255 bytes or UTF-16 units).
+NAME_MAX = 255
+
+
+def _name_max(folder: Path) -> int:
+    try:
+        return min(NAME_MAX, os.pathconf(folder, "PC_NAME_MAX"))
+    except (OSError, ValueError, AttributeError):  # no such folder yet, or no pathconf (Windows)
+        return NAME_MAX
+
+
+def temporary_path(path: str | os.PathLike[str], tag: str = "tmp") -> Path:
+    """A fresh hidden name beside ``path`` to write it under before the rename:
+    ``.STEM.XXXXXXXX.TAG.SUFFIX``, with the final suffix (by which matplotlib, laspy and rerun
+    choose the format) and the stem shortened to fit the folder's longest name: a legal name of
+    255 bytes must not fail because its temporary name is longer.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        The file that will be written.
+    tag : str
+        What the temporary file is (``tmp``, ``partial``).
+
+    Returns
+    -------
+    Path
+    """
+    path = Path(path)
+    middle = f".{secrets.token_hex(4)}.{tag}"
+    suffix = path.suffix
+    room = _name_max(path.parent) - len(f".{middle}{suffix}".encode())
+    if room < 0:  # a suffix as long as a name: not a format any writer reads by it
+        suffix, room = "", _name_max(path.parent) - len(f".{middle}".encode())
+    stem = path.stem.encode()[:room].decode(errors="ignore")  # whole characters only
+    return path.with_name(f".{stem}{middle}{suffix}")
 
 
 def _named(exc: OSError, path: Path) -> OSError:
@@ -110,7 +144,7 @@ def replacing(
     path = Path(os.path.realpath(path)) if follow_links else Path(path)
     if (follow_links or not path.is_symlink()) and path.exists() and not path.is_file():
         raise OSError(errno.EINVAL, "not a regular file (a device, a fifo or a socket): nothing is written", str(path))
-    temporary = _temporary(path)
+    temporary = temporary_path(path)
     try:
         yield temporary
         _fsync(temporary)

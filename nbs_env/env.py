@@ -175,6 +175,7 @@ class NBSEnv(gym.Env):
         self._episode: dict[str, Any] | None = None  # what reset was given, for pickling
         self._actions: list[int] = []
         self._last = StepOutcome()
+        self._ended = False  # a step has returned terminated or truncated
         self.storey: Storey | None = None
 
     @property
@@ -231,6 +232,7 @@ class NBSEnv(gym.Env):
             options.get("scene", config.scene), options.get("start"), config, self.np_random, self._scene_cache
         )
         self._last = StepOutcome()
+        self._ended = False
         self.storey = Storey(scene, config, self.np_random, count_conversions=config.reward.kind == "conversions")
 
     def step(self, action: Any):
@@ -239,7 +241,9 @@ class NBSEnv(gym.Env):
         The robot drives to the candidate, scans, registers the scan and updates its belief; when
         the room is then complete it also crosses to the next room and takes its first scan. A masked
         action, or any action while there is no candidate, takes no scan and costs
-        ``reward.invalid_action_penalty``; a step after the episode ended changes nothing (reward 0).
+        ``reward.invalid_action_penalty``. An episode that ended at :meth:`reset` (its first scan
+        finished the storey, or ``max_scans=1``) ends at the first step, with reward 0 and no scan; a
+        step after a step that ended the episode, or after :meth:`close`, is refused.
 
         Parameters
         ----------
@@ -274,16 +278,24 @@ class NBSEnv(gym.Env):
         Raises
         ------
         gymnasium.error.ResetNeeded
-            Called before :meth:`reset`.
+            Called before :meth:`reset`, after a step returned terminated or truncated, or after
+            :meth:`close`.
         InvalidActionError
             ``action`` is not an integer in ``[0, n_actions)``.
         """
         storey = self._storey()
         a = self._check_action(action)
-        storey.begin_step()
         if not storey.open:
-            # Stepping past the end of an episode: nothing to do, nothing changes.
+            if self._ended:
+                # What gymnasium leaves undefined is refused: a loop that missed terminated/truncated
+                # would otherwise run on, collecting rewards of 0 from an episode that has ended.
+                raise gym.error.ResetNeeded("the episode has ended (terminated or truncated); call reset()")
+            # An episode that ended at reset (its first scan finished the storey, or max_scans=1):
+            # reset cannot say so, the first step does, at no cost.
+            self._ended = True
+            storey.begin_step()
             return self._observation(), 0.0, storey.complete, not storey.complete, self._info()
+        storey.begin_step()
         stop = a == self.stop_action
         if not self.action_masks()[a] or (not stop and storey.plan.count == 0):
             info = self._info(invalid_action=True)
@@ -292,6 +304,7 @@ class NBSEnv(gym.Env):
         self._last = storey.room_done() if stop else storey.scan_at(a)
         terminated = storey.complete
         truncated = not terminated and not storey.open
+        self._ended = terminated or truncated
         return self._observation(), self._reward(self._last), terminated, truncated, self._info()
 
     def _reward(self, outcome: StepOutcome) -> float:
@@ -308,6 +321,15 @@ class NBSEnv(gym.Env):
         if self.storey is None:
             raise gym.error.ResetNeeded("call reset() first")
         return self.storey
+
+    def close(self) -> None:
+        """Let go of the episode and the storeys loaded (their ray-casting scenes and maps): the env
+        is then as before its first :meth:`reset`; :meth:`step` and :meth:`render` raise ResetNeeded."""
+        self.storey = None
+        self._episode = None
+        self._actions = []
+        self._scene_cache.clear()
+        super().close()
 
     def _check_action(self, action: Any) -> int:
         # What Discrete.contains takes: a Python or numpy integer, or a 0-d integer array (not a
@@ -330,7 +352,8 @@ class NBSEnv(gym.Env):
         (n_actions,) bool
             True for the real candidates; with ``rooms.completion="policy"`` the last action, "room
             done", is always allowed. All False before :meth:`reset`; once the episode is over only
-            action 0, which changes nothing, so that a masked sampler always has a choice.
+            action 0, so that a masked sampler given the last observation always has a choice (stepping
+            it raises ResetNeeded).
         """
         mask = np.zeros(self.n_actions, dtype=bool)
         if self.storey is None:
@@ -340,8 +363,7 @@ class NBSEnv(gym.Env):
             if self.stop_action is not None:
                 mask[self.stop_action] = True
         if not mask.any():
-            # A finished episode keeps one action so that a masked sampler always has a choice;
-            # stepping it changes nothing.
+            # A finished episode keeps one action so that a masked sampler always has a choice.
             mask[0] = True
         return mask
 

@@ -66,6 +66,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from nbs_env.atomic import temporary_path
 from nbs_env.labels import LABEL_COLOURS, VoxelLabel
 
 if TYPE_CHECKING:
@@ -284,7 +285,7 @@ class RunRecorder:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         # Written under a temporary name beside it and renamed by close(): until then no file at
         # ``path`` passes for a whole recording (nbs view would serve half of one).
-        self._partial = self.path.with_name(f".{self.path.name}.{uuid.uuid4().hex[:8]}.partial")
+        self._partial = temporary_path(self.path, "partial")
         # A stream of its own (never the global one), with a fresh id: two recorders never mix.
         self._rec = rr.RecordingStream(application_id=APPLICATION_ID, recording_id=uuid.uuid4())
         # Rows carry the scan timeline only: wall-clock and tick stamps would make a replay of the

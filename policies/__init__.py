@@ -10,7 +10,10 @@ what it runs with (``config_overrides``) and requires of the robot (``requires``
 
 from __future__ import annotations
 
+import numpy as np
+
 from nbs_env import lazy_getattr
+from nbs_env.errors import ConfigError
 from policies.base import Policy, agreed_requirements, config_for
 from policies.greedy import GreedyPolicy
 from policies.random import RandomPolicy
@@ -154,7 +157,7 @@ POLICIES = {
 }
 
 
-def make_policy(name: str, seed: int | None = None) -> Policy:
+def make_policy(name: str, seed: int | np.random.Generator | None = None) -> Policy:
     """A policy by name (see :data:`POLICIES`); ``name:option`` passes an option: a formulation
     (``information_gain:rear_side_voxel``), the controlled mode of a compared method, which ends
     rooms by the greedy's rule (``stachniss_burgard:controlled``,
@@ -165,8 +168,9 @@ def make_policy(name: str, seed: int | None = None) -> Policy:
     name : str
         A name of :data:`POLICIES`, optionally followed by ``:OPTION`` (``greedy:0.8+stop=0.08``,
         ``ppo:reference``).
-    seed : int, optional
-        Seeds the policies that draw at random (``random``); the others do not read it.
+    seed : int or numpy.random.Generator, optional
+        Seeds the policies that draw at random (``random``); the others do not read it. A
+        non-negative integer (numpy's seeds) or a Generator to draw from.
 
     Returns
     -------
@@ -177,9 +181,14 @@ def make_policy(name: str, seed: int | None = None) -> Policy:
     ------
     UnknownPolicyError
         An unknown name, an option the policy does not take, or an empty option after the colon.
+    ConfigError
+        A seed that is not a non-negative integer, a Generator or None.
     ModelFileError
         ``ppo:PATH`` with a missing, corrupt or mismatched checkpoint.
     """
+    integer = isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_))
+    if not (seed is None or isinstance(seed, np.random.Generator) or (integer and seed >= 0)):
+        raise ConfigError(f"seed must be a non-negative integer, a numpy Generator or None, got {seed!r}")
     base, colon, option = str(name).partition(":")
     if base not in POLICIES:
         raise UnknownPolicyError(f"unknown policy {name!r}; policies: {', '.join(POLICIES)}")

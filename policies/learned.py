@@ -24,6 +24,8 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -31,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from nbs_env.atomic import replacing
-from nbs_env.config import Config, _integer, _require
+from nbs_env.config import Config, _integer, _require, make_config
 from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES, CandidateColumn, candidate_table_of
 from policies.base import mask_of
@@ -48,7 +50,9 @@ __all__ = [
     "LearnedPolicy",
     "NetworkConfig",
     "build_network",
+    "check_tensors",
     "load_checkpoint",
+    "read_tensors",
     "resolve_checkpoint",
     "save_checkpoint",
     "trained_inputs",
@@ -370,7 +374,104 @@ def _json_kind(value: Any) -> str:
 
 
 def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError as exc:
+        raise ModelFileError(f"{path}: cannot be read ({exc.strerror or type(exc).__name__})") from None
+
+
+#: What torch says when it refuses a file can run to thousands of characters over many lines; a CLI
+#: error is one line, and this much names the cause.
+_DETAIL = 300
+
+
+def _one_line(exc: BaseException) -> str:
+    detail = " ".join(str(exc).split())
+    return detail if len(detail) <= _DETAIL else detail[: _DETAIL - 1] + "…"
+
+
+def read_tensors(path: Path) -> Any:
+    """What a tensors-only file holds, read with ``torch.load(weights_only=True)`` on the CPU.
+
+    Raises
+    ------
+    ModelFileError
+        The file cannot be read, or torch's tensors-only reader refuses it (a pickle of objects).
+        The message is one line: torch's own runs to several and advises loading with
+        ``weights_only=False``, which would run whatever pickle the file holds.
+    """
+    torch = _torch()
+    try:
+        # torch warns of the file's pickle protocol, of deprecated storages and of quantized
+        # tensors before refusing or accepting it: notes for torch's developers, not for the user,
+        # whose one line is the refusal below or the checks of check_tensors.
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return torch.load(path, map_location="cpu", weights_only=True)
+    except OSError as exc:
+        raise ModelFileError(f"{path}: cannot be read ({exc.strerror or type(exc).__name__})") from None
+    except Exception as exc:
+        raise ModelFileError(
+            f"{path}: not a tensors-only file (torch's tensors-only reader refused it: {type(exc).__name__})"
+        ) from None
+
+
+#: The element types weights are kept in. ``load_state_dict`` would cast integers, halves, complex
+#: numbers and booleans into the float network without a word: another network than the file's.
+WEIGHT_DTYPES = ("float32", "float64")
+
+
+def _tensor_leaves(node: Any, name: str) -> Iterator[tuple[str, Any]]:
+    """``(dotted name, tensor)`` of every tensor in a nest of dicts and lists; ModelFileError for a
+    key that is not a string or an integer (an optimiser's state is keyed by parameter index)."""
+    torch = _torch()
+    if isinstance(node, torch.Tensor):
+        yield name, node
+    elif isinstance(node, dict):
+        for key, value in node.items():
+            if not isinstance(key, (str, int)) or isinstance(key, bool):
+                raise ModelFileError(f"a key of {name or 'the file'} is a {type(key).__name__}, not a name")
+            yield from _tensor_leaves(value, f"{name}.{key}" if name else str(key))
+    elif isinstance(node, (list, tuple)):
+        for i, value in enumerate(node):
+            yield from _tensor_leaves(value, f"{name}[{i}]")
+
+
+def check_tensors(node: Any, path: Path) -> None:
+    """Refuse a file's tensors unless each is dense, on the CPU with its data, of a float type of
+    :data:`WEIGHT_DTYPES` and finite: what ``torch.save`` of a trained network writes, and what the
+    network can be given without a crash (sparse, quantized or storage-less "meta" tensors pass
+    the tensors-only reader and then fail inside torch) or a silent cast.
+
+    Parameters
+    ----------
+    node : Any
+        What :func:`read_tensors` returned (tensors in dicts and lists, and plain numbers).
+    path : Path
+        The file, named in the message.
+
+    Raises
+    ------
+    ModelFileError
+        The first tensor that is not so; the message names it.
+    """
+    torch = _torch()
+    try:
+        leaves = list(_tensor_leaves(node, ""))
+    except ModelFileError as exc:
+        raise ModelFileError(f"{path}: {exc}") from None
+    for name, tensor in leaves:
+        if tensor.layout != torch.strided:
+            problem = f"a {str(tensor.layout).removeprefix('torch.')} tensor, not a dense one"
+        elif tensor.device.type != "cpu":
+            problem = f"a tensor on the {tensor.device.type!r} device, without its numbers"
+        elif str(tensor.dtype).removeprefix("torch.") not in WEIGHT_DTYPES:
+            problem = f"of type {str(tensor.dtype).removeprefix('torch.')}, not {' or '.join(WEIGHT_DTYPES)}"
+        elif not bool(torch.isfinite(tensor).all()):
+            problem = "not finite (NaN or infinite values)"
+        else:
+            continue
+        raise ModelFileError(f"{path}: {name or 'its tensor'} is {problem}")
 
 
 def save_checkpoint(
@@ -424,6 +525,8 @@ def load_checkpoint(path: str | Path):
     try:
         # Nesting is bounded: a thousand levels would end in a RecursionError in the decoder.
         document = read_json(path.read_text())
+    except OSError as exc:
+        raise ModelFileError(f"{path}: cannot be read ({exc.strerror or type(exc).__name__})") from None
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ModelFileError(f"{path}: not a JSON checkpoint description ({exc})") from None
     if not isinstance(document, dict) or document.get("format") != CHECKPOINT_FORMAT:
@@ -451,26 +554,21 @@ def load_checkpoint(path: str | Path):
         raise ModelFileError(f"{weights}: {'weights file missing' if missing else 'not a regular file'}")
     if _sha256(weights) != document.get("sha256"):
         raise ModelFileError(f"{weights}: checksum does not match {path.name} (modified or truncated)")
-    try:
-        state = torch.load(weights, map_location="cpu", weights_only=True)
-    except Exception as exc:
-        # Only the exception's kind: torch's message runs to several lines and suggests loading with
-        # weights_only=False, which would run whatever pickle the file holds.
-        raise ModelFileError(
-            f"{weights}: not a tensors-only weights file (torch's tensors-only reader refused it: {type(exc).__name__})"
-        ) from None
-    if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
+    state = read_tensors(weights)
+    if not isinstance(state, dict) or not all(isinstance(k, str) for k in state):
+        raise ModelFileError(f"{weights}: not a dict of tensors by name")
+    if not all(isinstance(v, torch.Tensor) for v in state.values()):
         raise ModelFileError(f"{weights}: not a dict of tensors")
-    bad = sorted(k for k, v in state.items() if v.is_floating_point() and not bool(torch.isfinite(v).all()))
-    if bad:
-        raise ModelFileError(f"{weights}: non-finite weights in {', '.join(bad[:5])}")
+    stray = sorted(k for k in state if not k.startswith(("encoder.", "scorer.")))
+    if stray:
+        raise ModelFileError(f"{weights}: tensors of no part of the network ({', '.join(stray[:3])}): not this format")
+    check_tensors(state, weights)
     encoder, scorer = build_network(config)
     try:
         encoder.load_state_dict({k[len("encoder.") :]: v for k, v in state.items() if k.startswith("encoder.")})
         scorer.load_state_dict({k[len("scorer.") :]: v for k, v in state.items() if k.startswith("scorer.")})
     except RuntimeError as exc:
-        detail = " ".join(str(exc).split())  # torch's message spans lines; a CLI error is one
-        raise ModelFileError(f"{weights}: weights do not fit the network of {path.name}: {detail}") from None
+        raise ModelFileError(f"{weights}: weights do not fit the network of {path.name}: {_one_line(exc)}") from None
     encoder.eval()
     scorer.eval()
     return config, encoder, scorer, layout, document
@@ -506,6 +604,13 @@ class LearnedPolicy:
         #: (:func:`trained_inputs`): a run adopts them where its command line sets nothing, and is refused
         #: where it sets another value (:func:`policies.config_for`).
         self.requires: dict[str, Any] = {**trained_rules(self.document), **trained_inputs(self.document)}
+        try:
+            # Checked here, against the default robot, so that a bad recorded value is blamed on the
+            # file that holds it, not on a setting the user never typed (the run checks it again).
+            make_config("default", **self.requires)
+        except ConfigError as exc:
+            description = self.path / "policy.json" if self.path.is_dir() else self.path
+            raise ModelFileError(f"{description}: a training setting it records is refused: {exc}") from None
 
     def check_config(self, config: EnvConfig) -> None:
         """Refuse a run whose observation or actions the network was not made for: called by

@@ -232,7 +232,7 @@ def test_bad_checkpoints_raise_clear_errors(tmp_path):
     nan_state = {k: v.clone() for k, v in state.items()}
     first = next(k for k, v in nan_state.items() if v.is_floating_point())
     nan_state[first][...] = float("nan")
-    with pytest.raises(ModelFileError, match="non-finite weights"):
+    with pytest.raises(ModelFileError, match=r"encoder\.net\.0\.weight is not finite"):
         LearnedPolicy(save_checkpoint(tmp_path / "nan", config, nan_state))
     assert torch.isfinite(state[first]).all()
     other.write_text("{not json")

@@ -225,11 +225,16 @@ def _alive(pid: int) -> bool:
     return state != "Z"  # a zombie has ended; only its parent's reaper is late
 
 
-def _start(args: list[str], folder: Path, ready: str) -> subprocess.Popen:
+def _start(args: list[str], folder: Path, ready: str, group: bool = False) -> subprocess.Popen:
     """``python -m train ARGS``, once a file matching ``folder / ready`` exists (the first scan or
-    run recorded)."""
+    run recorded); ``group``: in a process group of its own, as a terminal's foreground job."""
     proc = subprocess.Popen(
-        [sys.executable, "-m", "train", *args], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        [sys.executable, "-m", "train", *args],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=group,
     )
     deadline = time.monotonic() + 120
     while not (folder.is_dir() and any(folder.glob(ready))):
@@ -315,14 +320,18 @@ def test_a_stop_between_runs_keeps_the_finished_ones(tmp_path):
 SEEDS = 6
 
 
-def _compare_stopped_by(sig: int, tmp_path: Path) -> tuple[list[str], Path, str]:
-    """Start a grid of two jobs, stop it by ``sig`` after its first run; check what it kept."""
+def _compare_stopped_by(sig: int, tmp_path: Path, group: bool = False) -> tuple[list[str], Path, str]:
+    """Start a grid of two jobs, stop it by ``sig`` after its first run (sent to its whole process
+    group with ``group``, as a closing terminal or ``timeout`` sends it); check what it kept."""
     out = tmp_path / "grid"
     args = ["compare", "--scenes", "l_room", "--policies", "random", "--seeds", ",".join(map(str, range(SEEDS)))]
     args += ["--preset", "fast", "--max-scans", "2", "--jobs", "2", "--quiet", "--out", str(out)]
-    proc = _start(args, out, "runs/l_room/random/seed*/run.json")
+    proc = _start(args, out, "runs/l_room/random/seed*/run.json", group=group)
     workers = _children(proc.pid)
-    proc.send_signal(sig)
+    if group:
+        os.killpg(proc.pid, sig)
+    else:
+        proc.send_signal(sig)
     stdout, stderr = proc.communicate(timeout=120)
     assert proc.returncode == 128 + sig, stderr
     kept = sorted(p.parent.name for p in out.glob("runs/l_room/random/seed*/run.json"))
@@ -344,6 +353,14 @@ def _compare_stopped_by(sig: int, tmp_path: Path) -> tuple[list[str], Path, str]
 @needs_proc
 def test_sigterm_during_nbs_compare_ends_its_workers_and_keeps_the_finished_runs(tmp_path):
     _compare_stopped_by(signal.SIGTERM, tmp_path)
+
+
+@needs_proc
+@pytest.mark.skipif(not hasattr(signal, "SIGHUP"), reason="POSIX signals")
+def test_a_closing_terminal_stops_nbs_compare_with_one_line(tmp_path):
+    """SIGHUP to the whole process group once killed multiprocessing's resource tracker too, whose
+    successor printed a leak warning and a traceback per semaphore after the one line."""
+    _compare_stopped_by(signal.SIGHUP, tmp_path, group=True)
 
 
 @needs_proc

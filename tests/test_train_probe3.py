@@ -153,3 +153,54 @@ def test_set_values_within_the_bound_are_read_as_before():
     assert _assignment("a.b=" + deepest)[1] == json.loads(deepest)
     assert _assignment('a=[[1, 2], {"k": "[[["}]') == ("a", [[1, 2], {"k": "[[["}])
     assert _assignment("robot.scanner=vz400") == ("robot.scanner", "vz400")  # a bare word: a string
+
+
+# ---------------------------------------------------------------------- probe 4: the training state's tensors
+class _Marker:
+    """A pickle that would create a file if it were ever unpickled."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __reduce__(self):
+        return (Path.touch, (self.path,))
+
+
+def _replace_state(run: Path, write) -> None:
+    """``run``'s training_state.pt rewritten by ``write(path)``, its recorded checksum made to match."""
+    import hashlib
+
+    state, description = run / "training_state.pt", run / "training_state.json"
+    write(state)
+    document = json.loads(description.read_text())
+    document["sha256"] = hashlib.sha256(state.read_bytes()).hexdigest()
+    description.write_text(json.dumps(document))
+    for checkpoint in run.glob("checkpoint_*"):  # the run's own state is the newest
+        shutil.rmtree(checkpoint)
+
+
+def test_a_pickle_as_the_training_state_is_refused_unread_in_one_line(run, capsys, tmp_path):
+    import pickle
+
+    marker = tmp_path / "PWNED"
+    _replace_state(run, lambda path: path.write_bytes(pickle.dumps(_Marker(marker), protocol=4)))
+    code, err = _train(["--resume", str(run), "--timesteps", "24", "--quiet"], capsys)
+    assert code == EXIT_USAGE and not marker.exists(), err
+    assert err == (
+        f"nbs train: error: --resume: {run}/training_state.pt: not a tensors-only file (torch's tensors-only "
+        "reader refused it: UnpicklingError)\n"
+    )
+
+
+def test_a_training_state_of_meta_tensors_is_refused_in_one_line(run, capsys):
+    import torch
+
+    def meta(path: Path) -> None:
+        state = torch.load(path, weights_only=True)
+        state["policy"] = {k: v.to("meta") for k, v in state["policy"].items()}
+        torch.save(state, path)
+
+    _replace_state(run, meta)
+    code, err = _train(["--resume", str(run), "--timesteps", "24", "--quiet"], capsys)
+    assert code == EXIT_USAGE and err.count("\n") == 1, err
+    assert err.startswith(f"nbs train: error: --resume: {run}/training_state.pt: policy.") and "'meta' device" in err

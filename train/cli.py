@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import logging
 import math
 import os
 import re
@@ -256,6 +257,8 @@ def run_compare(args: argparse.Namespace) -> int:
 
     if args.resume and args.force:
         return error("--resume reuses what is in --out and --force writes over it: pass one of them", EXIT_USAGE)
+    if args.address is not None and args.backend != "ray":
+        return error(f"--address applies to --backend ray only (this run is --backend {args.backend})", EXIT_USAGE)
     cores = os.cpu_count() or 1
     if args.jobs > 2 * cores and (args.backend == "local" or args.address is None):
         # Each worker holds a storey, its maps and a scanner's rays (about 1 GB): workers beyond the
@@ -757,6 +760,16 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
     print(f"nbs: warning: {' '.join(str(message).split())}", file=sys.stderr)
 
 
+class _OneLineLog(logging.Handler):
+    """A library's log record of a warning or worse (matplotlib's, at WARNING) as one prefixed line:
+    without a handler, Python's last resort prints the bare message, a stray line in a command's
+    stderr."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        with contextlib.suppress(Exception):  # a message that does not format is not worth a traceback
+            print(f"nbs: warning: {' '.join(record.getMessage().split())}", file=sys.stderr)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """``nbs``: every command's errors end here as one line and an exit code, never a traceback:
     Ctrl-C before a command's own handler is in place (while modules load) exits 130, and a file
@@ -767,10 +780,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     stderr, stdout, showwarning = sys.stderr, sys.stdout, warnings.showwarning
     sys.stderr, warnings.showwarning = _BoundedLines(stderr), _show_warning
     sys.stdout = NamedStream(stdout, "stdout")  # a full disk under `> file` is named as stdout's
+    log = _OneLineLog(logging.WARNING)
+    logging.getLogger().addHandler(log)
     try:
         return _checked_main(argv)
     finally:  # a caller in the same process (a test, a notebook) gets its own back
         sys.stderr, sys.stdout, warnings.showwarning = stderr, stdout, showwarning
+        logging.getLogger().removeHandler(log)
 
 
 def _checked_main(argv: Sequence[str] | None) -> int:

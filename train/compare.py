@@ -412,8 +412,9 @@ def _run_local(
     stopped: Callable[[], GridStoppedError],
 ) -> None:
     """:func:`run_grid`'s tasks in ``jobs`` worker processes, each result handed to ``finish`` here."""
-    from train.stopping import ignore_interrupts
+    from train.stopping import ignore_interrupts, start_resource_tracker
 
+    start_resource_tracker()
     # spawn: forked children would inherit open3d's and OpenBLAS's threads mid-state.
     context = multiprocessing.get_context("spawn")
     pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=ignore_interrupts)
@@ -1344,6 +1345,17 @@ def _refuse_repeats(flag: str, values: Sequence[Any]) -> None:
         raise CompareError(f"{flag} names {', '.join(repeated)}; each run is counted once: give each once")
 
 
+def _items(flag: str, text: str) -> list[str]:
+    """The comma-separated items of an option, stripped; an empty one (``0,``, ``a,,b``) is refused: a
+    slip (a shell variable that expanded to nothing), not a choice to leave one out."""
+    items = [p.strip() for p in str(text).split(",")]
+    if len(items) > 1 and not all(items):
+        raise CompareError(
+            f"{flag} {text!r} has an empty item (a comma at an end, or two together); give each item once"
+        )
+    return [item for item in items if item]
+
+
 def grid(
     scenes: str, policies: str, seeds: str, preset: str = "default", overrides: dict[str, Any] | None = None
 ) -> list[RunSpec]:
@@ -1371,13 +1383,14 @@ def grid(
     """
     from policies import UnknownPolicyError, agreed_requirements, make_policy
 
+    _items("--scenes", scenes)
     skipped: list[str] = []
     scene_list = expand_scenes(scenes, skipped)
     for scene in scene_list:  # each named source exists before any run starts (not a failed run each)
         _check_scene(scene)
     if skipped:
         print(f"nbs compare: skipped (local-only files absent): {', '.join(skipped)}", file=sys.stderr)
-    policy_list = [p.strip() for p in str(policies).split(",") if p.strip()]
+    policy_list = _items("--policies", policies)
     if not policy_list:
         raise CompareError("no policies given")
     _refuse_repeats("--scenes", scene_list)
@@ -1390,8 +1403,9 @@ def grid(
     except (UnknownPolicyError, ModelFileError) as exc:
         raise CompareError(str(exc)) from None
     overrides = adopt_requirements(dict(overrides or {}), agreed_requirements(made))
+    seed_items = _items("--seeds", seeds)
     try:
-        seed_list = [int(s) for s in str(seeds).split(",") if s.strip()]
+        seed_list = [int(s) for s in seed_items]
     except ValueError:
         raise CompareError(f"seeds must be comma-separated integers, got {seeds!r}") from None
     if not seed_list:

@@ -493,6 +493,9 @@ def make_training_envs(config: TrainConfig, seed: int | None = None):
         # its share, unless NBS_THREADS says otherwise. The workers read it when they start.
         previous = os.environ.get("NBS_THREADS")
         os.environ.setdefault("NBS_THREADS", str(max(1, threads.cores() // config.envs)))
+        from train.stopping import start_resource_tracker
+
+        start_resource_tracker()
         try:
             venv = SubprocVecEnv(workers, start_method="spawn")
         finally:
@@ -634,21 +637,22 @@ def resume_config(run_folder: str | Path, timesteps: int | None = None) -> Train
 
 
 def _load_state(model, folder: Path, document: dict) -> None:
-    import torch
-
-    from policies.learned import _sha256
+    from policies.learned import _one_line, _sha256, check_tensors, read_tensors
 
     tensors = folder / str(document.get("tensors", STATE_FILE))
     if not tensors.is_file():
         raise ModelFileError(f"{tensors}: missing (named by {folder / STATE_JSON})")
     if _sha256(tensors) != document.get("sha256"):
         raise ModelFileError(f"{tensors}: its checksum is not the one {STATE_JSON} records (a modified file)")
+    state = read_tensors(tensors)
+    if not isinstance(state, dict) or not isinstance(state.get("policy"), dict) or "optimizer" not in state:
+        raise ModelFileError(f"{tensors}: not a training state (the policy's tensors and the optimiser's state)")
+    check_tensors(state, tensors)
     try:
-        state = torch.load(tensors, map_location=model.device, weights_only=True)
         model.policy.load_state_dict(state["policy"])
         model.policy.optimizer.load_state_dict(state["optimizer"])
-    except (RuntimeError, KeyError, ValueError, TypeError) as exc:
-        raise ModelFileError(f"{tensors}: does not fit this run's network ({exc})") from None
+    except (RuntimeError, KeyError, ValueError, TypeError, IndexError) as exc:
+        raise ModelFileError(f"{tensors}: does not fit this run's network ({_one_line(exc)})") from None
     model.num_timesteps = int(document["timesteps"])
 
 
@@ -970,11 +974,14 @@ def _teacher(name: str):
     """The :class:`policies.GreedyPolicy` named ``name``, or ConfigError."""
     from policies import GreedyPolicy, UnknownPolicyError, make_policy
 
+    if str(name).partition(":")[0] != "greedy":
+        # Refused by name, before make_policy would load a checkpoint (ppo:PATH) only to refuse it.
+        raise ConfigError(f"bc_teacher must name a greedy (greedy or greedy:OPTIONS), got {name!r}")
     try:
         teacher = make_policy(name)
     except UnknownPolicyError as exc:
         raise ConfigError(f"bc_teacher: {exc}") from None
-    if not isinstance(teacher, GreedyPolicy):
+    if not isinstance(teacher, GreedyPolicy):  # "greedy" registered to something else
         raise ConfigError(f"bc_teacher must name a greedy, got {name!r}")
     return teacher
 
@@ -1159,6 +1166,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.address is not None and args.backend != "ray":
+        print(
+            f"nbs train: error: --address applies to --backend ray only (this run is --backend {args.backend})",
+            file=sys.stderr,
+        )
+        return 2
     if args.resume is not None:
         return _resume(args)
     if args.out is None:

@@ -28,6 +28,7 @@ __all__ = [
     "exit_code",
     "ignore_interrupts",
     "pending_signal",
+    "start_resource_tracker",
     "undefer_signals",
 ]
 
@@ -47,6 +48,26 @@ def ignore_interrupts() -> None:
     for sig in STOP_SIGNALS:
         if sig != signal.SIGTERM:  # the parent ends its workers with SIGTERM
             signal.signal(sig, signal.SIG_IGN)
+
+
+def start_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker, before a pool of workers does, deaf to SIGHUP.
+
+    The tracker, a process of its own, ignores SIGINT and SIGTERM but not SIGHUP, which a closing
+    terminal (and ``timeout -s HUP``) sends to the whole process group: it died, a new one was
+    started for the next worker, and that one printed a leak warning and a traceback for each
+    semaphore it had never seen. Blocked here while it starts, SIGHUP stays blocked in it (the mask
+    is inherited); this process receives a SIGHUP of that moment when it is unblocked.
+    """
+    if not hasattr(signal, "SIGHUP") or not hasattr(signal, "pthread_sigmask"):
+        return
+    from multiprocessing import resource_tracker
+
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGHUP})
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGHUP})
 
 
 #: A signal received while a command was still starting (:func:`defer_signals`), not yet acted on.

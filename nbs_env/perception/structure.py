@@ -25,7 +25,6 @@ import hashlib
 import json
 import math
 import os
-import tempfile
 from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
@@ -36,6 +35,7 @@ import shapely
 from scipy import ndimage
 from shapely.geometry import Polygon
 
+from nbs_env.atomic import write_text
 from nbs_env.errors import ModelFileError
 from nbs_env.perception.faces import PointIndex, WallFace
 
@@ -496,17 +496,7 @@ class SEClassifier:
         """
         path = Path(path)
         text = json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n"
-        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                fh.write(text)
-            os.replace(tmp, path)
-            # mkstemp makes the file private; a model shipped in a package must be readable by all.
-            os.chmod(path, 0o644)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        return path
+        return write_text(path, text)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> SEClassifier:
