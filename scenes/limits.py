@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import math
 import os
+from pathlib import Path
 
 import numpy as np
 
@@ -132,6 +133,10 @@ def check_face_count(source: str, n_faces: int) -> None:
 _FALLBACK_MEMORY = 16 * 2**30
 
 
+#: Where a cgroup v2 container's memory limit (``memory.max``) and use (``memory.current``) are read.
+CGROUP = Path("/sys/fs/cgroup")
+
+
 def machine_memory() -> int:
     """Bytes of memory this process may use: the machine's, or its container's limit where lower."""
     try:
@@ -139,7 +144,7 @@ def machine_memory() -> int:
     except (AttributeError, ValueError, OSError):
         total = _FALLBACK_MEMORY
     try:  # a cgroup v2 container's limit ("max" where none is set)
-        with open("/sys/fs/cgroup/memory.max") as f:
+        with open(CGROUP / "memory.max") as f:
             limit = f.read().strip()
         if limit.isdigit():
             total = min(total, int(limit))
@@ -150,8 +155,9 @@ def machine_memory() -> int:
 
 def memory_left() -> tuple[int, str] | None:
     """The bytes this process may still allocate, and what bounds them: its address-space limit
-    (``ulimit -v``) less what it holds, or the machine's available memory, whichever is less; None
-    where neither can be read (not Linux)."""
+    (``ulimit -v``) less what it holds, the machine's available memory, or its container's limit
+    (cgroup v2) less what the container holds, whichever is least; None where none can be read
+    (not Linux)."""
     found: list[tuple[int, str]] = []
     try:
         import resource
@@ -169,6 +175,14 @@ def memory_left() -> tuple[int, str] | None:
                 if line.startswith("MemAvailable:"):
                     found.append((int(line.split()[1]) * 1024, "the memory available on this machine"))
     except (OSError, ValueError, IndexError):
+        pass
+    try:  # a cgroup v2 container's limit less what its processes hold (the machine may have more free)
+        with open(CGROUP / "memory.max") as f:
+            limit = f.read().strip()
+        if limit.isdigit():
+            with open(CGROUP / "memory.current") as f:
+                found.append((int(limit) - int(f.read().strip()), "its container's memory limit"))
+    except (OSError, ValueError):
         pass
     return min(found) if found else None
 

@@ -370,3 +370,17 @@ def test_the_memory_left_is_read_from_the_system():
 
     left, why = memory_left()
     assert left > 2**26 and why
+
+
+def test_a_containers_memory_limit_bounds_the_memory_left(monkeypatch, tmp_path):
+    """cgroup v2: a container may hold far less than the machine has free."""
+    import scenes.limits as limits
+
+    (tmp_path / "memory.max").write_text(f"{3 * 2**30}\n")
+    (tmp_path / "memory.current").write_text(f"{2**30}\n")
+    monkeypatch.setattr(limits, "CGROUP", tmp_path)
+    assert limits.machine_memory() <= 3 * 2**30
+    if Path("/proc/meminfo").is_file():
+        assert limits.memory_left() == (2 * 2**30, "its container's memory limit")
+    (tmp_path / "memory.max").write_text("max\n")  # no limit set
+    assert limits.memory_left() is None or limits.memory_left()[1] != "its container's memory limit"
