@@ -220,14 +220,49 @@ def _reference_document() -> dict:
 CHECKPOINT_PLACES = [p for p in _paths(_reference_document()) if p]
 
 
+#: How a checkpoint's tensors may differ from a float network's weights and still pass
+#: ``torch.load(weights_only=True)``: :func:`_variant_weights` applies one to one tensor.
+TENSOR_VARIANTS = ["float64", "float16", "int64", "bool", "complex64", "meta", "sparse", "strided", "extra", "number"]
+
+
+def _variant_weights(variant: str, which: int, path: Path) -> str:
+    """Write the reference weights with tensor number ``which`` changed by ``variant`` to ``path``;
+    returns the file's SHA-256."""
+    import hashlib
+
+    import torch
+
+    state = torch.load(REFERENCE / "policy.pt", weights_only=True)
+    name = sorted(state)[which % len(state)]
+    tensor = state[name]
+    if variant in ("float64", "float16", "int64", "bool", "complex64"):
+        state[name] = tensor.to(getattr(torch, variant))
+    elif variant == "meta":
+        state[name] = tensor.to("meta")
+    elif variant == "sparse":
+        state[name] = tensor.to_sparse()
+    elif variant == "strided":  # not contiguous, the same numbers
+        state[name] = tensor.t().contiguous().t() if tensor.dim() == 2 else tensor
+    elif variant == "extra":
+        state[f"{name}.extra"] = tensor.clone()
+    else:
+        state[which] = tensor.clone()
+    torch.save(state, path)
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
 @st.composite
 def broken_checkpoints(draw):
     """The reference checkpoint's description with one to three values replaced or removed (its weights
     untouched, so that a change reaches past the checksum), or its weights replaced by other bytes (the
-    checksum made to match, so that they reach torch's tensors-only reader)."""
+    checksum made to match, so that they reach torch's tensors-only reader), or one of its tensors
+    changed in kind (:data:`TENSOR_VARIANTS`, written when the test runs)."""
     document = _reference_document()
     weights = None
-    if draw(st.integers(0, 4)) == 0:
+    choice = draw(st.integers(0, 5))
+    if choice == 5:  # tensors that torch's tensors-only reader passes, of another kind than weights
+        return document, (draw(st.sampled_from(TENSOR_VARIANTS)), draw(st.integers(0, 15)))
+    if choice == 0:
         data = (REFERENCE / "policy.pt").read_bytes()
         weights = draw(
             st.one_of(
@@ -262,7 +297,10 @@ def test_any_damaged_checkpoint_drives_a_run_or_is_refused_in_one_line(case, cap
         checkpoint = Path(folder) / "ckpt"
         shutil.copytree(REFERENCE, checkpoint)
         (checkpoint / "policy.json").write_text(json.dumps(document))
-        if weights is not None:
+        if isinstance(weights, tuple):
+            document["sha256"] = _variant_weights(*weights, checkpoint / "policy.pt")
+            (checkpoint / "policy.json").write_text(json.dumps(document))
+        elif weights is not None:
             (checkpoint / "policy.pt").write_bytes(weights)
         argv = ["scan", "--scene", "l_room", "--policy", f"ppo:{checkpoint}", "--out", f"{folder}/r", "--quiet"]
         try:
