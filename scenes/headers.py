@@ -102,6 +102,20 @@ _CHUNK_JSON = 0x4E4F534A
 _CHUNK_BIN = 0x004E4942
 #: Bytes of a glTF accessor component, by ``componentType``.
 _COMPONENT_BYTES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
+#: The names of the component types, for messages.
+_COMPONENT_NAMES = {
+    5120: "BYTE",
+    5121: "UNSIGNED_BYTE",
+    5122: "SHORT",
+    5123: "UNSIGNED_SHORT",
+    5125: "UNSIGNED_INT",
+    5126: "FLOAT",
+}
+#: What a mesh primitive's positions and indices may be: (``type``, ``componentType``).
+_ROLE_TYPES = {
+    "POSITION": {("VEC3", 5126)},
+    "indices": {("SCALAR", 5121), ("SCALAR", 5123), ("SCALAR", 5125)},
+}
 #: Components of an accessor element, by ``type``.
 _TYPE_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 #: Most elements an accessor without data may declare (it is zeros or sparse): the indices of the
@@ -111,6 +125,9 @@ _MAX_EMPTY_ACCESSOR = 3 * MAX_FACES
 #: (5 million faces) fit in a tenth of it. The buffers are read whole, so a file declaring (and
 #: holding, sparse) 6 GiB once reached memory.
 MAX_BUFFER_BYTES = 2 << 30
+#: How many bytes a buffer's side file may hold beyond its ``byteLength`` (padding, a trailing
+#: newline): the reader reads side files whole.
+SIDE_FILE_SLACK = 1 << 20
 #: Prefixes of the glTF extensions a file may require: they change only how it looks (materials,
 #: textures, lights), and only its geometry is read.
 APPEARANCE_EXTENSIONS = ("KHR_materials_", "KHR_texture_", "EXT_texture_", "KHR_lights_", "EXT_lights_")
@@ -162,6 +179,15 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
             raise InvalidMeshError(
                 source, f"buffers[{i}].byteLength declares {declared:,} bytes, but the file holds {have:,}"
             )
+        side = isinstance(buffer.get("uri"), str) and not buffer["uri"].startswith("data:")
+        if side and have is not None and have > declared + SIDE_FILE_SLACK:
+            # The reader takes a side file whole, whatever its byteLength says: a 2.5 GB file behind
+            # a buffer of 7 kB was read into memory before anything else was checked.
+            raise InvalidMeshError(
+                source,
+                f"buffers[{i}].uri {buffer['uri'][:80]!r} holds {have:,} bytes, but buffers[{i}].byteLength "
+                f"declares {declared:,}: not the file this buffer was written to",
+            )
         if sum(buffer_length) + declared > MAX_BUFFER_BYTES:
             raise InvalidMeshError(
                 source,
@@ -181,7 +207,14 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
             raise InvalidMeshError(
                 source, f"{where} ends at byte {end:,} of buffers[{buffer}], which has {buffer_length[buffer]:,}"
             )
-        view_length.append((length, view.get("byteStride")))
+        stride = view.get("byteStride")
+        if stride is not None and (
+            not isinstance(stride, int) or isinstance(stride, bool) or not 4 <= stride <= 252 or stride % 4
+        ):
+            raise InvalidMeshError(
+                source, f"{where}.byteStride must be a multiple of 4 within [4, 252] (glTF 2.0), got {stride!r}"
+            )
+        view_length.append((length, stride))
     for i, accessor in enumerate(_items(source, doc, "accessors")):
         where = f"accessors[{i}]"
         count = _natural(source, accessor, "count", where)
@@ -202,7 +235,13 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
         if view >= len(view_length):
             raise InvalidMeshError(source, f"{where}.bufferView is {view}, but there are {len(view_length)}")
         length, stride = view_length[view]
-        stride = stride if isinstance(stride, int) and not isinstance(stride, bool) and stride > 0 else size
+        if stride is not None and stride < size:
+            raise InvalidMeshError(
+                source,
+                f"{where}'s elements take {size} bytes, but bufferViews[{view}].byteStride is {stride}: "
+                "they would overlap",
+            )
+        stride = stride or size
         need = _natural(source, accessor, "byteOffset", where, 0) + max(count - 1, 0) * stride + size
         if need > length:
             raise InvalidMeshError(
@@ -234,7 +273,8 @@ def _check_extensions(source: str, doc: dict) -> None:
 
 def _check_sparse(source: str, doc: dict) -> None:
     """Refuse sparse accessors among a mesh's positions or indices: trimesh reads only the dense base
-    (zeros, or the bufferView) and drops the sparse values, so the geometry would be wrong."""
+    (zeros, or the bufferView) and drops the sparse values, so the geometry would be wrong. Refuse
+    positions that are not VEC3 floats and indices that are not unsigned integer scalars."""
     accessors = _items(source, doc, "accessors")
     for m, mesh in enumerate(_items(source, doc, "meshes")):
         primitives = mesh.get("primitives", [])
@@ -248,16 +288,30 @@ def _check_sparse(source: str, doc: dict) -> None:
             if isinstance(attributes, dict):
                 used["POSITION"] = attributes.get("POSITION")
             for role, index in used.items():
-                if (
-                    isinstance(index, int)
-                    and not isinstance(index, bool)
-                    and 0 <= index < len(accessors)
-                    and "sparse" in accessors[index]
-                ):
+                if not (isinstance(index, int) and not isinstance(index, bool) and 0 <= index < len(accessors)):
+                    continue
+                accessor = accessors[index]
+                where = f"accessors[{index}] ({role} of meshes[{m}].primitives[{p}])"
+                if "sparse" in accessor:
                     raise InvalidMeshError(
                         source,
-                        f"accessors[{index}] ({role} of meshes[{m}].primitives[{p}]) is sparse, which nbs-env "
-                        "cannot read (its sparse values would be dropped); export the file without sparse accessors",
+                        f"{where} is sparse, which nbs-env cannot read (its sparse values would be dropped); "
+                        "export the file without sparse accessors",
+                    )
+                # What the glTF 2.0 specification allows a mesh's positions and indices to be (without
+                # KHR_mesh_quantization, refused above): anything else was read as other geometry or
+                # failed inside the reader.
+                kind, component = accessor.get("type"), accessor.get("componentType")
+                allowed = _ROLE_TYPES[role]
+                if (kind, component) not in allowed:
+                    names = " or ".join(f"{t} of {_COMPONENT_NAMES[c]}" for t, c in sorted(allowed, key=lambda a: a[1]))
+                    shown = (
+                        _COMPONENT_NAMES.get(component, repr(component))
+                        if isinstance(component, int)
+                        else repr(component)
+                    )
+                    raise InvalidMeshError(
+                        source, f"{where} is {kind!r} of {shown}; the glTF specification has {names}"
                     )
 
 

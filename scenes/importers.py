@@ -101,6 +101,9 @@ DEFAULT_ROOM_HEIGHT = 2.7
 _PREFIXES = {c.name.lower(): c for c in SurfaceClass}
 _PREFIX_RE = re.compile(r"^(" + "|".join(_PREFIXES) + r")(?=$|[_\-. 0-9])", re.IGNORECASE)
 _ROOM_RE = re.compile(r"(?:^|[_\-. ])room(\d+)(?=$|[_\-. ])", re.IGNORECASE)
+#: The largest room number a part name may give (``wall_room12``): numbers name rooms, and no storey
+#: has a million of them; a longer one overflowed the arrays of room ids.
+MAX_ROOM_NUMBER = 999_999
 
 
 class UnlabelledPartsWarning(UserWarning):
@@ -138,19 +141,34 @@ def parse_part_name(name: str) -> tuple[SurfaceClass | None, int]:
         The class given by the name's prefix, None when it has no recognised prefix.
     room : int
         ``N`` of the first ``room<N>`` token, -1 when there is none.
+
+    Raises
+    ------
+    ValueError
+        A room number above :data:`MAX_ROOM_NUMBER`.
     """
     m = _PREFIX_RE.match(name.strip())
     r = _ROOM_RE.search(name)
-    return (_PREFIXES[m.group(1).lower()] if m else None), (int(r.group(1)) if r else -1)
+    room = -1
+    if r:
+        digits = r.group(1).lstrip("0") or "0"
+        if len(digits) > len(str(MAX_ROOM_NUMBER)) or int(digits) > MAX_ROOM_NUMBER:
+            shown = digits if len(digits) <= 20 else f"{digits[:20]}… ({len(digits):,} digits)"
+            raise ValueError(f"part {name[:80]!r} names room {shown}; room numbers go up to {MAX_ROOM_NUMBER:,}")
+        room = int(digits)
+    return (_PREFIXES[m.group(1).lower()] if m else None), room
 
 
-def _classify(candidates: Sequence[str | None]) -> tuple[SurfaceClass | None, int]:
+def _classify(source: str, candidates: Sequence[str | None]) -> tuple[SurfaceClass | None, int]:
     """First class and first room found among ``candidates``, tried in order."""
     cls, room = None, -1
     for cand in candidates:
         if not cand:
             continue
-        c, r = parse_part_name(cand)
+        try:
+            c, r = parse_part_name(cand)
+        except ValueError as exc:
+            raise InvalidMeshError(source, str(exc)) from None
         if cls is None:
             cls = c
         if room < 0:
@@ -225,7 +243,7 @@ def load_mesh_scene(path: str | Path, *, y_up: bool = False, units: str = "m", n
         vertices, faces, labels, rooms, unlabelled = _read_obj(source, data)
     elif ext == ".ply":
         check_ply_header(source, data)
-        vertices, faces, labels, rooms, unlabelled = _read_ply(source, path)
+        vertices, faces, labels, rooms, unlabelled = _read_ply(source, data)
     else:
         check_gltf_layout(source, path, data)
         vertices, faces, labels, rooms, unlabelled = _read_gltf(source, path, ext)
@@ -361,7 +379,7 @@ def _read_obj(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
     part_room = np.full(n_parts, -1, dtype=np.int64)
     unlabelled = []
     for (o, g), i in parts.items():
-        cls, room = _classify((g, o))
+        cls, room = _classify(source, (g, o))
         if cls is None:
             unlabelled.append(" / ".join(n for n in (o, g) if n) or "(unnamed)")
         else:
@@ -382,7 +400,8 @@ def _floats_ok(text: str) -> bool:
 def _read_gltf(source: str, path: Path, ext: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]:
     """Flatten a glTF scene graph into world-space vertices, faces, labels and raw rooms."""
     try:
-        scene = trimesh.load(str(path), file_type=ext[1:], force="scene", process=False)
+        # Without materials: no texture is read (a file of the geometry only is what is scanned).
+        scene = trimesh.load(str(path), file_type=ext[1:], force="scene", process=False, skip_materials=True)
     except Exception as exc:  # trimesh raises many types for malformed files
         raise InvalidMeshError(source, f"cannot parse as {ext[1:]}: {type(exc).__name__}: {exc}") from exc
     parents = scene.graph.transforms.parents
@@ -398,7 +417,7 @@ def _read_gltf(source: str, path: Path, ext: str) -> tuple[np.ndarray, np.ndarra
         while parent is not None and parent != scene.graph.base_frame:
             names.append(parent)
             parent = parents.get(parent)
-        cls, room = _classify(names)
+        cls, room = _classify(source, names)
         if cls is None:
             unlabelled.append(str(node))
             cls = SurfaceClass.CLUTTER
@@ -420,10 +439,14 @@ def _read_gltf(source: str, path: Path, ext: str) -> tuple[np.ndarray, np.ndarra
 
 
 # ------------------------------------------------------------------------------------------ PLY
-def _read_ply(source: str, path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]:
+def _read_ply(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]:
     """Read a PLY mesh with per-face ``label`` (and optional ``room``) properties."""
     try:
-        mesh = trimesh.load(str(path), file_type="ply", force="mesh", process=False)
+        # From the bytes already read and checked, with no resolver and no materials: a header's
+        # "comment TextureFile NAME" made trimesh open NAME, and a fifo there hung the load.
+        mesh = trimesh.load(
+            trimesh.util.wrap_as_stream(data), file_type="ply", force="mesh", process=False, skip_materials=True
+        )
     except Exception as exc:
         raise InvalidMeshError(source, f"cannot parse as ply: {type(exc).__name__}: {exc}") from exc
     if not isinstance(mesh, trimesh.Trimesh):
