@@ -47,6 +47,7 @@ from scenes import FloorPlan, Scene, load_scene
 from scenes.generator import generate_storey
 from scenes.geometry import point_is_free
 from scenes.labels import STRUCTURAL_CLASSES
+from scenes.limits import MAX_ORIGIN_DISTANCE
 
 __all__ = ["STAGES", "ScanPoints", "ScanRecord", "StageTimes", "StepOutcome", "Storey", "join_paths", "resolve_scene"]
 
@@ -233,6 +234,11 @@ def resolve_scene(
         if start.shape not in ((2,), (3,)) or not np.isfinite(start).all():
             shown = repr(given)[:80]
             raise ConfigError(f"options['start'] must be 2 or 3 finite numbers in metres (x, y[, z]), got {shown}")
+        if np.abs(start).max() > MAX_ORIGIN_DISTANCE:  # where no storey lies (scenes.limits), and 1e308 overflows
+            raise ConfigError(
+                f"options['start'] must lie within {MAX_ORIGIN_DISTANCE:,.0f} m of the origin, as every storey "
+                f"does, got {repr(given)[:80]}"
+            )
     if isinstance(spec, Scene):
         scene = spec
     elif isinstance(spec, FloorPlan):

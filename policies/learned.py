@@ -37,7 +37,7 @@ from nbs_env.config import Config, _integer, _require, make_config
 from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES, CandidateColumn, candidate_table_of
 from policies.base import mask_of
-from scenes.jsonio import read_json
+from scenes.jsonio import read_json_file
 
 if TYPE_CHECKING:
     from nbs_env.config import EnvConfig
@@ -524,7 +524,7 @@ def load_checkpoint(path: str | Path):
         raise ModelFileError(f"{path}: no such checkpoint (a folder with policy.json and policy.pt)")
     try:
         # Nesting is bounded: a thousand levels would end in a RecursionError in the decoder.
-        document = read_json(path.read_text())
+        document = read_json_file(path)
     except OSError as exc:
         raise ModelFileError(f"{path}: cannot be read ({exc.strerror or type(exc).__name__})") from None
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:

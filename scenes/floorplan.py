@@ -65,7 +65,7 @@ from shapely.geometry.polygon import orient
 
 from scenes.errors import FloorPlanError, PlanGeometryError, SceneFileError
 from scenes.geometry import STOREY_CLEARANCE
-from scenes.jsonio import read_json
+from scenes.jsonio import JSONSizeError, read_json_file
 from scenes.limits import MIN_STOREY_HEIGHT
 from scenes.model import Door, Room, Scene, SurfaceClass
 from scenes.validation import validate_plan_scene
@@ -398,16 +398,17 @@ def load_plan(path: str | Path) -> FloorPlan:
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        # Size and nesting are bounded: a 1.5 GB file ran out of memory, a thousand levels would end in
+        # a RecursionError in the decoder.
+        data = read_json_file(path, parse_constant=_reject_constant)
+    except JSONSizeError as exc:
+        raise FloorPlanError(str(path), str(exc)) from None
     except UnicodeDecodeError as exc:
         raise FloorPlanError(str(path), f"invalid JSON: not UTF-8 text (byte {exc.start})") from None
     except FileNotFoundError:
         raise SceneFileError(str(path), "no such file") from None
     except OSError as exc:
         raise SceneFileError(str(path), f"cannot read: {exc.strerror or exc}") from None
-    try:
-        # Nesting is bounded: a thousand levels would end in a RecursionError in the decoder.
-        data = read_json(text, parse_constant=_reject_constant)
     except json.JSONDecodeError as exc:
         raise FloorPlanError(str(path), f"invalid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
     except ValueError as exc:

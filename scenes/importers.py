@@ -77,7 +77,7 @@ import trimesh
 from scenes.errors import InvalidMeshError, MissingStructureError, SceneFileError, UnsupportedFormatError
 from scenes.headers import check_gltf_layout, check_ply_header
 from scenes.interior import with_derived_rooms
-from scenes.limits import MAX_FACES, check_face_count, check_storey_size, unit_scale
+from scenes.limits import MAX_FACES, check_face_count, check_file_size, check_storey_size, unit_scale
 from scenes.model import Room, Scene, SurfaceClass
 
 __all__ = [
@@ -234,6 +234,7 @@ def load_mesh_scene(path: str | Path, *, y_up: bool = False, units: str = "m", n
     if not path.is_file():
         raise SceneFileError(source, "no such file" if not path.exists() else "not a regular file")
     try:
+        check_file_size(source, path.stat().st_size)  # read whole: sized first
         data = path.read_bytes()
     except OSError as exc:
         raise SceneFileError(source, f"cannot read the file: {exc.strerror or exc}") from exc

@@ -12,17 +12,22 @@ as it is. This module holds no building: the policies, which must not read groun
 from __future__ import annotations
 
 import json
+import os
 import re
 from typing import Any
 
 import numpy as np
 
-__all__ = ["MAX_JSON_DEPTH", "JSONNestingError", "read_json"]
+__all__ = ["MAX_JSON_BYTES", "MAX_JSON_DEPTH", "JSONNestingError", "JSONSizeError", "read_json", "read_json_file"]
 
 #: Deepest nesting of arrays and objects read. A floor plan nests 4 levels (plan, rooms, room, polygon,
 #: point), a glTF header about 5, a checkpoint description 3: 64 leaves room for any honest document and stays
 #: far below Python's recursion limit (1000).
 MAX_JSON_DEPTH = 64
+#: The largest JSON file read (plans, checkpoint and training-state descriptions, result records): the
+#: largest of them, a floor plan of the largest storey, takes a few megabytes. Read whole and decoded,
+#: a file takes several times its size in memory: a 1.5 GB file once ended in a MemoryError.
+MAX_JSON_BYTES = 64 << 20
 
 # A JSON string, escapes included; brackets inside strings do not nest.
 _STRING = re.compile(r'"[^"\\]*(?:\\.[^"\\]*)*"', re.DOTALL)
@@ -32,6 +37,45 @@ _CLOSE = (ord("]"), ord("}"))
 
 class JSONNestingError(json.JSONDecodeError):
     """A JSON document nested deeper than the reader's bound; ``pos`` is where it first goes deeper."""
+
+
+class JSONSizeError(json.JSONDecodeError):
+    """A JSON file larger than the reader's bound, refused before it is read (a ``json.JSONDecodeError``,
+    so that every caller's handling of bad JSON takes it; its message has no line and column)."""
+
+    def __init__(self, msg: str) -> None:
+        super().__init__(msg, "", 0)
+        self.args = (msg,)
+
+    def __str__(self) -> str:
+        return str(self.msg)
+
+
+def read_json_file(path: str | os.PathLike[str], *, max_bytes: int = MAX_JSON_BYTES, **kwargs: Any) -> Any:
+    """:func:`read_json` of a UTF-8 file, its size checked before it is read.
+
+    Raises
+    ------
+    JSONSizeError
+        The file holds more than ``max_bytes``.
+    OSError
+        The file cannot be read.
+    UnicodeDecodeError
+        It is not UTF-8.
+    json.JSONDecodeError
+        As :func:`read_json`.
+    """
+    size = os.stat(path).st_size
+    if size > max_bytes:
+        raise JSONSizeError(
+            f"a file of {size:,} bytes, more than the {max_bytes:,} a JSON file of nbs-env may hold "
+            "(is it the file you meant?)"
+        )
+    with open(path, encoding="utf-8") as f:
+        text = f.read(max_bytes + 1)  # a file that grows (or a /proc file that claims 0 bytes) stops here
+    if len(text) > max_bytes:
+        raise JSONSizeError(f"a file of more than {max_bytes:,} bytes, the most a JSON file of nbs-env may hold")
+    return read_json(text, **kwargs)
 
 
 def read_json(text: str, *, max_depth: int = MAX_JSON_DEPTH, **kwargs: Any) -> Any:
@@ -44,15 +88,18 @@ def read_json(text: str, *, max_depth: int = MAX_JSON_DEPTH, **kwargs: Any) -> A
     json.JSONDecodeError
         Invalid JSON, as ``json.loads`` raises it, or an integer too long to convert.
     """
-    # Strings are blanked out keeping their length, so positions stay those of the text.
-    masked = _STRING.sub(lambda m: " " * len(m.group()), text)
-    codes = np.frombuffer(masked.encode("utf-32-le", errors="surrogatepass"), dtype="<u4")
+    # Strings are blanked out keeping their length, so positions stay those of the text. Brackets are
+    # ASCII, so the UTF-8 bytes find them at a byte a character (UTF-32 took four).
+    masked = _STRING.sub(lambda m: " " * len(m.group()), text).encode("utf-8", errors="surrogatepass")
+    codes = np.frombuffer(masked, dtype=np.uint8)
     brackets = np.flatnonzero(np.isin(codes, _OPEN + _CLOSE))
     if len(brackets) > max_depth:  # fewer brackets cannot nest deeper
         depth = np.cumsum(np.where(np.isin(codes[brackets], _OPEN), 1, -1))
         deeper = np.flatnonzero(depth > max_depth)
         if len(deeper):
-            raise JSONNestingError(f"nested deeper than {max_depth} levels", text, int(brackets[deeper[0]]))
+            at = len(masked[: int(brackets[deeper[0]])].decode("utf-8", errors="surrogatepass"))  # in characters
+            raise JSONNestingError(f"nested deeper than {max_depth} levels", text, at)
+    del masked, codes, brackets
     try:
         return json.loads(text, **kwargs)
     except ValueError as exc:

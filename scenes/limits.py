@@ -25,6 +25,11 @@ Limits
     Measured: a binary PLY of 4.9 million faces peaked at 3.7 GB. A file whose declared faces need
     more than the process may still allocate (its address-space limit, ``ulimit -v``, or the memory
     the machine has available) is refused before it is read: it aborted inside glibc, with no message.
+:data:`MAX_MESH_FILE_BYTES`, 1 GiB, a mesh file read whole (checked by :func:`check_file_size`)
+    An OBJ of the largest storey (5 million faces) takes some 300 MB of text; a binary file less. A
+    file is read into memory before it is parsed, so one of gigabytes (a point cloud, a disk image
+    given by mistake) is refused before it is read, as is one whose reading (about
+    :data:`READ_FACTOR` times its size) needs more memory than the process may still allocate.
 :data:`MIN_STOREY_WIDTH`, 1 m across, for files (mesh, IFC)
     No room is under a metre across; a file in metres read as millimetres (or an IFC file whose
     ``IfcUnitAssignment`` says millimetres for coordinates in metres) is a thousand times too small.
@@ -59,15 +64,18 @@ from scenes.labels import SurfaceClass
 __all__ = [
     "BYTES_PER_FACE",
     "MAX_FACES",
+    "MAX_MESH_FILE_BYTES",
     "MAX_ORIGIN_DISTANCE",
     "MAX_STOREY_HEIGHT",
     "MAX_STOREY_WIDTH",
     "MIN_STOREY_HEIGHT",
     "MIN_STOREY_WIDTH",
+    "READ_FACTOR",
     "STOREY_GAP",
     "STOREY_SHARE",
     "UNITS",
     "check_face_count",
+    "check_file_size",
     "check_origin_distance",
     "check_storey_shape",
     "check_storey_size",
@@ -81,6 +89,10 @@ MAX_STOREY_HEIGHT = 50.0
 MAX_FACES = 5_000_000
 BYTES_PER_FACE = 800
 MIN_STOREY_WIDTH = 1.0
+MAX_MESH_FILE_BYTES = 1 << 30
+#: The memory a mesh file's bytes take while it is read and parsed, per byte of the file: its bytes,
+#: their text and the parser's lists (an OBJ's lines), before the faces are counted.
+READ_FACTOR = 4
 MAX_ORIGIN_DISTANCE = 10_000.0
 MIN_STOREY_HEIGHT = 1.5
 STOREY_GAP = 2.0
@@ -126,6 +138,27 @@ def check_face_count(source: str, n_faces: int) -> None:
             source,
             f"loading the mesh's {n_faces:,} faces takes about {need / 2**30:.1f} GiB, and this process may "
             f"allocate {max(left[0], 0) / 2**30:.1f} GiB more ({left[1]}): simplify or split the model, or free memory",
+        )
+
+
+def check_file_size(source: str, size: int, limit: int = MAX_MESH_FILE_BYTES) -> None:
+    """Raise :class:`StoreySizeError` for a file of ``size`` bytes beyond ``limit``, or one whose reading
+    (:data:`READ_FACTOR` times its size) needs more memory than the process may still allocate."""
+    if size > limit:
+        raise StoreySizeError(
+            source,
+            f"the file holds {size:,} bytes; nbs-env reads mesh files of up to {limit:,} bytes (the largest "
+            f"storey it loads, {MAX_FACES:,} faces, takes about a third of that): is it the file you meant?",
+        )
+    need = size * READ_FACTOR
+    if need < 2**28:
+        return
+    left = memory_left()
+    if left is not None and need > left[0]:
+        raise StoreySizeError(
+            source,
+            f"reading the file's {size:,} bytes takes about {need / 2**30:.1f} GiB, and this process may "
+            f"allocate {max(left[0], 0) / 2**30:.1f} GiB more ({left[1]}): free memory, or simplify the model",
         )
 
 

@@ -115,3 +115,85 @@ def test_a_stride_of_the_element_size_loads(tmp_path):
     view = doc["accessors"][position_accessor(doc)]["bufferView"]
     doc["bufferViews"][view]["byteStride"] = 12
     assert len(load_scene(str(write_gltf(tmp_path / "stride12.gltf", doc))).mesh.faces) == 12
+
+
+# ---------------------------------------------------------------------- files read whole
+def _sparse(path: Path, size: int) -> Path:
+    with open(path, "wb") as f:
+        f.truncate(size)  # no disk used
+    return path
+
+
+@pytest.mark.parametrize("name", ["plan.json", "mesh.gltf", "mesh.obj", "mesh.ply", "mesh.glb"])
+def test_a_file_read_whole_is_sized_before_it_is_read(name, tmp_path, capsys):
+    """A 1.5 GB file given as a plan (or a .gltf) was read, decoded and re-encoded: a MemoryError."""
+    from scenes.jsonio import MAX_JSON_BYTES
+    from scenes.limits import MAX_MESH_FILE_BYTES
+    from train.cli import main as nbs
+
+    limit = MAX_JSON_BYTES if name.endswith(".json") else MAX_MESH_FILE_BYTES
+    path = _sparse(tmp_path / name, limit + 1)
+    assert nbs(["scenes", "info", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"nbs: error: {path}: ") and f"a file of {limit + 1:,} bytes" in err.replace(
+        "the file holds", "a file of"
+    ), err
+    assert err.count("\n") == 1 and "is it the file you meant?" in err
+
+
+def test_a_checkpoint_description_too_large_is_refused_before_it_is_read(tmp_path):
+    import shutil
+
+    from nbs_env.errors import ModelFileError
+    from policies import make_policy
+    from policies.learned import BUNDLED
+    from scenes.jsonio import MAX_JSON_BYTES
+
+    folder = tmp_path / "ck"
+    shutil.copytree(BUNDLED["reference"], folder)
+    _sparse(folder / "policy.json", MAX_JSON_BYTES + 1)
+    with pytest.raises(ModelFileError, match=rf"a file of {MAX_JSON_BYTES + 1:,} bytes, more than the"):
+        make_policy(f"ppo:{folder}")
+
+
+def test_json_nesting_is_found_at_its_character_beyond_ascii():
+    from scenes.jsonio import JSONNestingError, read_json
+
+    text = '{"é€😀": ' + "[" * 70 + "]" * 70 + "}"
+    with pytest.raises(JSONNestingError) as nested:
+        read_json(text)
+    assert nested.value.pos == text.index("[") + 63  # the 65th level, counted in characters, not bytes
+
+
+# ---------------------------------------------------------------------- numbers that overflow
+@pytest.mark.parametrize(
+    "option, message",
+    [
+        (["--learning-rate", "1e300"], "learning_rate must be within (0, 0.1], got 1e+300"),
+        (["--ent-coef", "1e300"], "ent_coef must be within [0, 1], got 1e+300"),
+        (["--scan-cost", "1e9"], "scan_cost must be within [0, 1,000]"),
+    ],
+)
+def test_training_numbers_that_turn_the_network_to_nan_are_refused_before_the_run(option, message, tmp_path, capsys):
+    """--learning-rate 1e300 or --ent-coef 1e300 ended the first update in a torch traceback."""
+    from train.cli import main as nbs
+
+    assert nbs(["train", "--timesteps", "64", "--out", str(tmp_path / "t"), *option]) == 2
+    err = capsys.readouterr().err
+    assert err == f"nbs train: error: {message}\n" or err.startswith(f"nbs train: error: {message}"), err
+    assert not (tmp_path / "t").exists()
+
+
+def test_a_start_beyond_any_storey_is_refused_in_the_cli_and_the_env(capsys, tmp_path):
+    from nbs_env.config import make_config
+    from nbs_env.env import NBSEnv
+    from nbs_env.errors import ConfigError
+    from train.cli import main as nbs
+
+    with pytest.raises(SystemExit):
+        nbs(["scan", "--scene", "l_room", "--start=1e308,0", "--out", str(tmp_path / "s")])
+    err = capsys.readouterr().err
+    assert "expected X,Y within 10,000 m of the origin" in err and "warning" not in err
+    env = NBSEnv(make_config("fast", scene="l_room"))
+    with pytest.raises(ConfigError, match=r"options\['start'\] must lie within 10,000 m of the origin"):
+        env.reset(seed=0, options={"start": (1e308, 0.0)})

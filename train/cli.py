@@ -89,6 +89,12 @@ def _start(text: str) -> tuple[float, float]:
         raise argparse.ArgumentTypeError(f"expected X,Y in metres (e.g. 3.0,4.5), got {text!r}") from None
     if not (math.isfinite(x) and math.isfinite(y)):
         raise argparse.ArgumentTypeError(f"expected finite X,Y, got {text!r}")
+    from scenes.limits import MAX_ORIGIN_DISTANCE
+
+    if max(abs(x), abs(y)) > MAX_ORIGIN_DISTANCE:
+        raise argparse.ArgumentTypeError(
+            f"expected X,Y within {MAX_ORIGIN_DISTANCE:,.0f} m of the origin, where storeys lie, got {text!r}"
+        )
     return x, y
 
 

@@ -58,6 +58,7 @@ import numpy as np
 from nbs_env.atomic import replacing
 from nbs_env.atomic import write_text as _write_text
 from nbs_env.config import json_form
+from scenes.jsonio import read_json_file
 from train.arguments import MAX_RUNS, parse_range
 
 __all__ = [
@@ -1015,7 +1016,7 @@ def write_record(out: str | Path, kind: str, record: dict[str, Any]) -> None:
         try:
             if path.is_symlink():  # not the folder's own: replaced, never read or written through
                 raise ValueError(path)
-            stored = json.loads(path.read_text())
+            stored = read_json_file(path)
         except (OSError, ValueError):
             stored = {}
         if not isinstance(stored, dict):  # a file damaged or edited into something else: start it afresh
@@ -1077,11 +1078,9 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
     for spec in specs:
         folder = _run_folder(out, asdict(spec))
         try:
-            text = (folder / "run.json").read_text()
+            record = read_json_file(folder / "run.json")
         except (OSError, UnicodeDecodeError):  # not there (not finished), or not a file: writing it says so
             continue
-        try:
-            record = json.loads(text)
         except ValueError as exc:
             damaged(folder / "run.json", f"not JSON ({exc})")
             continue
@@ -1101,7 +1100,7 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
             continue  # a failed run, or another grid's: run it again
         path = folder / "metrics.json"
         try:
-            finished = {**record, "metrics": json.loads(path.read_text())}
+            finished = {**record, "metrics": read_json_file(path)}
         except FileNotFoundError:
             damaged(path, "missing")
             continue
@@ -1119,7 +1118,7 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
     oracles: dict[str, Any] = {}
     settings = [{"preset": s.preset, "overrides": json_form(s.overrides)} for s in specs]
     try:
-        stored = json.loads((out / "oracle.json").read_text())
+        stored = read_json_file(out / "oracle.json")
     except (OSError, ValueError):
         stored = {}
     for scene, plan in stored.items() if isinstance(stored, dict) else ():

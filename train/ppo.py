@@ -28,10 +28,12 @@ import numpy as np
 
 from nbs_env import threads
 from nbs_env.atomic import replacing, write_text
-from nbs_env.config import Config, EnvConfig, _finite, _integer, _require
+from nbs_env.config import Config, EnvConfig, _integer, _require
+from nbs_env.config.checks import _within
 from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES
 from policies.learned import NetworkConfig, build_network, save_checkpoint
+from scenes.jsonio import read_json_file
 from train.arguments import add_robot_arguments, config_from_arguments, parse_range, scene_option_error
 
 __all__ = ["TrainConfig", "check_memory", "main", "memory_claim", "train"]
@@ -177,16 +179,13 @@ class TrainConfig(Config):
             and 1 <= self.rooms[0] <= self.rooms[1] <= 8,
             f"rooms must be (A, B) with 1 <= A <= B <= 8, got {self.rooms!r}",
         )
-        _finite(
-            learning_rate=self.learning_rate,
-            metre_cost=self.metre_cost,
-            scan_cost=self.scan_cost,
-            ent_coef=self.ent_coef,
-        )
-        _require(self.learning_rate > 0, f"learning_rate must be > 0, got {self.learning_rate}")
-        _require(self.metre_cost >= 0, f"metre_cost must be >= 0, got {self.metre_cost}")
-        _require(self.scan_cost >= 0, f"scan_cost must be >= 0, got {self.scan_cost}")
-        _require(self.ent_coef >= 0, f"ent_coef must be >= 0, got {self.ent_coef}")
+        # Adam's step and the entropy bonus beyond these turn the network's weights to inf or NaN within
+        # an update (a traceback from torch after the first rollout); PPO runs use 1e-5 to 1e-3 and 0 to 0.05.
+        _within(self, "learning_rate", 0.0, MAX_LEARNING_RATE, open_low=True)
+        _within(self, "ent_coef", 0.0, MAX_ENT_COEF)
+        # The env's reward bounds its prices (reward.scan_cost, reward.metre_cost): the same range.
+        _within(self, "metre_cost", 0.0, 1000.0)
+        _within(self, "scan_cost", 0.0, 1000.0)
         _require(
             self.completion in ("policy", "gain"), f"completion must be 'policy' or 'gain', got {self.completion!r}"
         )
@@ -507,6 +506,10 @@ def make_training_envs(config: TrainConfig, seed: int | None = None):
     return venv
 
 
+#: The largest learning rate and entropy bonus a run takes: a hundred times what PPO is run with.
+MAX_LEARNING_RATE = 0.1
+MAX_ENT_COEF = 1.0
+
 #: The file of a run's resumable state: every tensor of the policy (value head included) and the
 #: optimiser's state, tensors and numbers only (``torch.load(weights_only=True)`` reads it).
 STATE_FILE = "training_state.pt"
@@ -577,9 +580,11 @@ def latest_state(run_folder: str | Path) -> tuple[Path, dict]:
         if not path.is_file():
             continue
         try:
-            document = json.loads(path.read_text())
+            document = read_json_file(path)
         except (UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise ModelFileError(f"{path}: not a JSON training state ({exc})") from None
+        except OSError as exc:
+            raise ModelFileError(f"{path}: cannot be read ({exc.strerror or type(exc).__name__})") from None
         if not isinstance(document, dict) or document.get("format") != STATE_FORMAT or document.get("version") != 1:
             raise ModelFileError(f"{path}: not an {STATE_FORMAT!r} file of version 1")
         steps = document.get("timesteps")

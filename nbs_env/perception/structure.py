@@ -38,6 +38,7 @@ from shapely.geometry import Polygon
 from nbs_env.atomic import write_text
 from nbs_env.errors import ModelFileError
 from nbs_env.perception.faces import PointIndex, WallFace
+from scenes.jsonio import MAX_JSON_BYTES, read_json
 
 __all__ = [
     "DEFAULT_MODEL_RESOURCE",
@@ -510,6 +511,9 @@ class SEClassifier:
         """
         path = Path(path)
         try:
+            size = path.stat().st_size
+            if size > MAX_JSON_BYTES:  # read whole and decoded: sized first
+                raise ModelFileError(f"{path}: a file of {size:,} bytes; a model file holds at most {MAX_JSON_BYTES:,}")
             text = path.read_text(encoding="utf-8")
         except FileNotFoundError:
             raise ModelFileError(f"{path}: model file not found") from None
@@ -546,7 +550,7 @@ class SEClassifier:
     def from_text(cls, text: str, *, source: str = "<string>") -> SEClassifier:
         """Parse and check a stored model; ``source`` names it in error messages."""
         try:
-            document = json.loads(text)
+            document = read_json(text)
         except (json.JSONDecodeError, RecursionError):
             raise ModelFileError(f"{source}: truncated or not JSON") from None
 
