@@ -250,7 +250,10 @@ def resolve_scene(
     elif isinstance(spec, (str, Path)):
         key = str(spec)
         if key not in cache:
-            cache[key] = load_scene(key, **config.scene_options)
+            try:
+                cache[key] = load_scene(key, **config.scene_options)
+            except TypeError as exc:  # an option the kind of source does not take (units on a plan)
+                raise ConfigError(f"scene_options: {exc}") from None
         scene = cache[key]
     else:
         raise ConfigError(f"options['scene'] must be a scene name, path, Scene or FloorPlan, got {type(spec).__name__}")

@@ -197,3 +197,87 @@ def test_a_start_beyond_any_storey_is_refused_in_the_cli_and_the_env(capsys, tmp
     env = NBSEnv(make_config("fast", scene="l_room"))
     with pytest.raises(ConfigError, match=r"options\['start'\] must lie within 10,000 m of the origin"):
         env.reset(seed=0, options={"start": (1e308, 0.0)})
+
+
+# ---------------------------------------------------------------------- options and outputs
+@pytest.mark.parametrize(
+    "sets, message",
+    [
+        (
+            ["robot.voxel_size=0.05", "robot.voxel_size=0.06"],
+            "--set robot.voxel_size is given twice; give each field once",
+        ),
+        (["max_scans=1", "max_scans=2"], "--set max_scans is given twice"),
+        (["robot.scanner.height=1", "robot.scanner={}"], "--set robot.scanner and --set robot.scanner.height both set"),
+    ],
+)
+def test_a_field_set_twice_by_set_names_the_sets_not_an_option_never_given(sets, message, tmp_path, capsys):
+    from train.cli import main as nbs
+
+    argv = ["scan", "--scene", "l_room", "--preset", "fast", "--out", str(tmp_path / "s")]
+    for item in sets:
+        argv += ["--set", item]
+    assert nbs(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"nbs scan: error: {message}") and "--voxel" not in err and "--max-scans" not in err, err
+
+
+@pytest.mark.parametrize(
+    "argv, flag",
+    [
+        (["scan", "--scene", "l_room", "--max-scans", "1", "--out", "{tmp}/o", "--record", "{link}.rrd"], "--record"),
+        (["scenes", "show", "l_room", "--out", "{link}.png"], "--out"),
+        (["scenes", "generate", "--seed", "1", "--out", "{link}.json"], "--out"),
+        (["scan", "--scene", "l_room", "--max-scans", "1", "--out", "{link}"], "--out"),
+    ],
+)
+def test_an_output_through_a_loop_of_links_is_refused_before_the_work(argv, flag, tmp_path, capsys):
+    """pathlib's RuntimeError for a loop escaped as a traceback; a folder --out through one ran the scans first."""
+    from train.cli import main as nbs
+
+    suffix = Path(argv[-1]).suffix
+    link = tmp_path / "a"
+    os.symlink(tmp_path / f"b{suffix}", tmp_path / f"a{suffix}")
+    os.symlink(tmp_path / f"a{suffix}", tmp_path / f"b{suffix}")
+    argv = [a.replace("{tmp}", str(tmp_path)).replace("{link}", str(link)) for a in argv]
+    assert nbs(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{flag} {link}{suffix}: cannot be used (Too many levels of symbolic links)" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_report_folder_that_is_a_dangling_link_is_refused_before_the_scans(tmp_path, capsys):
+    from train.cli import main as nbs
+
+    os.symlink(tmp_path / "nowhere" / "dir", tmp_path / "dangling")
+    assert nbs(["scan", "--scene", "l_room", "--max-scans", "1", "--out", str(tmp_path / "dangling")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"nbs scan: error: --out {tmp_path / 'dangling'}: is a link to {tmp_path}/nowhere/dir, ")
+
+
+# ---------------------------------------------------------------------- scene options in the configuration
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (5, r"scene_options must be a dict of scenes\.load_scene's options"),
+        ({"units": "km"}, r"scene_options\['units'\] must be one of m, cm, mm, ft, in, got 'km'"),
+        ({"storey": True}, r"scene_options\['storey'\] must be a storey's name or index"),
+        ({"rooms": 3}, r"scene_options \['rooms'\] are not options of a scene file"),
+    ],
+)
+def test_scene_options_are_checked_when_the_configuration_is_made(options, message):
+    from nbs_env.config import make_config
+    from nbs_env.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=message):
+        make_config("fast", scene="l_room", scene_options=options)
+
+
+def test_a_scene_option_the_source_does_not_take_is_a_config_error_at_reset():
+    from nbs_env.config import make_config
+    from nbs_env.env import NBSEnv
+    from nbs_env.errors import ConfigError
+
+    env = NBSEnv(make_config("fast", scene="l_room", scene_options={"units": "mm"}))
+    with pytest.raises(ConfigError, match=r"scene_options: load_scene got options \['units'\] that a bundled scene"):
+        env.reset(seed=0)

@@ -292,6 +292,7 @@ def config_from_arguments(
     if options:
         given["scene_options"] = options
     paths = config_paths()
+    by_set: set[str] = set()  # the fields --set has set, told apart from the options' in a clash
     for key, value in args.set:
         root = key.split(".", 1)[0]
         if root in COMMAND_FIELDS:
@@ -300,8 +301,12 @@ def config_from_arguments(
             raise ConfigError(f"--set {key}: the configuration has no such field (dotted names, e.g. robot.voxel_size)")
         clash = [p for p in given if p == key or p.startswith(key + ".") or key.startswith(p + ".")]
         if clash:
-            raise ConfigError(f"--set {key} and {FLAGS.get(clash[0], clash[0])} both set {key}")
+            other = f"--set {clash[0]}" if clash[0] in by_set else FLAGS.get(clash[0], clash[0])
+            if other == f"--set {key}":
+                raise ConfigError(f"--set {key} is given twice; give each field once")
+            raise ConfigError(f"--set {key} and {other} both set {key}")
         given[key] = value
+        by_set.add(key)
     for key, value in defaults.items():
         given.setdefault(key, value)
     config = make_config(preset, **given)  # checked now, before any work starts

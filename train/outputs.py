@@ -100,6 +100,14 @@ def _parent_problem(path: Path) -> str | None:
 
 def _problem(output: Output) -> str | None:
     path = output.path
+    if path.is_symlink():
+        try:
+            os.stat(path)
+        except FileNotFoundError:  # a link to nothing: a file is made at its target, a folder cannot be
+            if output.kind == "folder":
+                return f"is a link to {os.readlink(path)}, which does not exist; name a folder"
+        except OSError as exc:  # a loop of links
+            return f"cannot be used ({exc.strerror or exc})"
     if output.kind == "folder":
         if not path.exists():
             return _parent_problem(path)
@@ -161,6 +169,8 @@ def check_outputs(outputs: Iterable[Output]) -> None:
             problem = _problem(output)
         except OSError as exc:  # a name too long for the file system, a loop of links
             problem = f"cannot be used ({exc.strerror or exc})"
+        except RuntimeError:  # pathlib's word for a loop of links met while resolving
+            problem = "cannot be used (a loop of symbolic links)"
         if problem is not None:
             raise OutputError(f"{output.flag} {_shown(output.path)}: {problem}")
 

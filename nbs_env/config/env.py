@@ -14,6 +14,7 @@ from nbs_env.config.robot import RobotConfig
 from nbs_env.config.rooms import MAX_SCANS, RoomRules
 from nbs_env.config.scanners import SCANNERS
 from scenes.generator import GeneratorConfig
+from scenes.limits import UNITS
 
 #: The most cells an observation window may have (64× the default 64 × 64 × 16): each is a float per
 #: step and a network input.
@@ -159,6 +160,39 @@ class RewardConfig(Config):
             _at_most(self, name, 1000.0)
 
 
+#: The options :func:`scenes.load_scene` takes for a file (those of a generated storey are ``generator``'s).
+SCENE_OPTIONS = ("storey", "doors", "class_map", "y_up", "units", "name", "validate")
+
+
+def _check_scene_options(options: Any) -> None:
+    """``scene_options`` holds options :func:`scenes.load_scene` takes, of their types: checked when
+    the configuration is made, not at the first reset (a TypeError from deep in the loader)."""
+    _require(
+        isinstance(options, dict) and all(isinstance(k, str) for k in options),
+        f"scene_options must be a dict of scenes.load_scene's options (e.g. {{'storey': 'Erdgeschoss'}}), "
+        f"got {repr(options)[:80]}",
+    )
+    unknown = sorted(set(options) - set(SCENE_OPTIONS))
+    _require(not unknown, f"scene_options {unknown} are not options of a scene file; they are {list(SCENE_OPTIONS)}")
+    checks = {
+        "storey": (
+            lambda v: (
+                (isinstance(v, str) and v.strip() != "") or (isinstance(v, int) and not isinstance(v, bool) and v >= 0)
+            ),
+            "a storey's name or index",
+        ),
+        "doors": (lambda v: v in ("open", "closed"), "'open' or 'closed'"),
+        "class_map": (lambda v: isinstance(v, dict), "a dict of IFC classes to surface classes"),
+        "y_up": (lambda v: isinstance(v, bool), "a bool"),
+        "validate": (lambda v: isinstance(v, bool), "a bool"),
+        "units": (lambda v: isinstance(v, str) and v in UNITS, f"one of {', '.join(UNITS)}"),
+        "name": (lambda v: isinstance(v, str), "a string"),
+    }
+    for key, value in options.items():
+        valid, what = checks[key]
+        _require(valid(value), f"scene_options['{key}'] must be {what}, got {repr(value)[:80]}")
+
+
 @dataclass(frozen=True)
 class EnvConfig(Config):
     """Everything an :class:`NBSEnv` is made of (JSON-safe, frozen).
@@ -245,6 +279,7 @@ class EnvConfig(Config):
             0.01 <= self.coverage_radius <= 1,
             f"coverage_radius must be within [0.01, 1] metres, got {self.coverage_radius}",
         )
+        _check_scene_options(self.scene_options)
         _require(isinstance(self.expose_belief, bool), f"expose_belief must be a bool, got {self.expose_belief!r}")
         preset = self.robot.scanner.preset
         if preset is not None:
