@@ -11,9 +11,11 @@ as it is. This module holds no building: the policies, which must not read groun
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import re
+import stat
 from typing import Any
 
 import numpy as np
@@ -59,13 +61,16 @@ def read_json_file(path: str | os.PathLike[str], *, max_bytes: int = MAX_JSON_BY
     JSONSizeError
         The file holds more than ``max_bytes``.
     OSError
-        The file cannot be read.
+        The file cannot be read, or is not a regular file.
     UnicodeDecodeError
         It is not UTF-8.
     json.JSONDecodeError
         As :func:`read_json`.
     """
-    size = os.stat(path).st_size
+    status = os.stat(path)
+    if not stat.S_ISREG(status.st_mode):  # a fifo would block the read for ever, a device not end
+        raise OSError(errno.EINVAL, "not a regular file (a fifo, a device or a folder)", os.fspath(path))
+    size = status.st_size
     if size > max_bytes:
         raise JSONSizeError(
             f"a file of {size:,} bytes, more than the {max_bytes:,} a JSON file of nbs-env may hold "

@@ -281,3 +281,64 @@ def test_a_scene_option_the_source_does_not_take_is_a_config_error_at_reset():
     env = NBSEnv(make_config("fast", scene="l_room", scene_options={"units": "mm"}))
     with pytest.raises(ConfigError, match=r"scene_options: load_scene got options \['units'\] that a bundled scene"):
         env.reset(seed=0)
+
+
+# ---------------------------------------------------------------------- signals at the end, fifos in result folders
+def test_a_stop_signal_after_the_command_is_done_is_ignored_by_the_process():
+    """Python restores the default handlers while it shuts down: a SIGTERM then killed a finished
+    `nbs scan` silently with 143. The command line's own main() ignores them once its work is said;
+    main() called with arguments (a test, a notebook) leaves the process's handlers alone."""
+    code = (
+        "import signal, sys; sys.argv = ['nbs', 'scenes', 'list']; from train.cli import main; c = main(); "
+        "assert signal.getsignal(signal.SIGTERM) == signal.SIG_IGN, signal.getsignal(signal.SIGTERM); "
+        "main(['scenes', 'list']); sys.exit(c)"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    import signal
+
+    from train.cli import main
+
+    before = signal.getsignal(signal.SIGTERM)
+    assert main(["scenes", "list"]) == 0 and signal.getsignal(signal.SIGTERM) == before
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="POSIX fifos")
+def test_a_fifo_in_a_comparisons_folder_is_refused_before_resume_reads_it(tmp_path, capsys):
+    """A fifo as a run's metrics.json blocked --resume for ever, deaf to SIGTERM and SIGINT."""
+    from train.cli import main as nbs
+
+    out = tmp_path / "grid"
+    argv = ["compare", "--scenes", "l_room", "--policies", "random", "--seeds", "0", "--preset", "fast"]
+    argv += ["--max-scans", "1", "--quiet", "--out", str(out)]
+    assert nbs(argv) == 0
+    metrics = out / "runs" / "l_room" / "random" / "seed0" / "metrics.json"
+    metrics.unlink()
+    os.mkfifo(metrics)
+    capsys.readouterr()
+    assert nbs([*argv, "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert err == (
+        f"nbs compare: error: --out {out}: {metrics} is not a regular file (a fifo, a socket or a device); the "
+        "comparison's files must be its own: replace it by the file or remove it, or choose another --out\n"
+    )
+
+
+def test_a_record_of_another_schema_or_an_oracle_with_nan_is_not_reused():
+    from train.compare import _oracle_usable, record_problem
+
+    record = {"spec": {"scene": "l_room", "policy": "random", "seed": 0}, "metrics": {"schema": 99}}
+    assert record_problem(record) == "its schema is 99, not 'nbs-metrics/1'"
+    plan = {"max_coverage_pct": 90.0, "coverage_pct": [50.0, 90.0], "room_max_pct": {"0": 90.0}}
+    assert _oracle_usable(plan)
+    assert not _oracle_usable({**plan, "positions": [[float("nan"), 0.0, 0.0]]})
+    assert not _oracle_usable({**plan, "coverage_pct": [50.0, 190.0]})
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="POSIX fifos")
+def test_json_files_that_are_not_regular_files_are_refused_unread(tmp_path):
+    from scenes.jsonio import read_json_file
+
+    os.mkfifo(tmp_path / "f.json")
+    with pytest.raises(OSError, match="not a regular file"):
+        read_json_file(tmp_path / "f.json")

@@ -204,3 +204,17 @@ def test_a_training_state_of_meta_tensors_is_refused_in_one_line(run, capsys):
     code, err = _train(["--resume", str(run), "--timesteps", "24", "--quiet"], capsys)
     assert code == EXIT_USAGE and err.count("\n") == 1, err
     assert err.startswith(f"nbs train: error: --resume: {run}/training_state.pt: policy.") and "'meta' device" in err
+
+
+def test_a_fifo_in_the_run_folder_is_refused_before_the_run_resumes(run, capsys):
+    """A fifo as the learning curve blocked the run's end for ever, deaf to SIGTERM: the steps trained were lost."""
+    import os
+
+    if not hasattr(os, "mkfifo"):
+        pytest.skip("POSIX fifos")
+    curve = run / "learning_curve.jsonl"
+    curve.unlink(missing_ok=True)
+    os.mkfifo(curve)
+    code, err = _train(["--resume", str(run), "--timesteps", "24", "--quiet"], capsys)
+    assert code == EXIT_USAGE and err.count("\n") == 1, err
+    assert err.startswith(f"nbs train: error: --resume {run}: {curve} is not a regular file"), err

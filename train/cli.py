@@ -28,7 +28,7 @@ from pathlib import Path
 
 from train.arguments import add_robot_arguments, add_scene_arguments, integer_from, scene_option_error
 from train.outputs import NamedStream, Output, OutputError, check_outputs, output_path
-from train.stopping import StopRequest, exit_code
+from train.stopping import STOP_SIGNALS, StopRequest, exit_code
 
 EXIT_SCENE_ERROR = 1
 EXIT_USAGE = 2
@@ -789,10 +789,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     log = _OneLineLog(logging.WARNING)
     logging.getLogger().addHandler(log)
     try:
-        return _checked_main(argv)
+        code = _checked_main(argv)
     finally:  # a caller in the same process (a test, a notebook) gets its own back
         sys.stderr, sys.stdout, warnings.showwarning = stderr, stdout, showwarning
         logging.getLogger().removeHandler(log)
+    if argv is None:
+        # The process's own command line, whose work is done and said: a stop signal from here on
+        # finds nothing to stop. Python restores the default handlers while it shuts down (half a
+        # second with open3d and torch loaded), so one landing then killed the process silently
+        # with 128 + the signal after a complete run. Ignored (a disposition of the whole process,
+        # which the shutdown keeps; a mask would be the main thread's only), it is dropped.
+        for sig in STOP_SIGNALS:
+            signal.signal(sig, signal.SIG_IGN)
+    return code
 
 
 def _checked_main(argv: Sequence[str] | None) -> int:

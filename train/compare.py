@@ -40,7 +40,6 @@ import io
 import json
 import math
 import multiprocessing
-import os
 import re
 import sys
 import time
@@ -963,7 +962,7 @@ def check_out_dir(out: str | Path, *, keep: bool = False) -> Path:
         empty and ``keep`` is False (:func:`train.outputs.check_outputs`); or a file or folder in
         it is a symbolic link (the grid would read and write through it).
     """
-    from train.outputs import Output, OutputError, check_outputs
+    from train.outputs import Output, OutputError, check_outputs, odd_entry
 
     out = Path(out)
     replace = None if keep else "pass --resume to continue that comparison, or --force to write over it"
@@ -983,24 +982,14 @@ def check_out_dir(out: str | Path, *, keep: bool = False) -> Path:
             raise CompareError(f"--out {out}: {path} {what}; move it away or choose another --out")
     # Every file under the folder is the grid's own: a link there (to a file outside it) would be
     # read as a finished run and written through, overwriting what it points to.
-    link = _first_link(out)
-    if link is not None:
+    odd = odd_entry(out)
+    if odd is not None:
+        path, what = odd
         raise CompareError(
-            f"--out {out}: {link} is a symbolic link; the comparison's files must be its own: "
+            f"--out {out}: {path} is {what}; the comparison's files must be its own: "
             "replace it by the file or remove it, or choose another --out"
         )
     return out
-
-
-def _first_link(folder: Path) -> Path | None:
-    """The first symbolic link under ``folder`` (in name order, not following links), or None."""
-    for root, folders, files in os.walk(folder):
-        folders.sort()
-        for name in sorted(folders + files):
-            path = Path(root) / name
-            if path.is_symlink():
-                return path
-    return None
 
 
 def write_record(out: str | Path, kind: str, record: dict[str, Any]) -> None:
@@ -1190,6 +1179,10 @@ def _check_metrics(m: Any, spec: dict[str, Any]) -> None:
     figure the tables and plots read of a run, and says it is the run of ``spec``."""
     if not isinstance(m, dict):
         raise _BadRecordError(f"it holds {_shown(m)}, not a run's figures")
+    from nbs_env.report import SCHEMA
+
+    if m.get("schema") != SCHEMA:  # another version's figures, or another file
+        raise _BadRecordError(f"its schema is {_shown(m.get('schema'))}, not {SCHEMA!r}")
     for key in ("scene", "policy", "seed"):  # the record of another run, copied or edited in
         want, have = spec[key], m.get(key)
         if type(have) is not type(want) or have != want:
@@ -1331,7 +1324,20 @@ def _oracle_usable(plan: dict[str, Any]) -> bool:
         rooms = {str(k): float(v) for k, v in plan.get("room_max_pct", {}).items()}
     except (KeyError, TypeError, ValueError, AttributeError):
         return False
-    return curve.ndim == 1 and bool(np.isfinite(best)) and all(np.isfinite(v) for v in rooms.values())
+    in_range = bool(0 <= best <= 100) and all(0 <= v <= 100 for v in rooms.values())  # NaN fails too
+    return curve.ndim == 1 and bool(((curve >= 0) & (curve <= 100)).all()) and in_range and _finite_leaves(plan)
+
+
+def _finite_leaves(node: Any) -> bool:
+    """No NaN or infinity anywhere in a record (its positions, its times): written back into
+    ``oracle.json``, one would make the file invalid JSON."""
+    if isinstance(node, float):
+        return math.isfinite(node)
+    if isinstance(node, dict):
+        return all(_finite_leaves(v) for v in node.values())
+    if isinstance(node, list):
+        return all(_finite_leaves(v) for v in node)
+    return True
 
 
 def _refuse_repeats(flag: str, values: Sequence[Any]) -> None:

@@ -14,13 +14,14 @@ from __future__ import annotations
 
 import argparse
 import os
+import stat
 import tempfile
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-__all__ = ["NamedStream", "Output", "OutputError", "check_outputs", "output_path", "utf8_problem"]
+__all__ = ["NamedStream", "Output", "OutputError", "check_outputs", "odd_entry", "output_path", "utf8_problem"]
 
 
 class OutputError(ValueError):
@@ -138,6 +139,25 @@ def _problem(output: Output) -> str | None:
     if path.exists() and output.replace is not None:
         return f"exists; {output.replace}, or choose another name"
     return _parent_problem(path.resolve() if path.is_symlink() else path)
+
+
+def odd_entry(folder: Path) -> tuple[Path, str] | None:
+    """The first entry under ``folder`` (in name order, not following links) that is neither a file
+    nor a folder, and what it is; None when there is none. A fifo read as a run's record blocked
+    ``--resume`` for ever, deaf to signals."""
+    for root, folders, files in os.walk(folder):
+        folders.sort()
+        for name in sorted(folders + files):
+            path = Path(root) / name
+            try:
+                mode = path.lstat().st_mode
+            except OSError:
+                continue
+            if stat.S_ISLNK(mode):
+                return path, "a symbolic link"
+            if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+                return path, "not a regular file (a fifo, a socket or a device)"
+    return None
 
 
 def utf8_problem(flag: str, name: object, advice: str = "rename it") -> str | None:

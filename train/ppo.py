@@ -1286,6 +1286,16 @@ def _resume(args) -> int:
     if problem is not None:  # a run folder that has become read-only since
         print(f"nbs train: error: {problem}", file=sys.stderr)
         return 2
+    from train.outputs import odd_entry
+
+    odd = odd_entry(Path(args.resume))
+    if odd is not None:  # a fifo as its curve blocked the run's end for ever, deaf to signals
+        print(
+            f"nbs train: error: --resume {args.resume}: {odd[0]} is {odd[1]}; a run's files are its own: "
+            "replace it by the file or remove it",
+            file=sys.stderr,
+        )
+        return 2
     if args.envs != build_parser().get_default("envs"):
         config = dataclasses.replace(config, envs=args.envs)
     return _run(config, args.resume, args, resume=True)
