@@ -143,7 +143,8 @@ def replacing(
     # Through a link to its file: renamed onto the link itself, the new file would replace the link.
     path = Path(os.path.realpath(path)) if follow_links else Path(path)
     if (follow_links or not path.is_symlink()) and path.exists() and not path.is_file():
-        raise OSError(errno.EINVAL, "not a regular file (a device, a fifo or a socket): nothing is written", str(path))
+        what = "a folder" if path.is_dir() else "a device, a fifo or a socket"
+        raise OSError(errno.EINVAL, f"not a regular file ({what}): nothing is written", str(path))
     temporary = temporary_path(path)
     try:
         yield temporary

@@ -877,12 +877,25 @@ def serve_web(
     binary = rerun_binary()
     # A port the user named is tried here first: rerun, given one in use, may neither exit nor serve
     # within the timeout, and the error would blame its start-up instead of the port.
+    import socket
+
+    try:
+        socket.getaddrinfo(bind, None, type=socket.SOCK_STREAM)
+    except (OSError, UnicodeError) as exc:
+        raise NoViewerError(
+            f"the address to serve on (--bind) {bind!r}: {getattr(exc, 'strerror', None) or exc}"
+        ) from None
     for what, wanted in (("the recording's port (--port)", port), ("the web viewer's port (--web-port)", web_port)):
         problem = _port_problem(bind, wanted) if wanted else None
         if problem is not None:
             raise NoViewerError(f"{what} {wanted} on {bind}: {problem}")
-    port = port or _free_port(bind)
-    web_port = web_port or _free_port(bind)
+    try:
+        port = port or _free_port(bind)
+        web_port = web_port or _free_port(bind)
+    except (OSError, UnicodeError) as exc:  # a name that resolves to nothing, an address not this machine's
+        raise NoViewerError(
+            f"the address to serve on (--bind) {bind!r}: {getattr(exc, 'strerror', None) or exc}"
+        ) from None
     host = _url_host(bind)
     url = web_viewer_url(host, web_port, port)
     command = [str(binary), "--serve-web", "--bind", bind, "--port", str(port), "--web-viewer-port", str(web_port)]

@@ -63,6 +63,7 @@ leaves the whole element out.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
@@ -154,6 +155,9 @@ _FACE_PROBE = 0.1
 #: Distance (m) either side of a door's centre at which its two rooms are looked up.
 _DOOR_PROBE = 0.6
 
+#: The deepest extrusion of an element, metres: a building's elements are at most a storey's width
+#: (:data:`scenes.limits.MAX_STOREY_WIDTH`, a wall extruded along its length) and nowhere near 10 km.
+MAX_EXTRUSION = 10_000.0
 _INSTALL_HINT = "reading IFC needs ifcopenshell: pip install 'nbs-env[ifc]'"
 _BOUNDING_CLASSES = ("IfcSlab", "IfcCovering", "IfcRoof")
 
@@ -199,8 +203,41 @@ def _check_placements(source: str, model: Any) -> None:
                     source, f"the placement #{node.id()} is relative to itself: PlacementRelTo forms a cycle"
                 )
             chain.append(node.id())
-            node = getattr(node, "PlacementRelTo", None)
+            parent = getattr(node, "PlacementRelTo", None)
+            # A reference of another type (an IfcBuilding where a placement belongs) passes the reader
+            # and ended in an AttributeError inside ifcopenshell's placement.
+            if parent is not None and not parent.is_a("IfcObjectPlacement"):
+                raise IfcError(
+                    source,
+                    f"the placement #{node.id()} is relative to #{parent.id()}, an {parent.is_a()}, not a placement",
+                )
+            relative = getattr(node, "RelativePlacement", None)
+            if node.is_a("IfcLocalPlacement") and (relative is None or not relative.is_a("IfcPlacement")):
+                shown = "nothing" if relative is None else f"#{relative.id()}, an {relative.is_a()}"
+                raise IfcError(source, f"the placement #{node.id()} places by {shown}, not an axis placement")
+            node = parent
         ended.update(chain)
+
+
+def _check_geometry_values(source: str, model: Any, scale: float) -> None:
+    """Directions that point somewhere, finite points, and extrusions of a building's size: a zero
+    axis divided by its length (a NaN storey and a misleading "no wall faces"), and a wall extruded
+    1e300 m was dropped by the geometry engine without a word."""
+    for direction in model.by_type("IfcDirection"):
+        ratios = [float(r) for r in direction.DirectionRatios or ()]
+        if not ratios or not all(math.isfinite(r) for r in ratios) or not any(ratios):
+            raise IfcError(source, f"the direction #{direction.id()} {tuple(ratios)} points nowhere")
+    for point in model.by_type("IfcCartesianPoint"):
+        if not all(math.isfinite(float(c)) for c in point.Coordinates or ()):
+            raise IfcError(source, f"the point #{point.id()} has a coordinate that is not a finite number")
+    for solid in model.by_type("IfcExtrudedAreaSolid"):
+        depth = float(solid.Depth) * scale
+        if not (math.isfinite(depth) and 0 < depth <= MAX_EXTRUSION):
+            raise IfcError(
+                source,
+                f"the extrusion #{solid.id()} is {float(solid.Depth):g} units ({depth:g} m) deep; an element of a "
+                f"storey is more than 0 and at most {MAX_EXTRUSION:,.0f} m deep",
+            )
 
 
 def load_ifc_scene(
@@ -273,6 +310,7 @@ def load_ifc_scene(
     _check_placements(source, model)
 
     scale = float(ifcopenshell.util.unit.calculate_unit_scale(model))
+    _check_geometry_values(source, model, scale)
     mapping = _merge_class_map(source, model, class_map)
     storeys = _sorted_storeys(model, scale)
     if not storeys:

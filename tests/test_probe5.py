@@ -9,6 +9,7 @@ import os
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -304,8 +305,12 @@ def test_a_stop_signal_after_the_command_is_done_is_ignored_by_the_process():
 
 
 @pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="POSIX fifos")
-def test_a_fifo_in_a_comparisons_folder_is_refused_before_resume_reads_it(tmp_path, capsys):
-    """A fifo as a run's metrics.json blocked --resume for ever, deaf to SIGTERM and SIGINT."""
+@pytest.mark.parametrize(
+    "make, what", [(os.mkfifo, "not a regular file (a fifo, a socket or a device)"), (os.mkdir, "a folder")]
+)
+def test_a_fifo_or_folder_in_a_comparisons_folder_is_refused_before_resume_reads_it(make, what, tmp_path, capsys):
+    """A fifo as a run's metrics.json blocked --resume for ever, deaf to SIGTERM and SIGINT; a folder
+    there made the run run again and fail at its write."""
     from train.cli import main as nbs
 
     out = tmp_path / "grid"
@@ -314,13 +319,13 @@ def test_a_fifo_in_a_comparisons_folder_is_refused_before_resume_reads_it(tmp_pa
     assert nbs(argv) == 0
     metrics = out / "runs" / "l_room" / "random" / "seed0" / "metrics.json"
     metrics.unlink()
-    os.mkfifo(metrics)
+    make(metrics)
     capsys.readouterr()
     assert nbs([*argv, "--resume"]) == 2
     err = capsys.readouterr().err
     assert err == (
-        f"nbs compare: error: --out {out}: {metrics} is not a regular file (a fifo, a socket or a device); the "
-        "comparison's files must be its own: replace it by the file or remove it, or choose another --out\n"
+        f"nbs compare: error: --out {out}: {metrics} is {what}; the comparison's files must be its own: "
+        "replace it by the file or remove it, or choose another --out\n"
     )
 
 
@@ -342,3 +347,74 @@ def test_json_files_that_are_not_regular_files_are_refused_unread(tmp_path):
     os.mkfifo(tmp_path / "f.json")
     with pytest.raises(OSError, match="not a regular file"):
         read_json_file(tmp_path / "f.json")
+
+
+# ---------------------------------------------------------------------- IFC values
+def _fzk(tmp_path: Path, old: str, new: str) -> Path:
+    from scenes.corpus import corpus_entry
+
+    text = corpus_entry("fzk_haus_eg").path().read_text(encoding="utf-8", errors="surrogateescape")
+    assert old in text
+    path = tmp_path / "edited.ifc"
+    path.write_text(text.replace(old, new), encoding="utf-8", errors="surrogateescape")
+    return path
+
+
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        (
+            "#432= IFCLOCALPLACEMENT(#115,#431);",
+            "#432= IFCLOCALPLACEMENT(#434,#431);",
+            r"the placement #432 is relative to #434, an IfcBuilding, not a placement",
+        ),
+        ("#472= IFCDIRECTION((0.,0.,1.));", "#472= IFCDIRECTION((0.,0.,0.));", r"the direction #472 .* points nowhere"),
+        (
+            "#15006= IFCEXTRUDEDAREASOLID(#14994,#15003,#15004,2.5);",
+            "#15006= IFCEXTRUDEDAREASOLID(#14994,#15003,#15004,1.E300);",
+            r"the extrusion #15006 is 1e\+300 units \(1e\+300 m\) deep",
+        ),
+    ],
+)
+def test_ifc_values_that_break_the_geometry_are_refused_naming_the_entity(old, new, message, tmp_path):
+    """A placement relative to a building ended in an AttributeError traceback inside ifcopenshell; a
+    zero axis in a divide warning and "no wall faces"; a wall extruded 1e300 m was dropped silently."""
+    pytest.importorskip("ifcopenshell")
+    from scenes import IfcError
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(IfcError, match=message):
+            load_scene(str(_fzk(tmp_path, old, new)), storey=0)
+
+
+# ---------------------------------------------------------------------- the environment and the viewer
+@pytest.mark.parametrize("value", ["", "abc", "0", "4,0"])
+def test_an_omp_thread_count_libgomp_refuses_is_refused_before_it_loads(value):
+    """libgomp printed a blank line and its complaint on stderr of an otherwise successful run."""
+    env = {**os.environ, "OMP_NUM_THREADS": value}
+    proc = subprocess.run(
+        [sys.executable, "-m", "train", "scenes", "list"],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 2 and proc.stderr.startswith(f"nbs: error: OMP_NUM_THREADS={value!r} is not a thread")
+    assert proc.stderr.count("\n") == 1 and "libgomp" not in proc.stderr
+
+
+def test_an_address_the_viewer_cannot_serve_on_is_named(tmp_path):
+    from nbs_env.replay import NoViewerError, serve_web
+
+    rr = pytest.importorskip("rerun")
+    recording = tmp_path / "r.rrd"
+    stream = rr.RecordingStream(application_id="nbs_env_test")
+    stream.save(recording)
+    stream.log("x", rr.Points3D([[0.0, 0.0, 0.0]]))
+    stream.flush()
+    del stream
+    for bind in ("999.1.1.1", "localhost:80"):
+        with pytest.raises(NoViewerError, match=rf"the address to serve on \(--bind\) '{bind}': "):
+            serve_web(recording, port=0, web_port=0, bind=bind)

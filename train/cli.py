@@ -722,13 +722,22 @@ def run_view(args: argparse.Namespace) -> int:
 
 def _environment_problem() -> str | None:
     """What is wrong with the environment variables the commands read, before any work: the
-    kernels' ``NBS_THREADS`` and matplotlib's ``MPLBACKEND`` (which fails its import)."""
+    kernels' ``NBS_THREADS``, libgomp's ``OMP_NUM_THREADS`` and matplotlib's ``MPLBACKEND`` (which
+    fails its import)."""
     from nbs_env.threads import cores
 
     try:
         cores()
     except ValueError as exc:
         return str(exc)
+    omp = os.environ.get("OMP_NUM_THREADS")
+    # What libgomp (torch, scikit-learn) reads when it loads: a value it refuses is two stray lines of
+    # its own on stderr, whatever the command then does.
+    if omp is not None and not re.fullmatch(r"\s*\+?0*[1-9]\d*\s*(,\s*\+?0*[1-9]\d*\s*)*", omp):
+        return (
+            f"OMP_NUM_THREADS={omp[:40]!r} is not a thread count (a positive integer, or a list such as 4,2): "
+            "unset it or fix it (nbs sizes its own threads with NBS_THREADS)"
+        )
     if "MPLBACKEND" in os.environ:
         try:
             import matplotlib  # noqa: F401  (it reads MPLBACKEND on import)

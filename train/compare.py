@@ -945,6 +945,10 @@ def write_outputs(
     return rows
 
 
+#: The files a run writes into its folder (:func:`write_record`).
+_RUN_FILES = ("run.json", "metrics.json", "error.txt")
+
+
 def check_out_dir(out: str | Path, *, keep: bool = False) -> Path:
     """``out`` as a folder this process can write into (created if missing), before any run starts.
 
@@ -983,6 +987,13 @@ def check_out_dir(out: str | Path, *, keep: bool = False) -> Path:
     # Every file under the folder is the grid's own: a link there (to a file outside it) would be
     # read as a finished run and written through, overwriting what it points to.
     odd = odd_entry(out)
+    if odd is None:  # a folder where a run writes a file: found after the run, it would cost the run
+        runs = out / "runs"
+        odd = (
+            next(((p, "a folder") for p in sorted(runs.rglob("*")) if p.name in _RUN_FILES and p.is_dir()), None)
+            if runs.is_dir()
+            else None
+        )
     if odd is not None:
         path, what = odd
         raise CompareError(
