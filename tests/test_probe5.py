@@ -263,7 +263,7 @@ def test_a_report_folder_that_is_a_dangling_link_is_refused_before_the_scans(tmp
         (5, r"scene_options must be a dict of scenes\.load_scene's options"),
         ({"units": "km"}, r"scene_options\['units'\] must be one of m, cm, mm, ft, in, got 'km'"),
         ({"storey": True}, r"scene_options\['storey'\] must be a storey's name or index"),
-        ({"rooms": 3}, r"scene_options \['rooms'\] are not options of a scene file"),
+        ({"zz": 3}, r"scene_options \['zz'\] are not options of scenes\.load_scene"),
     ],
 )
 def test_scene_options_are_checked_when_the_configuration_is_made(options, message):

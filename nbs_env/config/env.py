@@ -172,8 +172,14 @@ def _check_scene_options(options: Any) -> None:
         f"scene_options must be a dict of scenes.load_scene's options (e.g. {{'storey': 'Erdgeschoss'}}), "
         f"got {repr(options)[:80]}",
     )
-    unknown = sorted(set(options) - set(SCENE_OPTIONS))
-    _require(not unknown, f"scene_options {unknown} are not options of a scene file; they are {list(SCENE_OPTIONS)}")
+    # A generated:SEED storey takes the generator's fields (checked by GeneratorConfig when it loads).
+    generator = tuple(GeneratorConfig.__dataclass_fields__)
+    unknown = sorted(set(options) - set(SCENE_OPTIONS) - set(generator))
+    _require(
+        not unknown,
+        f"scene_options {unknown} are not options of scenes.load_scene; they are {list(SCENE_OPTIONS)} and, for "
+        "generated:SEED, the generator's fields",
+    )
     checks = {
         "storey": (
             lambda v: (
@@ -189,6 +195,8 @@ def _check_scene_options(options: Any) -> None:
         "name": (lambda v: isinstance(v, str), "a string"),
     }
     for key, value in options.items():
+        if key not in checks:
+            continue
         valid, what = checks[key]
         _require(valid(value), f"scene_options['{key}'] must be {what}, got {repr(value)[:80]}")
 
