@@ -324,7 +324,11 @@ def test_compare_with_a_run_record_turned_folder_says_so_in_one_line(tmp_path, c
     record.unlink()
     record.mkdir()
     code, err = run_cli(command + " --resume", capsys)
-    assert code == EXIT_SCENE_ERROR and err.strip().splitlines() == [f"nbs compare: error: {record}: Is a directory"]
+    # Refused before any run: found at the write, it cost the run.
+    assert code == EXIT_USAGE and err.strip().splitlines() == [
+        f"nbs compare: error: --out {out}: {record} is a folder; the comparison's files must be its own: replace it "
+        "by the file or remove it, or choose another --out"
+    ]
 
 
 def test_compare_writes_each_run_as_it_finishes_and_keeps_them_when_the_summary_fails(tmp_path, monkeypatch, capsys):
