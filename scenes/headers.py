@@ -14,6 +14,7 @@ from __future__ import annotations
 import base64
 import binascii
 import json
+import math
 import struct
 from pathlib import Path
 from typing import Any
@@ -374,11 +375,26 @@ def _side_file(source: str, path: Path, uri: str, where: str) -> Path | None:
     return side
 
 
+#: A node's transform: its properties and their number of components (glTF 2.0).
+_TRANSFORM_LENGTHS = {"matrix": 16, "translation": 3, "rotation": 4, "scale": 3}
+
+
 def _check_node_tree(source: str, nodes: list[dict]) -> None:
     """The nodes' ``children`` must name nodes and form a forest: a node that is its own descendant
     once sent the scene graph's walk round without end."""
     children: list[list[int]] = []
     for i, node in enumerate(nodes):
+        for key, length in _TRANSFORM_LENGTHS.items():
+            # A transform of strings was read as zeros: a storey "0 m high", not the file's mistake.
+            value = node.get(key)
+            if value is not None and not (
+                isinstance(value, list)
+                and len(value) == length
+                and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+            ):
+                raise InvalidMeshError(
+                    source, f"nodes[{i}].{key} must be {length} finite numbers, got {repr(value)[:60]}"
+                )
         kids = node.get("children", [])
         if not isinstance(kids, list) or not all(
             isinstance(k, int) and not isinstance(k, bool) and 0 <= k < len(nodes) for k in kids

@@ -418,3 +418,14 @@ def test_an_address_the_viewer_cannot_serve_on_is_named(tmp_path):
     for bind in ("999.1.1.1", "localhost:80"):
         with pytest.raises(NoViewerError, match=rf"the address to serve on \(--bind\) '{bind}': "):
             serve_web(recording, port=0, web_port=0, bind=bind)
+
+
+@pytest.mark.parametrize(
+    "key, value", [("matrix", ["1"] * 16), ("matrix", [float("nan")] * 16), ("translation", [0, 0]), ("scale", "x")]
+)
+def test_a_node_transform_that_is_not_finite_numbers_is_refused(key, value, tmp_path):
+    """A matrix of strings was read as zeros: "the storey is 0 m high"."""
+    doc = gltf_doc(room_parts())
+    doc["nodes"][0][key] = value
+    with pytest.raises(InvalidMeshError, match=rf"nodes\[0\]\.{key} must be \d+ finite numbers"):
+        load_scene(str(write_gltf(tmp_path / "t.gltf", doc)))
