@@ -65,6 +65,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -79,6 +80,7 @@ from scenes.errors import IfcError, MissingDependencyError, MissingStructureErro
 from scenes.geometry import split_long_faces
 from scenes.importers import footprint_polygon
 from scenes.interior import derive_rooms, rooms_by_probe
+from scenes.labels import STRUCTURAL_CLASSES
 from scenes.limits import check_storey_size
 from scenes.model import Door, Room, Scene, SurfaceClass
 
@@ -87,6 +89,7 @@ __all__ = [
     "DEFAULT_CLASS_MAP",
     "MAX_FACE_EDGE",
     "ROOM_Z_TOLERANCE",
+    "UnbuiltElementsWarning",
     "load_ifc_scene",
 ]
 
@@ -219,6 +222,36 @@ def _check_placements(source: str, model: Any) -> None:
         ended.update(chain)
 
 
+class UnbuiltElementsWarning(UserWarning):
+    """Structural elements of the storey (walls, slabs) whose body geometry ifcopenshell could not
+    build: they are left out of the scene, and the message names them.
+
+    Attributes
+    ----------
+    source : str
+        The file.
+    elements : tuple of str
+        ``#ID IfcClass 'Name'`` of each element left out.
+    """
+
+    def __init__(self, source: str, elements: Iterable[Any]) -> None:
+        self.source = str(source)
+        self.elements = tuple(f"#{e.id()} {e.is_a()} {getattr(e, 'Name', None)!r}" for e in elements)
+        shown = ", ".join(self.elements[:5]) + (f" and {len(self.elements) - 5} more" if len(self.elements) > 5 else "")
+        super().__init__(
+            f"{self.source}: {len(self.elements)} structural element(s) have a body the geometry engine could not "
+            f"build and were left out: {shown}"
+        )
+
+
+def _has_body(element: Any) -> bool:
+    """Whether ``element`` has a body representation (an axis-only wall has none, and is not missed)."""
+    shape = getattr(element, "Representation", None)
+    return shape is not None and any(
+        (r.RepresentationIdentifier or "").lower() == "body" for r in shape.Representations or ()
+    )
+
+
 def _check_geometry_values(source: str, model: Any, scale: float) -> None:
     """Directions that point somewhere, finite points, and extrusions of a building's size: a zero
     axis divided by its length (a NaN storey and a misleading "no wall faces"), and a wall extruded
@@ -336,6 +369,13 @@ def load_ifc_scene(
     # Doors are meshed even when left out of the scene: their geometry gives the Door ground truth.
     wanted = {e.id(): e for e in [*(on_storey[i] for i in classes), *others, *spaces, *door_elements]}
     shapes = _triangulate(source, ifcopenshell, model, wanted.values())
+    unbuilt = [
+        on_storey[i]
+        for i, c in classes.items()
+        if c in STRUCTURAL_CLASSES and i not in shapes and _has_body(on_storey[i])
+    ]
+    if unbuilt:
+        warnings.warn(UnbuiltElementsWarning(source, unbuilt), stacklevel=2)
 
     wall_ids = [i for i, c in classes.items() if c == SurfaceClass.WALL and i in shapes]
     if not wall_ids:

@@ -429,3 +429,17 @@ def test_a_node_transform_that_is_not_finite_numbers_is_refused(key, value, tmp_
     doc["nodes"][0][key] = value
     with pytest.raises(InvalidMeshError, match=rf"nodes\[0\]\.{key} must be \d+ finite numbers"):
         load_scene(str(write_gltf(tmp_path / "t.gltf", doc)))
+
+
+def test_a_wall_whose_body_cannot_be_built_is_named_in_a_warning(tmp_path):
+    """ifcopenshell leaves out an element whose geometry fails; it was dropped without a word."""
+    pytest.importorskip("ifcopenshell")
+    from scenes.ifc import UnbuiltElementsWarning
+
+    path = _fzk(
+        tmp_path,
+        "#14992= IFCPOLYLINE((#14984,#14986,#14988,#14990,#14984));",
+        "#14992= IFCPOLYLINE((#14984,#14984,#14984));",  # a profile of no area
+    )
+    with pytest.warns(UnbuiltElementsWarning, match=r"1 structural element\(s\) .* #15042 IfcWallStandardCase"):
+        load_scene(str(path), storey=0)
