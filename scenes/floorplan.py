@@ -276,10 +276,12 @@ class FloorPlan:
         named = [("name", data.get("name", ""))]
         named += [(f"rooms[{i}].name", r["name"]) for i, r in enumerate(data["rooms"])]
         for where, text in named:
-            bad = next((c for c in text if unicodedata.category(c) == "Cc" or c in _BIDI_CONTROLS), None)
+            bad = next((c for c in text if unicodedata.category(c) in ("Cc", "Cs") or c in _BIDI_CONTROLS), None)
             if bad is not None:
-                # A name is printed in tables and messages: a newline or a NUL there breaks them.
-                raise FloorPlanError(source, f"a name may not hold the control character U+{ord(bad):04X}", path=where)
+                # A name is printed in tables and messages: a newline or a NUL there breaks them, and a
+                # lone surrogate ("\ud800", valid JSON) is no character: no UTF-8 output can hold it.
+                what = "the lone surrogate" if unicodedata.category(bad) == "Cs" else "the control character"
+                raise FloorPlanError(source, f"a name may not hold {what} U+{ord(bad):04X}", path=where)
         rooms = tuple(RoomPlan(r["name"], tuple((float(x), float(y)) for x, y in r["polygon"])) for r in data["rooms"])
         names = [r.name for r in rooms]
         for i, name in enumerate(names):
@@ -700,9 +702,18 @@ def extrude(plan: FloorPlan, *, source: str | None = None, validate: bool = True
                 src, f"window at {_xy(c)} is on an inside wall; windows go on outside walls", path=f"{path}.position"
             )
         e, s = found
-        openings.setdefault((r, e.index), []).append(
-            _Opening(s - w.width / 2, s + w.width / 2, w.sill, w.sill + w.height, True)
-        )
+        new = _Opening(s - w.width / 2, s + w.width / 2, w.sill, w.sill + w.height, True)
+        for other in openings.get((r, e.index), []):
+            # Two openings over one stretch of wall: a pane counted twice (forty copies of one window
+            # made its area forty times what the wall lost), or a window in a door.
+            if new.s0 < other.s1 and other.s0 < new.s1 and new.z0 < other.z1 and other.z0 < new.z1:
+                kind = "another window" if other.pane else "a door"
+                raise PlanGeometryError(
+                    src,
+                    f"window at {_xy(c)} overlaps {kind} on the same wall of room {w.room!r}",
+                    path=f"{path}.position",
+                )
+        openings.setdefault((r, e.index), []).append(new)
 
     # Floors, ceilings and the wall faces of every room, with their openings.
     rooms_gt: list[Room] = []

@@ -161,6 +161,9 @@ _DOOR_PROBE = 0.6
 #: The deepest extrusion of an element, metres: a building's elements are at most a storey's width
 #: (:data:`scenes.limits.MAX_STOREY_WIDTH`, a wall extruded along its length) and nowhere near 10 km.
 MAX_EXTRUSION = 10_000.0
+#: The shallowest, metres: a hundredth of a millimetre, below any element a scan could see (a unit of
+#: 1e-300 m collapsed every wall to nothing, reported as "no wall faces").
+MIN_EXTRUSION = 1e-5
 _INSTALL_HINT = "reading IFC needs ifcopenshell: pip install 'nbs-env[ifc]'"
 _BOUNDING_CLASSES = ("IfcSlab", "IfcCovering", "IfcRoof")
 
@@ -252,6 +255,30 @@ def _has_body(element: Any) -> bool:
     )
 
 
+def _check_units(source: str, model: Any) -> None:
+    """Every conversion-based unit converts by a positive number to a unit that does not lead back
+    to it: ifcopenshell follows the chain without a cycle check (a unit converting to itself ran for
+    ever, deaf to SIGTERM) and multiplies whatever the factor holds (a string: a TypeError)."""
+    for unit in model.by_type("IfcConversionBasedUnit"):
+        seen: list[int] = []
+        node = unit
+        while node is not None and node.is_a("IfcConversionBasedUnit"):
+            if node.id() in seen:
+                raise IfcError(source, f"the unit #{unit.id()} converts to itself (through #{node.id()})")
+            seen.append(node.id())
+            factor = getattr(node, "ConversionFactor", None)
+            if factor is None or not factor.is_a("IfcMeasureWithUnit"):
+                raise IfcError(source, f"the unit #{node.id()} has no conversion factor")
+            value = getattr(factor.ValueComponent, "wrappedValue", factor.ValueComponent)
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not (math.isfinite(value) and value > 0)
+            ):
+                raise IfcError(source, f"the unit #{node.id()} converts by {repr(value)[:40]}, not a positive number")
+            node = factor.UnitComponent
+
+
 def _check_geometry_values(source: str, model: Any, scale: float) -> None:
     """Directions that point somewhere, finite points, and extrusions of a building's size: a zero
     axis divided by its length (a NaN storey and a misleading "no wall faces"), and a wall extruded
@@ -265,11 +292,12 @@ def _check_geometry_values(source: str, model: Any, scale: float) -> None:
             raise IfcError(source, f"the point #{point.id()} has a coordinate that is not a finite number")
     for solid in model.by_type("IfcExtrudedAreaSolid"):
         depth = float(solid.Depth) * scale
-        if not (math.isfinite(depth) and 0 < depth <= MAX_EXTRUSION):
+        if not (math.isfinite(depth) and MIN_EXTRUSION <= depth <= MAX_EXTRUSION):
             raise IfcError(
                 source,
                 f"the extrusion #{solid.id()} is {float(solid.Depth):g} units ({depth:g} m) deep; an element of a "
-                f"storey is more than 0 and at most {MAX_EXTRUSION:,.0f} m deep",
+                f"storey is {MIN_EXTRUSION:g} to {MAX_EXTRUSION:,.0f} m deep (the file's length unit is {scale:g} m: "
+                "is it right?)",
             )
 
 
@@ -342,7 +370,13 @@ def load_ifc_scene(
         raise IfcError(source, f"cannot read as IFC: {type(exc).__name__}: {exc}") from exc
     _check_placements(source, model)
 
-    scale = float(ifcopenshell.util.unit.calculate_unit_scale(model))
+    _check_units(source, model)
+    try:
+        scale = float(ifcopenshell.util.unit.calculate_unit_scale(model))
+    except Exception as exc:  # ifcopenshell's own errors for a unit it cannot follow
+        raise IfcError(source, f"the length unit cannot be read: {type(exc).__name__}: {exc}") from None
+    if not (math.isfinite(scale) and scale > 0):
+        raise IfcError(source, f"the length unit is {scale:g} metres, not a length")
     _check_geometry_values(source, model, scale)
     mapping = _merge_class_map(source, model, class_map)
     storeys = _sorted_storeys(model, scale)

@@ -793,6 +793,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     defer_signals()
     stderr, stdout, showwarning = sys.stderr, sys.stdout, warnings.showwarning
+    # What no encoding can write (a lone surrogate in a name a file gave) is escaped, not a
+    # UnicodeEncodeError halfway through a summary whose report is already written.
+    errors = {stream: getattr(stream, "errors", None) for stream in (stdout, stderr)}
+    for stream, previous in errors.items():
+        if previous is not None and hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="backslashreplace")
     sys.stderr, warnings.showwarning = _BoundedLines(stderr), _show_warning
     sys.stdout = NamedStream(stdout, "stdout")  # a full disk under `> file` is named as stdout's
     log = _OneLineLog(logging.WARNING)
@@ -802,6 +808,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:  # a caller in the same process (a test, a notebook) gets its own back
         sys.stderr, sys.stdout, warnings.showwarning = stderr, stdout, showwarning
         logging.getLogger().removeHandler(log)
+        for stream, previous in errors.items():
+            if previous is not None and hasattr(stream, "reconfigure"):
+                with contextlib.suppress(Exception):
+                    stream.reconfigure(errors=previous)
     if argv is None:
         # The process's own command line, whose work is done and said: a stop signal from here on
         # finds nothing to stop. Python restores the default handlers while it shuts down (half a
