@@ -34,6 +34,7 @@ _PLY_TYPES = {
     "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4,
     "double": 8, "float64": 8,
 }  # fmt: skip
+_PLY_FLOAT_TYPES = ("float", "float32", "double", "float64")
 _PLY_FORMATS = ("ascii", "binary_little_endian", "binary_big_endian")
 #: Where a header must have ended: real headers are a few hundred bytes.
 _PLY_HEADER_MAX = 1 << 16
@@ -60,7 +61,8 @@ def check_ply_header(source: str, data: bytes) -> None:
     newline = data.find(b"\n", end)
     body = len(data) - newline - 1 if newline >= 0 else 0
     # Keywords are ASCII; a comment in another encoding must not stop the check.
-    lines = data[:end].decode("ascii", errors="replace").splitlines()
+    # Lines end at \n (a lone \r ends none, as in PLY readers); the last piece is what precedes end_header.
+    lines = data[:end].decode("ascii", errors="replace").split("\n")[:-1]
     encoding = None
     elements: list[list] = []  # [name, declared count, least bytes of a binary record, properties]
     for lineno, line in enumerate(lines, start=1):
@@ -73,11 +75,17 @@ def check_ply_header(source: str, data: bytes) -> None:
             if len(words) != 3 or not words[2].isdigit():
                 raise InvalidMeshError(source, f"PLY header line {lineno}: expected 'element NAME COUNT', got {line!r}")
             elements.append([words[1], int(words[2]), 0, 0])
+        elif not words:  # a reader splits each line into words: trimesh's ended in an IndexError
+            raise InvalidMeshError(source, f"PLY header line {lineno} is blank")
         elif words[:1] == ["property"] and elements:
             # A list takes its count's bytes at least (it may be empty); a scalar its own.
             kind = words[2] if len(words) == 5 and words[1] == "list" else words[1] if len(words) == 3 else None
             if kind not in _PLY_TYPES:
                 raise InvalidMeshError(source, f"PLY header line {lineno}: bad property {line!r}")
+            if words[1] == "list" and words[2] in _PLY_FLOAT_TYPES:
+                raise InvalidMeshError(
+                    source, f"PLY header line {lineno}: a list's count is an integer type, got {words[2]!r}"
+                )
             elements[-1][2] += _PLY_TYPES[kind]
             elements[-1][3] += 1
     if encoding is None:
@@ -171,7 +179,9 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
     for i, image in enumerate(_items(source, doc, "images")):
         if isinstance(image.get("uri"), str) and not image["uri"].startswith("data:"):
             _side_file(source, path, image["uri"], f"images[{i}]")
-    _check_node_tree(source, _items(source, doc, "nodes"))
+    nodes = _items(source, doc, "nodes")
+    _check_node_tree(source, nodes)
+    _check_scenes_and_modes(source, doc, nodes)
     buffer_length = []
     for i, buffer in enumerate(buffers):
         declared = _natural(source, buffer, "byteLength", f"buffers[{i}]")
@@ -373,6 +383,40 @@ def _side_file(source: str, path: Path, uri: str, where: str) -> Path | None:
     if not regular:
         raise InvalidMeshError(source, f"{where}.uri {uri!r} is not a regular file (a folder, a fifo or a device)")
     return side
+
+
+def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> None:
+    """``scene`` names a scene and each scene's ``nodes`` name nodes (an IndexError in the reader);
+    a node with a mesh holds no camera (the reader keeps the camera and drops the mesh without a
+    word); a primitive's ``mode`` is one of glTF's seven (99 made the part vanish)."""
+    scenes = _items(source, doc, "scenes")
+    if "scenes" in doc and not scenes:
+        raise InvalidMeshError(source, "the file's scenes list is empty: it shows nothing")
+    if "scene" in doc:
+        k = doc["scene"]
+        if not (isinstance(k, int) and not isinstance(k, bool) and 0 <= k < len(scenes)):
+            raise InvalidMeshError(source, f"scene is {repr(k)[:40]}, but the file has {len(scenes)} scene(s)")
+    for i, scene in enumerate(scenes):
+        roots = scene.get("nodes", [])
+        if not isinstance(roots, list) or not all(
+            isinstance(n, int) and not isinstance(n, bool) and 0 <= n < len(nodes) for n in roots
+        ):
+            raise InvalidMeshError(source, f"scenes[{i}].nodes must name nodes 0..{len(nodes) - 1}")
+    for i, node in enumerate(nodes):
+        if "mesh" in node and "camera" in node:
+            raise InvalidMeshError(
+                source,
+                f"nodes[{i}] holds both a mesh and a camera, and the reader keeps only the camera: give the "
+                "camera a node of its own",
+            )
+    for m, mesh in enumerate(_items(source, doc, "meshes")):
+        primitives = mesh.get("primitives", [])
+        for p, primitive in enumerate(primitives if isinstance(primitives, list) else ()):
+            mode = primitive.get("mode", 4) if isinstance(primitive, dict) else 4
+            if not (isinstance(mode, int) and not isinstance(mode, bool) and 0 <= mode <= 6):
+                raise InvalidMeshError(
+                    source, f"meshes[{m}].primitives[{p}].mode is {repr(mode)[:40]}; glTF's modes are 0 to 6"
+                )
 
 
 #: A node's transform: its properties and their number of components (glTF 2.0).

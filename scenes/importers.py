@@ -69,6 +69,7 @@ import re
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import shapely
@@ -469,9 +470,11 @@ def _read_ply(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
         raise InvalidMeshError(source, "the PLY face element has no vertex_indices list")
     try:
         polys = _ply_polygons(data[index_prop], n_raw)
-        label_raw = np.asarray(data["label"]).reshape(-1)
-        room_raw = np.asarray(data["room"]).reshape(-1) if "room" in props else np.full(n_raw, -1)
-    except (KeyError, IndexError, ValueError) as exc:
+        label_raw = _ply_integers(data["label"], n_raw, "label")
+        room_raw = _ply_integers(data["room"], n_raw, "room") if "room" in props else np.full(n_raw, -1)
+    except _PlyValueError as exc:
+        raise InvalidMeshError(source, str(exc)) from None
+    except (KeyError, IndexError, ValueError, TypeError) as exc:
         # The header declares the property, the body does not hold it where it should (an ASCII face
         # line with fewer or more values than the header lists).
         raise InvalidMeshError(
@@ -483,6 +486,13 @@ def _read_ply(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
             source,
             f"face 'label' values {bad.tolist()} are no SurfaceClass "
             f"({', '.join(f'{c.value} = {c.name.lower()}' for c in SurfaceClass)})",
+        )
+    odd = (room_raw < -1) | (room_raw > MAX_ROOM_NUMBER)
+    if odd.any():
+        raise InvalidMeshError(
+            source,
+            f"face {int(np.flatnonzero(odd)[0])}'s 'room' is {int(room_raw[odd][0])}; a room is -1 (none) or a "
+            f"number up to {MAX_ROOM_NUMBER:,}",
         )
     faces, src = [], []
     for i, poly in enumerate(polys):
@@ -502,14 +512,42 @@ def _read_ply(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
     )
 
 
+class _PlyValueError(ValueError):
+    """A PLY face element's values that are not what its header says they mean."""
+
+
 def _ply_polygons(column: np.ndarray, n: int) -> list[np.ndarray]:
-    """The vertex lists of the raw PLY face element, whatever layout trimesh left them in."""
+    """The vertex lists of the raw PLY face element, whatever layout trimesh left them in; their
+    indices must be whole numbers (a list of floats is allowed by the format, 15.5 names no vertex)."""
     col = np.asarray(column)
     if col.dtype.names and "f1" in col.dtype.names:  # binary: (count, indices) records
-        return list(np.asarray(col["f1"]).reshape(n, -1))
-    if col.dtype == object:
-        return [np.asarray(p, dtype=np.int64) for p in col]
-    return list(col.reshape(n, -1))
+        polys = list(np.asarray(col["f1"]).reshape(n, -1))
+    elif col.dtype == object:
+        polys = [np.asarray(p) for p in col]
+    else:
+        polys = list(col.reshape(n, -1))
+    out = []
+    for i, poly in enumerate(polys):
+        poly = np.asarray(poly)
+        if poly.dtype.kind == "f" and not (np.isfinite(poly).all() and (poly == np.round(poly)).all()):
+            raise _PlyValueError(f"PLY face {i} has a vertex index that is not a whole number: {poly.tolist()[:6]}")
+        if poly.dtype.kind not in "iuf":
+            raise _PlyValueError(f"PLY face {i}'s vertex indices are not numbers")
+        out.append(poly.astype(np.int64))
+    return out
+
+
+def _ply_integers(column: Any, n: int, name: str) -> np.ndarray:
+    """A per-face scalar property as (n,) int64; one value a face, whole numbers."""
+    values = np.asarray(column)
+    if values.dtype == object or values.size != n:  # a face line short of its values, or with more
+        raise _PlyValueError(f"the face element's '{name}' values do not match its header (one a face, {n:,} faces)")
+    values = values.reshape(-1)
+    if values.dtype.kind == "f" and not (np.isfinite(values).all() and (values == np.round(values)).all()):
+        raise _PlyValueError(f"face '{name}' values must be whole numbers")
+    if values.dtype.kind not in "iuf":
+        raise _PlyValueError(f"face '{name}' values are not numbers")
+    return values.astype(np.int64)
 
 
 # ---------------------------------------------------------------------------------------- rooms

@@ -93,3 +93,85 @@ def test_a_length_unit_that_converts_to_itself_or_by_no_number_is_refused(factor
     path = _fzk(tmp_path, unit, f"#13= IFCCONVERSIONBASEDUNIT(#18,.LENGTHUNIT.,'ODD',{factor});\n{extra}")
     with pytest.raises(IfcError, match=message):
         load_scene(str(path), storey=0)
+
+
+# ---------------------------------------------------------------------- PLY faces and glTF scenes
+def _ply_text(faces: list[str], header_extra: str = "", index_type: str = "int") -> str:
+    vertices = ["0 0 0", "4 0 0", "4 3 0", "0 3 0", "0 0 2.5", "4 0 2.5", "4 3 2.5", "0 3 2.5"]
+    return (
+        "ply\nformat ascii 1.0\n"
+        f"element vertex {len(vertices)}\nproperty float x\nproperty float y\nproperty float z\n"
+        f"element face {len(faces)}\nproperty list uchar {index_type} vertex_indices\nproperty uchar label\n"
+        f"property int room\n{header_extra}end_header\n" + "\n".join(vertices + faces) + "\n"
+    )
+
+
+GOOD_FACES = ["4 0 1 2 3 0 0", "4 4 7 6 5 1 0", "4 0 4 5 1 2 0", "4 1 5 6 2 2 0", "4 2 6 7 3 2 0", "4 3 7 4 0 2 0"]
+
+
+@pytest.mark.parametrize(
+    "faces, index_type, message",
+    [
+        (["3 1 2", *GOOD_FACES[1:]], "int", r"the face element's 'label' values do not match its header"),
+        (["4 0.5 1.5 2.5 3.5 0 0", *GOOD_FACES[1:]], "float", r"PLY face 0 has a vertex index that is not a whole"),
+        (["4 0 1 2 3 0 -7", *GOOD_FACES[1:]], "int", r"face 0's 'room' is -7; a room is -1 \(none\) or a number"),
+        (["4 0 1 2 3 0 2147483647", *GOOD_FACES[1:]], "int", r"face 0's 'room' is 2147483647"),
+    ],
+)
+def test_ply_faces_whose_values_are_not_what_the_header_means_are_refused(faces, index_type, message, tmp_path):
+    """A short face row ended in a numpy traceback; fractional indices were truncated; a room of -7
+    was read as none and 2147483647 as a new room."""
+    from scenes import InvalidMeshError
+
+    good = tmp_path / "good.ply"
+    good.write_text(_ply_text(GOOD_FACES, index_type=index_type))
+    assert len(load_scene(str(good)).mesh.faces) == 12
+    path = tmp_path / "bad.ply"
+    path.write_text(_ply_text(faces, index_type=index_type))
+    with pytest.raises(InvalidMeshError, match=message):
+        load_scene(str(path))
+
+
+def test_ply_headers_with_a_blank_line_or_a_float_list_count_are_refused_naming_the_line(tmp_path):
+    from scenes import InvalidMeshError
+
+    path = tmp_path / "blank.ply"
+    path.write_text(_ply_text(GOOD_FACES, header_extra="\n"))
+    with pytest.raises(InvalidMeshError, match=r"PLY header line 11 is blank"):
+        load_scene(str(path))
+    path.write_text(_ply_text(GOOD_FACES).replace("list uchar int", "list double int"))
+    with pytest.raises(InvalidMeshError, match=r"PLY header line 8: a list's count is an integer type, got 'double'"):
+        load_scene(str(path))
+    path.write_text(_ply_text(GOOD_FACES).replace("\n", "\r\n"))  # CRLF: lines end at \n, as readers read them
+    assert len(load_scene(str(path)).mesh.faces) == 12
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda d: d.update(scene=5), r"scene is 5, but the file has 1 scene\(s\)"),
+        (lambda d: d.update(scenes=[]), r"the file's scenes list is empty"),
+        (lambda d: d["scenes"][0].update(nodes=[99]), r"scenes\[0\]\.nodes must name nodes"),
+        (
+            lambda d: d["meshes"][0]["primitives"][0].update(mode=99),
+            r"primitives\[0\]\.mode is 99; glTF's modes are 0 to 6",
+        ),
+        (
+            lambda d: (
+                d.update(cameras=[{"type": "perspective", "perspective": {"yfov": 1.0, "znear": 0.1}}]),
+                d["nodes"][0].update(camera=0),
+            ),
+            r"nodes\[0\] holds both a mesh and a camera",
+        ),
+    ],
+)
+def test_gltf_scenes_modes_and_cameras_the_reader_mishandles_are_refused(edit, message, tmp_path):
+    """An IndexError from the reader, a part that vanished (mode 99), a mesh dropped for the camera
+    of its node."""
+    from scenes import InvalidMeshError
+    from tests.test_scene_probe2 import gltf_doc, room_parts, write_gltf
+
+    doc = gltf_doc(room_parts())
+    edit(doc)
+    with pytest.raises(InvalidMeshError, match=message):
+        load_scene(str(write_gltf(tmp_path / "x.gltf", doc)))
