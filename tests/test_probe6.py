@@ -175,3 +175,30 @@ def test_gltf_scenes_modes_and_cameras_the_reader_mishandles_are_refused(edit, m
     edit(doc)
     with pytest.raises(InvalidMeshError, match=message):
         load_scene(str(write_gltf(tmp_path / "x.gltf", doc)))
+
+
+# ---------------------------------------------------------------------- a stop that waits too long
+def test_a_stop_not_reached_in_time_is_escalated_unless_the_work_is_holding():
+    """A training step on a storey of 10 m cells took minutes: the stop, waiting for it, outlasted a
+    supervisor's grace, and SIGKILL left no state. With escalate_after the first signal is delivered
+    again as a second one (a KeyboardInterrupt the run answers by saving its last update's state)."""
+    import os
+    import signal
+    import time
+
+    from train.stopping import StopRequest
+
+    with pytest.raises(KeyboardInterrupt), StopRequest(escalate_after=0.2) as stop:
+        os.kill(os.getpid(), signal.SIGTERM)
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline:  # a step that does not look at the stop
+            time.sleep(0.01)
+    assert stop.signal == signal.SIGTERM and time.monotonic() < deadline
+    with StopRequest(escalate_after=0.2) as stop, stop.hold():  # writing what it keeps: not interrupted
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.6)
+    with StopRequest(escalate_after=0.2) as stop:  # the work stopped in time: nothing more comes
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.05)
+    time.sleep(0.4)
+    assert stop.signal == signal.SIGTERM

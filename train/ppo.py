@@ -18,6 +18,7 @@ import dataclasses
 import json
 import os
 import re
+import signal
 import sys
 import time
 from dataclasses import dataclass, field
@@ -506,6 +507,11 @@ def make_training_envs(config: TrainConfig, seed: int | None = None):
     return venv
 
 
+#: Seconds a stop signal waits for the training step under way before it stops the run at once,
+#: keeping its last update's state: within the grace a supervisor gives before SIGKILL (Docker's 10 s
+#: by default, Kubernetes' 30 s) on most machines.
+STOP_WAIT_S = 8.0
+
 #: The largest learning rate and entropy bonus a run takes: a hundred times what PPO is run with.
 MAX_LEARNING_RATE = 0.1
 MAX_ENT_COEF = 1.0
@@ -877,8 +883,11 @@ def train(
     started = time.time()
     warm = None
     progress_callback = None
+    stop: StopRequest | None = None
     try:
-        with StopRequest() as stop:
+        # A step on a large storey can take minutes: a stop not reached in STOP_WAIT_S is escalated,
+        # and the run keeps its last update's state (the rollout under way is dropped).
+        with StopRequest(escalate_after=STOP_WAIT_S) as stop:
             if config.bc_steps and state is None:
                 teacher = _teacher(config.bc_teacher)
                 warm = behaviour_clone(model, config.bc_steps, progress=progress, teacher=teacher, stop=stop)
@@ -899,11 +908,11 @@ def train(
                 callback=progress_callback,
                 reset_num_timesteps=state is None,
             )
-    except KeyboardInterrupt:  # a second signal, that would not wait for the rollout's end
-        import signal
-
+    except KeyboardInterrupt as exc:  # a second signal, or the first escalated: no wait for the rollout's end
+        received = None if stop is None else stop.signal
+        exc.signal = received or signal.SIGINT  # what _run exits with: 143 for a SIGTERM escalated
         with StopRequest() as again, again.hold():
-            again.signal = signal.SIGINT  # as if received: a third one is held too while the state is written
+            again.signal = exc.signal  # as if received: a third one is held too while the state is written
             start = None if progress_callback is None else progress_callback.rollout_start
             if start is not None and start > done_before:
                 model.num_timesteps = start  # the rollout under way is dropped: it would be collected again
@@ -1314,7 +1323,7 @@ def _run(config: TrainConfig, out: Path, args, resume: bool) -> int:
     except ConfigError as exc:
         print(f"nbs train: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:  # before the run's steps began, or a second signal that would not wait
+    except KeyboardInterrupt as exc:  # before the run's steps began, a second signal, or the first escalated
         try:
             _, saved = latest_state(out)
             kept = (
@@ -1323,8 +1332,9 @@ def _run(config: TrainConfig, out: Path, args, resume: bool) -> int:
             )
         except ModelFileError:
             kept = "nothing was saved to continue from"
-        print(f"nbs train: interrupted; {kept}", file=sys.stderr)
-        return 130
+        received = getattr(exc, "signal", None) or signal.SIGINT
+        print(f"nbs train: stopped by {signal.Signals(received).name}; {kept}", file=sys.stderr)
+        return exit_code(received)
     except (EOFError, BrokenPipeError, ConnectionResetError) as exc:  # a rollout worker that ended
         print(
             f"nbs train: error: a rollout worker process ended ({type(exc).__name__}); the run keeps its last "
@@ -1342,14 +1352,14 @@ def _run(config: TrainConfig, out: Path, args, resume: bool) -> int:
         return 1
     if model.interrupted is not None and path is None:
         print(
-            f"nbs train: stopped by signal {model.interrupted} during behaviour cloning, before the run had a "
-            "state to continue from: run the command again",
+            f"nbs train: stopped by {signal.Signals(model.interrupted).name} during behaviour cloning, before the run "
+            "had a state to continue from: run the command again",
             file=sys.stderr,
         )
         return exit_code(model.interrupted)
     if model.interrupted is not None:
         print(
-            f"nbs train: stopped by signal {model.interrupted} at {model.num_timesteps} timesteps; "
+            f"nbs train: stopped by {signal.Signals(model.interrupted).name} at {model.num_timesteps} timesteps; "
             f"the run is saved: continue it with nbs train --resume {out}",
             file=sys.stderr,
         )

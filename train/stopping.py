@@ -14,6 +14,7 @@ stop with no clean-up.
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import threading
 import time
@@ -132,13 +133,23 @@ class StopRequest:
     ----------
     signal : int or None
         The first signal received, or None.
+
+    Parameters
+    ----------
+    escalate_after : float, optional
+        Seconds after the first signal at which it is delivered again, as a second one (a
+        ``KeyboardInterrupt`` unless the work is holding): for work whose steps may outlast a
+        supervisor's grace before SIGKILL (a training step on a large storey took minutes, and the
+        run was killed with nothing saved). None: wait for the step, however long.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, escalate_after: float | None = None) -> None:
         self.signal: int | None = None
         self._previous: dict[int, Any] = {}
         self._holding = False
         self._at = 0.0
+        self.escalate_after = escalate_after
+        self._timer: threading.Timer | None = None
 
     def __enter__(self) -> StopRequest:
         global _pending
@@ -147,12 +158,21 @@ class StopRequest:
                 self._previous[sig] = signal.signal(sig, self._handle)
         if _pending is not None:  # asked while the command was starting: stop at the first step
             self.signal, self._at, _pending = _pending, _pending_at, None
+            self._escalate(self.signal)
         return self
 
     def __exit__(self, *exc: object) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
         self._previous.clear()
+
+    def _escalate(self, sig: int) -> None:
+        if self.escalate_after is not None and self._timer is None and self._previous:
+            self._timer = threading.Timer(self.escalate_after, os.kill, (os.getpid(), sig))
+            self._timer.daemon = True
+            self._timer.start()
 
     def __call__(self) -> bool:
         return self.signal is not None
@@ -180,3 +200,4 @@ class StopRequest:
             # Asked twice: the user will not wait for the step to end.
             raise KeyboardInterrupt
         self.signal, self._at = sig, time.monotonic()
+        self._escalate(sig)
