@@ -170,8 +170,12 @@ def resolve_checkpoint(spec: str | Path) -> Path:
         Neither an existing path nor a bundled name.
     """
     path = Path(spec)
-    if path.exists():
-        return path
+    try:
+        if path.exists():
+            return path
+    except OSError as exc:  # a name too long for the file system, a loop of links
+        shown = str(spec) if len(str(spec)) <= 200 else f"{str(spec)[:160]}… ({len(str(spec)):,} characters)"
+        raise ModelFileError(f"{shown}: cannot be a checkpoint ({exc.strerror or type(exc).__name__})") from None
     if str(spec) in BUNDLED:
         return BUNDLED[str(spec)]
     raise ModelFileError(

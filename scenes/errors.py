@@ -24,7 +24,10 @@ class SceneError(Exception):
         self.source = str(source)
         self.problem = problem
         self.path = path
-        where = f"{self.source}: {path}" if path else self.source
+        # A source of thousands of characters (a name too long for any file system, the very cause)
+        # is cut in the message so that the problem after it is read; .source keeps it whole.
+        shown = self.source if len(self.source) <= 200 else f"{self.source[:160]}… ({len(self.source):,} characters)"
+        where = f"{shown}: {path}" if path else shown
         super().__init__(f"{where}: {problem}")
 
 

@@ -202,3 +202,27 @@ def test_a_stop_not_reached_in_time_is_escalated_unless_the_work_is_holding():
         time.sleep(0.05)
     time.sleep(0.4)
     assert stop.signal == signal.SIGTERM
+
+
+# ---------------------------------------------------------------------- names in tables and messages
+def test_a_pipe_in_a_name_does_not_split_a_markdown_row():
+    """`l_room|x` wrote a row of 12 cells under an 11-column header: the numbers under the wrong headings."""
+    from train.compare import _md_row
+
+    row = _md_row(["pl/we|ird.json", "random", 'r,1|"x\nnext', 1.5])
+    assert row == '| pl/we\\|ird.json | random | r,1\\|"x next | 1.5 |'
+    assert row.replace("\\|", "").count("|") == 5
+
+
+def test_a_name_too_long_for_the_file_system_leaves_room_for_the_reason(tmp_path, capsys):
+    """The 5,000-character name came first and the line was cut before the reason ("File name too long")."""
+    from nbs_env.errors import ModelFileError
+    from policies import make_policy
+    from train.cli import main as nbs
+
+    name = "a" * 5000
+    with pytest.raises(ModelFileError, match=r"… \(5,000 characters\): cannot be a checkpoint \(File name too long\)"):
+        make_policy(f"ppo:{name}")
+    assert nbs(["scenes", "info", f"{name}.obj"]) == 1
+    err = capsys.readouterr().err
+    assert err.endswith("(5,004 characters): File name too long\n") and len(err) < 400, err

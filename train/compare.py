@@ -653,9 +653,15 @@ def _cell(value: Any, fmt: str) -> str:
     return f"{fmt.format(mean)} ± {fmt.format(std)}"
 
 
+def _md_row(cells: Sequence[Any]) -> str:
+    """A Markdown table row: a ``|`` in a cell (a legal file or room name) is escaped, a line break
+    is a space; written raw, they split the row into more cells than the header has."""
+    return "| " + " | ".join(" ".join(str(c).split("\n")).replace("|", "\\|") for c in cells) + " |"
+
+
 def _markdown(rows: list[dict[str, Any]]) -> str:
     head = ["scene", "policy", "room", *[h for _, h, _ in QUANTITIES], "% of oracle max", "scans ÷ oracle's", "notes"]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines = [_md_row(head), "|" + "---|" * len(head)]
     for r in rows:
         notes = []
         if r.get("failed"):
@@ -669,7 +675,7 @@ def _markdown(rows: list[dict[str, Any]]) -> str:
         cells += [_cell(r.get(key), fmt) for key, _, fmt in QUANTITIES]
         cells += [_cell(r.get("of_oracle_pct"), "{:.1f}"), _cell(r.get("vs_oracle_scans"), "{:.2f}")]
         cells.append("; ".join(notes))
-        lines.append("| " + " | ".join(cells) + " |")
+        lines.append(_md_row(cells))
     return "\n".join(lines) + "\n"
 
 
@@ -681,7 +687,7 @@ def _storeys_markdown(rows: list[dict[str, Any]]) -> str:
             "doors abandoned", "exterior doors",
             "path (m)",
             "reg. error mean / max (cm)", "notes"]  # fmt: skip
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines = [_md_row(head), "|" + "---|" * len(head)]
     for r in rows:
         if r["room"] != "total" or r["scene"] == "all scenes":
             continue
@@ -704,7 +710,7 @@ def _storeys_markdown(rows: list[dict[str, Any]]) -> str:
         cells.append(_cell(r.get("path_length_m"), "{:.1f}"))
         cells.append(" / ".join(_cell(v, "{:.1f}") for v in reg))
         cells.append("; ".join(notes))
-        lines.append("| " + " | ".join(cells) + " |")
+        lines.append(_md_row(cells))
     return "\n".join(lines) + "\n"
 
 
@@ -720,7 +726,7 @@ def _quality_markdown(rows: list[dict[str, Any]], thresholds: dict[str, float] |
             f"{thresholds['max_incidence_deg']:g}°; overlap: the share of each scan the cloud before it explains.",
             "",
         ]
-    lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines += [_md_row(head), "|" + "---|" * len(head)]
     for r in rows:
         if r["room"] != "total":
             continue
@@ -733,7 +739,7 @@ def _quality_markdown(rows: list[dict[str, Any]], thresholds: dict[str, float] |
         cells += [_cell(r.get(k), "{:.1f}") for k in ("dense_pct", "incidence_pct", "quality_pct")]
         cells.append(" / ".join(_cell(r.get(k), "{:.0f}") for k in ("mean_overlap", "min_overlap")))
         cells += [_cell(r.get("min_fitness"), "{:.0f}"), _cell(r.get("refused"), "{:.1f}")]
-        lines.append("| " + " | ".join(cells) + " |")
+        lines.append(_md_row(cells))
     return "\n".join(lines) + "\n"
 
 
@@ -743,7 +749,7 @@ def _methods_markdown(results: Sequence[dict[str, Any]], oracles: dict[str, dict
     head = ["policy", "runs", "rooms ended", "by its rule (%)", "by the cap", "no NVP left",
             "no NVP after one scan", "rooms unscanned", "scans / storey", "SE sensed (%)", "% of oracle max",
             "path (m) / storey"]  # fmt: skip
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines = [_md_row(head), "|" + "---|" * len(head)]
     for policy in dict.fromkeys(r["spec"]["policy"] for r in results):
         runs = [r for r in results if r["spec"]["policy"] == policy and r["ok"]]
         if not runs:
@@ -762,7 +768,7 @@ def _methods_markdown(results: Sequence[dict[str, Any]], oracles: dict[str, dict
                  str(cap), str(len(ends) - rule - cap), str(first),
                  str(int(sum(q.get("unscanned_rooms", 0) for q in qs))),
                  mean("scans"), mean("structure_sensed_pct"), mean("of_oracle_pct"), mean("path_length_m")]  # fmt: skip
-        lines.append("| " + " | ".join(cells) + " |")
+        lines.append(_md_row(cells))
     return "\n".join(lines) + "\n"
 
 
