@@ -129,15 +129,24 @@ def check_face_count(source: str, n_faces: int) -> None:
             source,
             f"the mesh has {n_faces:,} faces (the most nbs-env loads is {MAX_FACES:,}): simplify or split the model",
         )
-    need = n_faces * BYTES_PER_FACE
+    _check_memory(
+        source,
+        n_faces * BYTES_PER_FACE,
+        f"loading the mesh's {n_faces:,} faces",
+        "simplify or split the model, or free memory",
+    )
+
+
+def _check_memory(source: str, need: int, what: str, advice: str) -> None:
+    """Raise :class:`StoreySizeError` when ``what`` needs ``need`` bytes and the process may allocate fewer."""
     if need < 2**28:  # a quarter of a GiB: any machine that runs the simulator has it
         return
     left = memory_left()
     if left is not None and need > left[0]:
         raise StoreySizeError(
             source,
-            f"loading the mesh's {n_faces:,} faces takes about {need / 2**30:.1f} GiB, and this process may "
-            f"allocate {max(left[0], 0) / 2**30:.1f} GiB more ({left[1]}): simplify or split the model, or free memory",
+            f"{what} takes about {need / 2**30:.1f} GiB, and this process may allocate "
+            f"{max(left[0], 0) / 2**30:.1f} GiB more ({left[1]}): {advice}",
         )
 
 
@@ -150,16 +159,9 @@ def check_file_size(source: str, size: int, limit: int = MAX_MESH_FILE_BYTES) ->
             f"the file holds {size:,} bytes; nbs-env reads mesh files of up to {limit:,} bytes (the largest "
             f"storey it loads, {MAX_FACES:,} faces, takes about a third of that): is it the file you meant?",
         )
-    need = size * READ_FACTOR
-    if need < 2**28:
-        return
-    left = memory_left()
-    if left is not None and need > left[0]:
-        raise StoreySizeError(
-            source,
-            f"reading the file's {size:,} bytes takes about {need / 2**30:.1f} GiB, and this process may "
-            f"allocate {max(left[0], 0) / 2**30:.1f} GiB more ({left[1]}): free memory, or simplify the model",
-        )
+    _check_memory(
+        source, size * READ_FACTOR, f"reading the file's {size:,} bytes", "free memory, or simplify the model"
+    )
 
 
 #: Where the machine's memory cannot be read (not Linux nor another POSIX system): a workstation's.
