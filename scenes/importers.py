@@ -84,6 +84,7 @@ from scenes.model import Room, Scene, SurfaceClass
 __all__ = [
     "EXPORT_EXTENSIONS",
     "SUPPORTED_EXTENSIONS",
+    "SurfacelessPartsWarning",
     "UnlabelledPartsWarning",
     "export_scene",
     "footprint_polygon",
@@ -125,6 +126,28 @@ class UnlabelledPartsWarning(UserWarning):
         super().__init__(
             f"{self.source}: {len(self.names)} part(s) have no class prefix ({prefixes}) and were "
             f"loaded as clutter: {', '.join(repr(n) for n in self.names)}"
+        )
+
+
+class SurfacelessPartsWarning(UserWarning):
+    """Parts of a glTF file drawn as points or lines (primitive modes 0-3): they hold no surface a
+    scan could sense, and were left out.
+
+    Attributes
+    ----------
+    source : str
+        The file.
+    names : tuple of str
+        The parts' node names, in file order.
+    """
+
+    def __init__(self, source: str, names: Sequence[str]) -> None:
+        self.source = str(source)
+        self.names = tuple(names)
+        shown = ", ".join(repr(n) for n in self.names[:5]) + (" ..." if len(self.names) > 5 else "")
+        super().__init__(
+            f"{self.source}: {len(self.names)} part(s) are drawn as points or lines, not surfaces, and were left "
+            f"out: {shown}"
         )
 
 
@@ -408,12 +431,17 @@ def _read_gltf(source: str, path: Path, ext: str) -> tuple[np.ndarray, np.ndarra
         raise InvalidMeshError(source, f"cannot parse as {ext[1:]}: {type(exc).__name__}: {exc}") from exc
     parents = scene.graph.transforms.parents
     verts, faces, labels, rooms, unlabelled = [], [], [], [], []
+    surfaceless: list[str] = []
     offset = 0
     for node in sorted(scene.graph.nodes_geometry):
         transform, geom_name = scene.graph[node]
         geom = scene.geometry.get(geom_name)
         if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
-            continue  # point clouds and paths have no surfaces to scan
+            # Point clouds and paths (primitive modes 0-3) have no surfaces to scan: left out, and
+            # said, since a part drawn so vanishes from the storey.
+            if geom is not None:
+                surfaceless.append(str(node))
+            continue
         names = [node, geom_name]
         parent = parents.get(node)
         while parent is not None and parent != scene.graph.base_frame:
@@ -429,6 +457,8 @@ def _read_gltf(source: str, path: Path, ext: str) -> tuple[np.ndarray, np.ndarra
         labels.append(np.full(len(geom.faces), cls.value, dtype=np.int64))
         rooms.append(np.full(len(geom.faces), room, dtype=np.int64))
         offset += len(v)
+    if surfaceless:
+        warnings.warn(SurfacelessPartsWarning(source, surfaceless), stacklevel=3)
     if not faces:
         return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), []
     return (

@@ -226,3 +226,18 @@ def test_a_name_too_long_for_the_file_system_leaves_room_for_the_reason(tmp_path
     assert nbs(["scenes", "info", f"{name}.obj"]) == 1
     err = capsys.readouterr().err
     assert err.endswith("(5,004 characters): File name too long\n") and len(err) < 400, err
+
+
+def test_gltf_parts_drawn_as_points_or_lines_are_named_in_a_warning(tmp_path):
+    """Modes 0-3 hold no surfaces: such a part vanished from the storey without a notice."""
+    from scenes.importers import SurfacelessPartsWarning
+    from tests.test_scene_probe2 import gltf_doc, room_parts, write_gltf
+
+    parts = room_parts()
+    parts["clutter_box"] = parts["wall_s"].copy()
+    doc = gltf_doc(parts)
+    k = next(i for i, node in enumerate(doc["nodes"]) if node.get("name") == "clutter_box")
+    doc["meshes"][doc["nodes"][k]["mesh"]]["primitives"][0]["mode"] = 1  # lines
+    with pytest.warns(SurfacelessPartsWarning, match=r"1 part\(s\) are drawn as points or lines.*'clutter_box'"):
+        scene = load_scene(str(write_gltf(tmp_path / "lines.gltf", doc)))
+    assert len(scene.mesh.faces) == 12
