@@ -37,6 +37,7 @@ from nbs_env.config import Config, _integer, _require, make_config
 from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES, CandidateColumn, candidate_table_of
 from policies.base import mask_of
+from scenes.errors import short_name
 from scenes.jsonio import read_json_file
 
 if TYPE_CHECKING:
@@ -174,8 +175,9 @@ def resolve_checkpoint(spec: str | Path) -> Path:
         if path.exists():
             return path
     except OSError as exc:  # a name too long for the file system, a loop of links
-        shown = str(spec) if len(str(spec)) <= 200 else f"{str(spec)[:160]}… ({len(str(spec)):,} characters)"
-        raise ModelFileError(f"{shown}: cannot be a checkpoint ({exc.strerror or type(exc).__name__})") from None
+        raise ModelFileError(
+            f"{short_name(spec)}: cannot be a checkpoint ({exc.strerror or type(exc).__name__})"
+        ) from None
     if str(spec) in BUNDLED:
         return BUNDLED[str(spec)]
     raise ModelFileError(

@@ -7,6 +7,13 @@ Each error names *where* (a file, a bundled name, a JSON field path) and *what*.
 from __future__ import annotations
 
 
+def short_name(name: object, keep: int = 200) -> str:
+    """A name for a message: one of thousands of characters (too long for any file system, often the
+    very cause of the error) is cut, so that the reason after it is still read."""
+    text = str(name)
+    return text if len(text) <= keep else f"{text[: keep - 40]}… ({len(text):,} characters)"
+
+
 class SceneError(Exception):
     """Base class of every error raised while loading, building or validating a scene.
 
@@ -26,7 +33,7 @@ class SceneError(Exception):
         self.path = path
         # A source of thousands of characters (a name too long for any file system, the very cause)
         # is cut in the message so that the problem after it is read; .source keeps it whole.
-        shown = self.source if len(self.source) <= 200 else f"{self.source[:160]}… ({len(self.source):,} characters)"
+        shown = short_name(self.source)
         where = f"{shown}: {path}" if path else shown
         super().__init__(f"{where}: {problem}")
 

@@ -237,15 +237,10 @@ def run_train(argv: Sequence[str]) -> int:
 def _os_error(exc: OSError) -> str:
     """An OSError on one line, the file first: ``r/metrics.json: No space left on device``."""
     if exc.filename is not None and exc.strerror:
-        return f"{_short_name(exc.filename)}: {exc.strerror}"
+        from scenes.errors import short_name
+
+        return f"{short_name(exc.filename)}: {exc.strerror}"
     return str(exc)
-
-
-def _short_name(name: object, keep: int = 200) -> str:
-    """A file name for a message: one of thousands of characters (too long for any file system, the
-    cause of the error) is cut so that the reason after it is still read."""
-    text = str(name)
-    return text if len(text) <= keep else f"{text[: keep - 40]}…{text[-20:]} ({len(text):,} characters)"
 
 
 def run_compare(args: argparse.Namespace) -> int:
