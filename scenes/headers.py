@@ -24,7 +24,7 @@ from scenes.errors import InvalidMeshError
 from scenes.jsonio import read_json
 from scenes.limits import MAX_FACES, check_face_count
 
-__all__ = ["check_gltf_layout", "check_ply_header"]
+__all__ = ["ascii_ply_row_error", "check_gltf_layout", "check_ply_header"]
 
 # ------------------------------------------------------------------------------------------ PLY
 #: Bytes of a binary PLY scalar, by every type name the format allows.
@@ -103,6 +103,61 @@ def check_ply_header(source: str, data: bytes) -> None:
             )
     # The bytes are there: a storey too large to load, told before trimesh reads it.
     check_face_count(source, sum(count for name, count, _, _ in elements if name == "face"))
+
+
+def ascii_ply_row_error(data: bytes) -> str | None:
+    """Say which record of an ASCII PLY body does not hold what its element's properties need.
+
+    Called after a parse failed, to replace numpy's "setting an array element with a sequence" by
+    the element, the record and its line. Rows are read as trimesh reads them: one record per line,
+    ``str.splitlines``, numbers separated by blanks.
+
+    Returns
+    -------
+    str or None
+        The first mismatch, or ``None`` if every record of a header-checked file holds its
+        properties (the failure lay elsewhere).
+    """
+    end = data.find(b"end_header", 0, _PLY_HEADER_MAX)
+    newline = data.find(b"\n", end)
+    if end < 0 or newline < 0:
+        return None
+    elements: list[tuple[str, int, list[bool]]] = []  # name, count, per property: is a list
+    for line in data[:end].decode("ascii", errors="replace").split("\n"):
+        words = line.split()
+        if words[:1] == ["element"] and len(words) == 3 and words[2].isdigit():
+            elements.append((words[1], int(words[2]), []))
+        elif words[:1] == ["property"] and elements:
+            elements[-1][2].append(words[1:2] == ["list"])
+    header_lines = data[: newline + 1].count(b"\n")
+    rows = data[newline + 1 :].decode("utf-8", errors="replace").splitlines()
+    row = 0
+    for name, count, is_list in elements:
+        for k in range(count):
+            if row >= len(rows):
+                return f"element '{name}' declares {count:,} records, the body ends at record {k:,}"
+            words = rows[row].split()
+            where = f"element '{name}' record {k:,} (line {header_lines + row + 1:,})"
+            need, at = 0, 0
+            for listed in is_list:
+                if not listed:
+                    need += 1
+                    at += 1
+                    continue
+                try:
+                    length = int(float(words[at]))
+                except (IndexError, ValueError):
+                    return f"{where} has no number where a list's count should be, at value {at + 1}"
+                need += 1 + length
+                at += 1 + length
+            if len(words) != need:
+                return f"{where} holds {len(words)} values; its header's properties need {need}"
+            try:
+                [float(w) for w in words]
+            except ValueError:
+                return f"{where} holds a value that is not a number: {rows[row].strip()[:80]!r}"
+            row += 1
+    return None
 
 
 # ------------------------------------------------------------------------------------- glTF/GLB

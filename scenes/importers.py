@@ -76,7 +76,7 @@ import shapely
 import trimesh
 
 from scenes.errors import InvalidMeshError, MissingStructureError, SceneFileError, UnsupportedFormatError
-from scenes.headers import check_gltf_layout, check_ply_header
+from scenes.headers import ascii_ply_row_error, check_gltf_layout, check_ply_header
 from scenes.interior import with_derived_rooms
 from scenes.limits import MAX_FACES, check_face_count, check_file_size, check_storey_size, unit_scale
 from scenes.model import Room, Scene, SurfaceClass
@@ -279,11 +279,13 @@ def load_mesh_scene(path: str | Path, *, y_up: bool = False, units: str = "m", n
         raise InvalidMeshError(source, "the mesh is empty (no faces)")
     out_of_range = (faces < 0) | (faces >= len(vertices))
     if out_of_range.any():
-        bad = int(faces[out_of_range][0])
+        # Numbered as the file numbers them: OBJ from 1, PLY and glTF from 0.
+        first = 1 if ext == ".obj" else 0
+        bad = int(faces[out_of_range][0]) + first
         raise InvalidMeshError(
             source,
-            f"{int(out_of_range.any(axis=1).sum())} face(s) refer to vertex {bad + 1} or other "
-            f"vertices outside 1..{len(vertices)}",
+            f"{int(out_of_range.any(axis=1).sum())} face(s) refer to vertex {bad} or other "
+            f"vertices outside {first}..{len(vertices) - 1 + first}",
         )
     finite = np.isfinite(vertices).all(axis=1)
     if not finite.all():
@@ -480,15 +482,17 @@ def _read_ply(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
             trimesh.util.wrap_as_stream(data), file_type="ply", force="mesh", process=False, skip_materials=True
         )
     except Exception as exc:
-        raise InvalidMeshError(source, f"cannot parse as ply: {type(exc).__name__}: {exc}") from exc
+        # numpy's reason ("setting an array element with a sequence") names no record: find it.
+        row = _ascii_row_error(data)
+        raise InvalidMeshError(source, row or f"cannot parse as ply: {type(exc).__name__}: {exc}") from exc
     if not isinstance(mesh, trimesh.Trimesh):
         return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), []
     vertices = np.asarray(mesh.vertices, dtype=float)
     raw = mesh.metadata.get("_ply_raw", {}).get("face", {})
-    data = raw.get("data")
+    columns = raw.get("data")
     props = list(raw.get("properties", {}))
     n_raw = int(raw.get("length", 0) or 0)
-    if data is None or "label" not in props:
+    if columns is None or "label" not in props:
         faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
         # Without labels every face is clutter, which the structure check then reports with a hint.
         n = len(faces)
@@ -499,16 +503,18 @@ def _read_ply(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
     if index_prop is None:
         raise InvalidMeshError(source, "the PLY face element has no vertex_indices list")
     try:
-        polys = _ply_polygons(data[index_prop], n_raw)
-        label_raw = _ply_integers(data["label"], n_raw, "label")
-        room_raw = _ply_integers(data["room"], n_raw, "room") if "room" in props else np.full(n_raw, -1)
-    except _PlyValueError as exc:
-        raise InvalidMeshError(source, str(exc)) from None
+        polys = _ply_polygons(columns[index_prop], n_raw)
+        label_raw = _ply_integers(columns["label"], n_raw, "label")
+        room_raw = _ply_integers(columns["room"], n_raw, "room") if "room" in props else np.full(n_raw, -1)
     except (KeyError, IndexError, ValueError, TypeError) as exc:
         # The header declares the property, the body does not hold it where it should (an ASCII face
-        # line with fewer or more values than the header lists).
+        # line with fewer or more values than the header lists): name the record where one is to blame.
+        row = _ascii_row_error(data)
+        if row is None and isinstance(exc, _PlyValueError):
+            row = str(exc)
         raise InvalidMeshError(
-            source, f"the face element's values do not match its header's properties ({type(exc).__name__}: {exc})"
+            source,
+            row or f"the face element's values do not match its header's properties ({type(exc).__name__}: {exc})",
         ) from None
     if not np.all(np.isin(label_raw, [c.value for c in SurfaceClass])):
         bad = np.unique(label_raw[~np.isin(label_raw, [c.value for c in SurfaceClass])])
@@ -540,6 +546,12 @@ def _read_ply(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
         np.where(room_arr < 0, -1, room_arr),
         [],
     )
+
+
+def _ascii_row_error(data: bytes) -> str | None:
+    """The first ASCII record that does not fit its header, or ``None`` (or a binary file)."""
+    head = data[: data.find(b"end_header")]
+    return ascii_ply_row_error(data) if b"format ascii" in head else None
 
 
 class _PlyValueError(ValueError):

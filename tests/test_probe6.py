@@ -112,7 +112,7 @@ GOOD_FACES = ["4 0 1 2 3 0 0", "4 4 7 6 5 1 0", "4 0 4 5 1 2 0", "4 1 5 6 2 2 0"
 @pytest.mark.parametrize(
     "faces, index_type, message",
     [
-        (["3 1 2", *GOOD_FACES[1:]], "int", r"the face element's 'label' values do not match its header"),
+        (["3 1 2", *GOOD_FACES[1:]], "int", r"element 'face' record 0 \(line 20\) holds 3 values; its header's prop"),
         (["4 0.5 1.5 2.5 3.5 0 0", *GOOD_FACES[1:]], "float", r"PLY face 0 has a vertex index that is not a whole"),
         (["4 0 1 2 3 0 -7", *GOOD_FACES[1:]], "int", r"face 0's 'room' is -7; a room is -1 \(none\) or a number"),
         (["4 0 1 2 3 0 2147483647", *GOOD_FACES[1:]], "int", r"face 0's 'room' is 2147483647"),
