@@ -119,15 +119,39 @@ def as_spec(spec: Any) -> str | Path | FloorPlan:
     raise TypeError(f"scene spec must be a str, os.PathLike or FloorPlan, got {type(spec).__name__}")
 
 
+def source_options(text: str) -> tuple[str, tuple[str, ...]]:
+    """What kind of source ``text`` names and the :func:`scenes.load_scene` options it takes, from
+    its name alone (nothing is read): so that a configuration can refuse an option its scene would
+    refuse at the first load.
+
+    Returns
+    -------
+    kind : str
+        ``"generated storey"``, ``"bundled scene"``, ``"floor-plan file"``, ``"mesh file"`` or
+        ``"IFC file"``.
+    options : tuple of str
+    """
+    if text.startswith(_GENERATED):
+        return "generated storey", (*GeneratorConfig.__dataclass_fields__, "validate")
+    suffix = Path(text).suffix.lower()
+    if not suffix and "/" not in text and "\\" not in text:
+        return "bundled scene", ("validate",)
+    if suffix == ".json":
+        return "floor-plan file", ("validate",)
+    if suffix in MESH_EXTENSIONS:
+        return "mesh file", ("y_up", "units", "name")
+    return "IFC file", ("storey", "class_map", "name", "doors")
+
+
 def _load_source(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene:
     if isinstance(spec, FloorPlan):
         return extrude(spec, **_take(options, ("validate",), "floor plan"))
     text = str(spec)
     check_source(text)
+    kind, allowed = source_options(text)
     if text.startswith(_GENERATED):
         seed = int(text[len(_GENERATED) :])
-        fields = tuple(GeneratorConfig.__dataclass_fields__)
-        opts = _take(options, (*fields, "validate"), "generated storey")
+        opts = _take(options, allowed, kind)
         opts.pop("validate", None)  # generated storeys are always validated
         try:
             _, scene = generate_storey(seed, GeneratorConfig(**opts))
@@ -140,16 +164,16 @@ def _load_source(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene
     path = Path(text)
     suffix = path.suffix.lower()
     if not suffix and "/" not in text and "\\" not in text:
-        return extrude(bundled_plan(text), source=text, **_take(options, ("validate",), "bundled scene"))
+        return extrude(bundled_plan(text), source=text, **_take(options, allowed, kind))
     if suffix == ".json":
-        return extrude(load_plan(path), source=text, **_take(options, ("validate",), "floor-plan file"))
+        return extrude(load_plan(path), source=text, **_take(options, allowed, kind))
     if suffix in MESH_EXTENSIONS:
         from scenes.importers import load_mesh_scene
 
-        return load_mesh_scene(path, **_take(options, ("y_up", "units", "name"), "mesh file"))
+        return load_mesh_scene(path, **_take(options, allowed, kind))
     from scenes.ifc import load_ifc_scene
 
-    return load_ifc_scene(path, **_take(options, ("storey", "class_map", "name", "doors"), "IFC file"))
+    return load_ifc_scene(path, **_take(options, allowed, kind))
 
 
 def check_source(text: str) -> None:

@@ -274,14 +274,21 @@ def test_scene_options_are_checked_when_the_configuration_is_made(options, messa
         make_config("fast", scene="l_room", scene_options=options)
 
 
-def test_a_scene_option_the_source_does_not_take_is_a_config_error_at_reset():
+def test_a_scene_option_the_source_does_not_take_is_a_config_error_when_made_or_at_reset():
     from nbs_env.config import make_config
     from nbs_env.env import NBSEnv
     from nbs_env.errors import ConfigError
 
-    env = NBSEnv(make_config("fast", scene="l_room", scene_options={"units": "mm"}))
+    # The configuration's own scene is known when it is made: refused there.
+    with pytest.raises(ConfigError, match=r"scene_options \['units'\] do not apply to scene 'l_room' \(bundled"):
+        make_config("fast", scene="l_room", scene_options={"units": "mm"})
+    with pytest.raises(ConfigError, match=r"\['storey'\] do not apply to scene 'a/b\.obj' \(mesh file\)"):
+        make_config("fast", scene="a/b.obj", scene_options={"storey": 0})
+    assert make_config("fast", scene="a/b.ifc", scene_options={"storey": 0}).scene_options == {"storey": 0}
+    # A scene a reset names: refused at that reset.
+    env = NBSEnv(make_config("fast", scene_options={"units": "mm"}))
     with pytest.raises(ConfigError, match=r"scene_options: load_scene got options \['units'\] that a bundled scene"):
-        env.reset(seed=0)
+        env.reset(seed=0, options={"scene": "l_room"})
 
 
 # ---------------------------------------------------------------------- signals at the end, fifos in result folders

@@ -15,6 +15,7 @@ from nbs_env.config.rooms import MAX_SCANS, RoomRules
 from nbs_env.config.scanners import SCANNERS
 from scenes.generator import GeneratorConfig
 from scenes.limits import UNITS
+from scenes.loader import source_options
 
 #: The most cells an observation window may have (64× the default 64 × 64 × 16): each is a float per
 #: step and a network input.
@@ -288,6 +289,14 @@ class EnvConfig(Config):
             f"coverage_radius must be within [0.01, 1] metres, got {self.coverage_radius}",
         )
         _check_scene_options(self.scene_options)
+        if self.scene != "generated" and isinstance(self.scene, str):
+            # Refused here, not at the first reset: whether a scene takes an option its name tells.
+            kind, allowed = source_options(self.scene)
+            odd = sorted(set(self.scene_options) - set(allowed))
+            _require(
+                not odd,
+                f"scene_options {odd} do not apply to scene {self.scene[:80]!r} ({kind}), which takes {list(allowed)}",
+            )
         _require(isinstance(self.expose_belief, bool), f"expose_belief must be a bool, got {self.expose_belief!r}")
         preset = self.robot.scanner.preset
         if preset is not None:
