@@ -36,6 +36,8 @@ _PLY_TYPES = {
 }  # fmt: skip
 _PLY_FLOAT_TYPES = ("float", "float32", "double", "float64")
 _PLY_FORMATS = ("ascii", "binary_little_endian", "binary_big_endian")
+#: What a PLY header line after the first may start with.
+_PLY_KEYWORDS = ("format", "comment", "obj_info", "element", "property")
 #: Where a header must have ended: real headers are a few hundred bytes.
 _PLY_HEADER_MAX = 1 << 16
 
@@ -64,23 +66,42 @@ def check_ply_header(source: str, data: bytes) -> None:
     # Lines end at \n (a lone \r ends none, as in PLY readers); the last piece is what precedes end_header.
     lines = data[:end].decode("ascii", errors="replace").split("\n")[:-1]
     encoding = None
-    elements: list[list] = []  # [name, declared count, least bytes of a binary record, properties]
+    # [name, declared count, least bytes of a binary record, properties, their names]
+    elements: list[list] = []
     for lineno, line in enumerate(lines, start=1):
         words = line.split()
+        if lineno == 1:
+            if line.strip() != "ply":
+                raise InvalidMeshError(source, f"PLY header line 1 is {line.strip()[:40]!r}, not 'ply'")
+            continue
+        if words and words[0] not in _PLY_KEYWORDS:
+            # trimesh skips a line it does not know: a "ply" twice read the body from the wrong
+            # place, a property without its keyword left the vertices without a coordinate.
+            raise InvalidMeshError(
+                source,
+                f"PLY header line {lineno}: {line.strip()[:60]!r} is no header line (they start with "
+                f"{', '.join(_PLY_KEYWORDS)})",
+            )
         if words[:1] == ["format"]:
             encoding = words[1] if len(words) > 1 else ""
             if encoding not in _PLY_FORMATS:
                 raise InvalidMeshError(source, f"PLY header line {lineno}: unknown format {encoding!r}")
         elif words[:1] == ["element"]:
+            if encoding is None:
+                raise InvalidMeshError(source, f"PLY header line {lineno}: an element before the 'format' line")
             if len(words) != 3 or not words[2].isdigit():
                 raise InvalidMeshError(source, f"PLY header line {lineno}: expected 'element NAME COUNT', got {line!r}")
-            elements.append([words[1], int(words[2]), 0, 0])
+            if any(e[0] == words[1] for e in elements):
+                raise InvalidMeshError(source, f"PLY header line {lineno}: a second element {words[1]!r}")
+            elements.append([words[1], int(words[2]), 0, 0, []])
         elif not words:  # a reader splits each line into words: trimesh's ended in an IndexError
             raise InvalidMeshError(source, f"PLY header line {lineno} is blank")
-        elif words[:1] == ["property"] and elements:
+        elif words[:1] == ["property"] and not elements:
+            raise InvalidMeshError(source, f"PLY header line {lineno}: a property before any element")
+        elif words[:1] == ["property"]:
             # A list takes its count's bytes at least (it may be empty); a scalar its own.
             kind = words[2] if len(words) == 5 and words[1] == "list" else words[1] if len(words) == 3 else None
-            if kind not in _PLY_TYPES:
+            if kind not in _PLY_TYPES or (words[1] == "list" and words[3] not in _PLY_TYPES):
                 raise InvalidMeshError(source, f"PLY header line {lineno}: bad property {line!r}")
             if words[1] == "list" and words[2] in _PLY_FLOAT_TYPES:
                 raise InvalidMeshError(
@@ -88,21 +109,46 @@ def check_ply_header(source: str, data: bytes) -> None:
                 )
             elements[-1][2] += _PLY_TYPES[kind]
             elements[-1][3] += 1
+            elements[-1][4].append((words[-1], words[1] == "list"))
     if encoding is None:
         raise InvalidMeshError(source, "the PLY header has no 'format' line")
+    # trimesh reads what it finds: without these it returned no faces or failed inside.
+    names = {e[0]: dict(e[4]) for e in elements}  # element: {property: is a list}
+    for element in ("vertex", "face"):
+        if element not in names:
+            raise InvalidMeshError(source, f"the PLY header declares no {element} element: no mesh")
+    missing = [axis for axis in "xyz" if names["vertex"].get(axis, True)]
+    if missing:
+        raise InvalidMeshError(source, f"the PLY vertex element has no {', '.join(missing)} number property")
+    if not any(names["face"].get(p) for p in ("vertex_indices", "vertex_index")):
+        raise InvalidMeshError(source, "the PLY face element has no vertex_indices list")
     need = 0
-    for k, (_, count, binary_bytes, properties) in enumerate(elements):
+    for k, (_, count, binary_bytes, properties, _) in enumerate(elements):
         least = 2 * properties if encoding == "ascii" else binary_bytes
         need += count * max(least, 1)  # a record takes a byte at least (an ASCII newline)
         if need > body:
-            declared = " and ".join(f"{c:,} {n}" for n, c, _, _ in elements[: k + 1])
+            declared = " and ".join(f"{c:,} {n}" for n, c, *_ in elements[: k + 1])
             raise InvalidMeshError(
                 source,
                 f"the PLY header declares {declared} records, at least {need:,} bytes, but {body:,} bytes "
                 "follow the header: the file is truncated or its header is wrong",
             )
+    if encoding == "ascii":
+        # More lines than records: trimesh reads the declared ones and drops the rest without a word.
+        last = len(data)
+        while last > newline + 1 and data[last - 1 : last].isspace():
+            last -= 1
+        rows = data.count(b"\n", newline + 1, last) + 1 if last > newline + 1 else 0
+        records = sum(count for _, count, *_ in elements)
+        if rows > records:
+            declared = " and ".join(f"{c:,} {n}" for n, c, *_ in elements)
+            raise InvalidMeshError(
+                source,
+                f"the PLY header declares {declared} records, {records:,} lines, but the body holds {rows:,} lines: "
+                "its counts are wrong",
+            )
     # The bytes are there: a storey too large to load, told before trimesh reads it.
-    check_face_count(source, sum(count for name, count, _, _ in elements if name == "face"))
+    check_face_count(source, sum(count for name, count, *_ in elements if name == "face"))
 
 
 def ascii_ply_row_error(data: bytes) -> str | None:
@@ -145,9 +191,12 @@ def ascii_ply_row_error(data: bytes) -> str | None:
                     at += 1
                     continue
                 try:
-                    length = int(float(words[at]))
+                    count_value = float(words[at])
                 except (IndexError, ValueError):
-                    return f"{where} has no number where a list's count should be, at value {at + 1}"
+                    count_value = math.nan
+                if not (math.isfinite(count_value) and count_value >= 0 and count_value.is_integer()):
+                    return f"{where} has no whole number >= 0 where a list's count should be, at value {at + 1}"
+                length = int(count_value)
                 need += 1 + length
                 at += 1 + length
             if len(words) != need:

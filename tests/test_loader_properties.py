@@ -192,6 +192,66 @@ def test_any_bytes_with_a_scene_suffix_load_or_raise_a_scene_error(data, suffix)
         loads_or_refuses(path)
 
 
+#: A labelled box room as text, in the two text formats whose bodies are read line by line.
+_BOX_PLY = (
+    "ply\nformat ascii 1.0\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\n"
+    "element face 6\nproperty list uchar int vertex_indices\nproperty uchar label\nproperty int room\n"
+    "end_header\n0 0 0\n4 0 0\n4 3 0\n0 3 0\n0 0 2.5\n4 0 2.5\n4 3 2.5\n0 3 2.5\n"
+    "4 0 1 2 3 0 0\n4 4 7 6 5 1 0\n4 0 4 5 1 2 0\n4 1 5 6 2 2 0\n4 2 6 7 3 2 0\n4 3 7 4 0 2 0\n"
+)
+_BOX_OBJ = (
+    "v 0 0 0\nv 4 0 0\nv 4 3 0\nv 0 3 0\nv 0 0 2.5\nv 4 0 2.5\nv 4 3 2.5\nv 0 3 2.5\n"
+    "o floor_room0\nf 1 2 3 4\no ceiling_room0\nf 5 8 7 6\no wall_room0\nf 1 5 6 2\nf 2 6 7 3\n"
+    "f 3 7 8 4\nf 4 8 5 1\n"
+)
+TOKENS = st.sampled_from(
+    ["0", "-1", "3", "2.5", "1e308", "-1e308", "nan", "inf", "x", "", "99999999999999999999", "0x1F", "#"]
+)
+
+
+@st.composite
+def edited_texts(draw):
+    """A labelled box room's OBJ or ASCII PLY text with one to four edits of its lines or words: a
+    word replaced, inserted or dropped, a line dropped, doubled or swapped with another."""
+    suffix, text = draw(st.sampled_from([(".ply", _BOX_PLY), (".obj", _BOX_OBJ)]))
+    lines = text.splitlines()
+    for _ in range(draw(st.integers(1, 4))):
+        i = draw(st.integers(0, len(lines) - 1))
+        words = lines[i].split()
+        edit = draw(st.sampled_from(["replace", "insert", "drop_word", "drop_line", "double", "swap"]))
+        if edit in ("replace", "insert", "drop_word") and words:
+            k = draw(st.integers(0, len(words) - 1))
+            if edit == "replace":
+                words[k] = draw(TOKENS)
+            elif edit == "insert":
+                words.insert(k, draw(TOKENS))
+            else:
+                del words[k]
+            lines[i] = " ".join(words)
+        elif edit == "drop_line":
+            del lines[i]
+        elif edit == "double":
+            lines.insert(i, lines[i])
+        else:
+            j = draw(st.integers(0, len(lines) - 1))
+            lines[i], lines[j] = lines[j], lines[i]
+        if not lines:
+            lines = [""]
+    return suffix, "\n".join(lines) + "\n"
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+@settings(SETTINGS, max_examples=60)
+@given(case=edited_texts())
+def test_any_edit_of_a_text_mesh_loads_or_raises_a_scene_error(case):
+    """The bodies of text meshes, which random bytes rarely reach: short, long and wordy rows."""
+    suffix, text = case
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / f"room{suffix}"
+        path.write_text(text)
+        loads_or_refuses(path)
+
+
 # ---------------------------------------------------------------------- IFC
 @settings(SETTINGS, max_examples=6)
 @given(cut=st.floats(0.0, 0.999), flip=st.integers(0, 10**9))

@@ -38,3 +38,33 @@ def test_an_index_outside_the_vertices_is_numbered_as_the_format_numbers_vertice
     obj.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\no floor\nf 1 2 9\n")
     with pytest.raises(InvalidMeshError, match=r"refer to vertex 9 or other vertices outside 1\.\.3"):
         load_scene(str(obj))
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        # trimesh skipped a line it did not know: the body was read from the wrong place
+        (lambda t: "ply\n" + t, r"PLY header line 2: 'ply' is no header line"),
+        (lambda t: t.replace("property float y\n", "float y\n"), r"header line 5: 'float y' is no header line"),
+        (lambda t: t.replace("list uchar int vertex", "list uchar 0 vertex"), r"header line 8: bad property"),
+        (lambda t: t.replace("int vertex_indices", "int corners"), r"the PLY face element has no vertex_indices list"),
+        (lambda t: t.replace("property float y\n", ""), r"the PLY vertex element has no y number property"),
+        (
+            lambda t: t.replace("format ascii 1.0\nelement vertex 8\n", "element vertex 8\nformat ascii 1.0\n"),
+            r"PLY header line 2: an element before the 'format' line",
+        ),
+        (lambda t: t.replace("element face 6", "element vertex 6"), r"line 7: a second element 'vertex'"),
+        # more face rows than declared: the rest was dropped without a word
+        (
+            lambda t: t.replace("element face 6", "element face 5"),
+            r"declares 8 vertex and 5 face records, 13 lines, but",
+        ),
+    ],
+)
+def test_ply_headers_that_trimesh_would_misread_are_refused(edit, message, tmp_path):
+    path = tmp_path / "bad.ply"
+    path.write_text(edit(_ply_text(GOOD_FACES)))
+    with pytest.raises(InvalidMeshError, match=message):
+        load_scene(str(path))
+    path.write_text(_ply_text(GOOD_FACES) + "\n\n  \n")  # trailing blank lines are no records
+    assert len(load_scene(str(path)).mesh.faces) == 12
