@@ -68,3 +68,26 @@ def test_ply_headers_that_trimesh_would_misread_are_refused(edit, message, tmp_p
         load_scene(str(path))
     path.write_text(_ply_text(GOOD_FACES) + "\n\n  \n")  # trailing blank lines are no records
     assert len(load_scene(str(path)).mesh.faces) == 12
+
+
+def test_a_closed_stdout_or_stderr_drops_what_is_written_and_the_report_is_kept(tmp_path):
+    """With descriptor 1 closed Python's sys.stdout is None: every write ended in an AttributeError
+    traceback after the report was written, and the report's file could take descriptor 1."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    nbs = f"{sys.executable} -c 'import sys; from train.cli import main; sys.argv[0] = \"nbs\"; sys.exit(main())'"
+    out = tmp_path / "o"
+    for command, code in (
+        (f"{nbs} scenes info l_room >&-", 0),
+        (f"{nbs} scenes info nope.json >&-", 1),
+        (f"{nbs} scenes info nope.json 2>&-", 1),
+        (f"{nbs} scan --scene l_room --preset fast --max-scans 1 --no-steps --out {out} >&- 2>&-", 0),
+    ):
+        proc = subprocess.run(["bash", "-c", command], cwd=root, capture_output=True, text=True, timeout=300)
+        assert proc.returncode == code, (command, proc.stderr)
+        assert "Traceback" not in proc.stderr, proc.stderr
+    assert json.loads((out / "metrics.json").read_text())["scans"] == 1

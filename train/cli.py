@@ -794,7 +794,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     from train.stopping import defer_signals
 
     defer_signals()
+    if argv is None:
+        _fill_closed_descriptors()
     stderr, stdout, showwarning = sys.stderr, sys.stdout, warnings.showwarning
+    # A stream closed by the caller (`nbs scan ... >&-`: Python's is None) takes what is written and
+    # drops it, as print() does; the report files are the command's work.
+    sinks = {name: open(os.devnull, "w") for name in ("stdout", "stderr") if getattr(sys, name) is None}  # noqa: SIM115  # closed in main's finally
+    if sinks:
+        sys.stdout, sys.stderr = sinks.get("stdout", sys.stdout), sinks.get("stderr", sys.stderr)
+        stderr, stdout = sys.stderr, sys.stdout
     # What no encoding can write (a lone surrogate in a name a file gave) is escaped, not a
     # UnicodeEncodeError halfway through a summary whose report is already written.
     errors = {stream: getattr(stream, "errors", None) for stream in (stdout, stderr)}
@@ -809,6 +817,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         code = _checked_main(argv)
     finally:  # a caller in the same process (a test, a notebook) gets its own back
         sys.stderr, sys.stdout, warnings.showwarning = stderr, stdout, showwarning
+        for name, sink in sinks.items():
+            setattr(sys, name, None)
+            sink.close()
         logging.getLogger().removeHandler(log)
         for stream, previous in errors.items():
             if previous is not None and hasattr(stream, "reconfigure"):
@@ -823,6 +834,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         for sig in STOP_SIGNALS:
             signal.signal(sig, signal.SIG_IGN)
     return code
+
+
+def _fill_closed_descriptors() -> None:
+    """Put ``/dev/null`` on a closed descriptor 0, 1 or 2: else the first file the command opens
+    (a report) takes its number, and whatever a library prints to it lands in the file."""
+    for fd in (0, 1, 2):
+        try:
+            os.fstat(fd)
+        except OSError:
+            null = os.open(os.devnull, os.O_RDWR)
+            if null != fd:
+                os.dup2(null, fd)
+                os.close(null)
 
 
 def _checked_main(argv: Sequence[str] | None) -> int:
