@@ -47,6 +47,7 @@ __all__ = [
     "BUNDLED",
     "CHECKPOINT_FORMAT",
     "INPUT_FIELDS",
+    "MAX_ACTIVATION_BYTES",
     "MAX_PARAMETERS",
     "LearnedPolicy",
     "NetworkConfig",
@@ -73,6 +74,12 @@ MAX_PARAMETERS = 10**8
 #: one-hot input takes 24 bytes a cell, 100 MB an observation at this bound, and the parameter count
 #: does not grow with the window (the encoder pools it to a fixed size), so it is bounded apart.
 MAX_VOXEL_CELLS = 2**22
+#: The most bytes one observation's pass through the network may hold (inputs and every layer's
+#: output, summed: a bound on its peak): the parameter count does not see them, and a 3 MB
+#: description of 4,096 first-layer channels over a 128 x 128 x 256 window once asked for 8 GiB at
+#: its first decision. The default network holds 4 MiB, the default channels over the largest
+#: window (:data:`MAX_VOXEL_CELLS`) 250 MiB.
+MAX_ACTIVATION_BYTES = 1 << 29
 #: Bounds of the other fields of a network description: what no network of this shape comes near
 #: (the defaults are 64 and 5), so that a description's numbers are sized before they are used.
 _FIELD_LIMITS = {"candidates": 4096, "features": 64, "actions": 4097, "grid_dim": 65536, "hidden": 65536}
@@ -261,6 +268,12 @@ class NetworkConfig(Config):
             f"the network described has {self.parameters:,} parameters, at most {MAX_PARAMETERS:,} "
             f"({4 * self.parameters / 2**30:,.1f} GiB of float32 weights)",
         )
+        _require(
+            self.activation_bytes <= MAX_ACTIVATION_BYTES,
+            f"the network described holds {self.activation_bytes / 2**20:,.0f} MiB of activations for one "
+            f"observation, at most {MAX_ACTIVATION_BYTES >> 20:,} MiB (channels {list(self.channels)} over a "
+            f"{_cells(self.voxel_shape)} window, {self.candidates} candidates of hidden width {self.hidden})",
+        )
 
     @property
     def parameters(self) -> int:
@@ -274,6 +287,22 @@ class NetworkConfig(Config):
         if self.actions > self.candidates:  # the "room done" head
             scorer += (g + r + 3) * h + h + h + 1
         return encoder + scorer
+
+    @property
+    def activation_bytes(self) -> int:
+        """Bytes of one observation's pass through :func:`build_network`'s layers, counted from the
+        description: the input, its one-hot, and every convolution's, ReLU's and linear layer's
+        output (float32), summed."""
+        x, y, z = self.voxel_shape
+        cells = x * y * z
+        floats = cells * (1 + 2 * N_LABELS)  # the labels, their rounded codes, the one-hot (and its mask)
+        for c in self.channels:
+            x, y, z = -(-x // 2), -(-y // 2), -(-z // 2)  # stride 2, padding 1: ceil of a half
+            floats += 2 * c * x * y * z  # the convolution's output and its ReLU's
+        floats += self.channels[2] * 32 + 2 * self.grid_dim
+        k, h = self.candidates, self.hidden
+        floats += k * (self.grid_dim + self.features + 2 + self.room_features) + 4 * k * h + 2 * k
+        return 4 * floats
 
     @property
     def latent_dim(self) -> int:

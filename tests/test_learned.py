@@ -273,6 +273,26 @@ def test_the_parameter_count_is_the_built_network_s():
         assert config.parameters == built
 
 
+def test_the_activation_count_bounds_what_a_pass_through_the_network_holds():
+    """The bound on activations is checked on a count from the description: it must not be less
+    than the outputs a forward pass makes (summed over every module, as a peak's upper bound)."""
+    torch = pytest.importorskip("torch")
+    for config in (NetworkConfig(), NetworkConfig(actions=65, room_features=5, hidden=32, channels=(4, 8, 16))):
+        encoder, scorer = build_network(config)
+        made = []
+        for module in [*encoder.modules(), *scorer.modules()]:
+            if not list(module.children()):  # the layers, not their containers
+                module.register_forward_hook(
+                    lambda _m, _i, out, made=made: made.append(out.numel() * out.element_size())
+                )
+        with torch.no_grad():
+            g = encoder(torch.zeros((1, *config.voxel_shape)))
+            table = torch.zeros((1, config.candidates * config.features + config.room_features))
+            scorer(torch.cat([g, table], dim=1))
+        one_hot = 4 * (1 + 2 * 6) * int(np.prod(config.voxel_shape))
+        assert sum(made) + one_hot <= config.activation_bytes <= 1.5 * (sum(made) + one_hot)
+
+
 def test_a_network_description_is_sized_before_anything_is_built(tmp_path, monkeypatch, capsys):
     """A policy.json is data from elsewhere: a hidden size of 10^9 once made torch try to allocate
     360 GB. Its fields' types and ranges, and the parameter count they imply (at most MAX_PARAMETERS),
@@ -293,6 +313,11 @@ def test_a_network_description_is_sized_before_anything_is_built(tmp_path, monke
         ({"channels": [4096, 4096, 4096]}, r"parameters, at most 100,000,000 \(.* GiB of float32 weights\)"),
         ({"voxel_shape": [1024, 1024, 1024]}, r"has 1,073,741,824 cells, at most 4,194,304"),
         ({"voxel_shape": [64, 64, 10**6]}, r"voxel_shape must be three integers <= 1024"),
+        # 789,214 parameters, 3 MB of weights: 16 GiB of activations at the first decision
+        (
+            {"voxel_shape": [128, 128, 256], "channels": [4096, 1, 1]},
+            r"holds 16,593 MiB of activations for one observation, at most 512 MiB \(channels \[4096, 1, 1\]",
+        ),
         ({"candidates": 10**7, "actions": 10**7}, r"candidates must be an integer <= 4096"),
         ({"hidden": "64"}, r"hidden must be an integer >= 1, got '64'"),
         ({"hidden": 64.0}, r"hidden must be an integer >= 1, got 64\.0"),
