@@ -81,8 +81,9 @@ from scenes.geometry import split_long_faces
 from scenes.importers import footprint_polygon
 from scenes.interior import derive_rooms, rooms_by_probe
 from scenes.labels import STRUCTURAL_CLASSES
-from scenes.limits import check_storey_size
+from scenes.limits import check_file_size, check_storey_size
 from scenes.model import Door, Room, Scene, SurfaceClass
+from scenes.stepgraph import check_chains, check_references
 
 __all__ = [
     "BOUNDING_TOLERANCE",
@@ -225,6 +226,47 @@ def _check_placements(source: str, model: Any) -> None:
         ended.update(chain)
 
 
+#: The relations that make a building's tree (whole → parts), with their attributes, as
+#: ``ifcopenshell.util.element`` walks them: aggregation, nesting, containment, openings and fillings.
+_DECOMPOSITIONS = (
+    ("IfcRelAggregates", "RelatingObject", "RelatedObjects"),
+    ("IfcRelNests", "RelatingObject", "RelatedObjects"),
+    ("IfcRelContainedInSpatialStructure", "RelatingStructure", "RelatedElements"),
+    ("IfcRelVoidsElement", "RelatingBuildingElement", "RelatedOpeningElement"),
+    ("IfcRelFillsElement", "RelatingOpeningElement", "RelatedBuildingElement"),
+)
+#: The deepest chain of decompositions in the corpus's IFC files (project, site, building, storey,
+#: wall, opening, door, ...), and the bound: a chain of 20,000 aggregated parts took every element
+#: through the whole chain (quadratic), and a part of itself looped forever.
+CORPUS_DECOMPOSITION_DEPTH = 6
+MAX_DECOMPOSITION_DEPTH = 64
+
+
+def _check_decomposition(source: str, model: Any) -> None:
+    """The building's tree has no cycle (a wall part of itself, a building under its own storey)
+    and no chain deeper than :data:`MAX_DECOMPOSITION_DEPTH`."""
+    parts: dict[int, list[int]] = {}
+    kinds: dict[int, str] = {}
+    for relation, whole_name, parts_name in _DECOMPOSITIONS:
+        try:
+            relations = model.by_type(relation)
+        except RuntimeError:  # not in this schema
+            continue
+        for rel in relations:
+            whole = getattr(rel, whole_name, None)
+            related = getattr(rel, parts_name, None)
+            related = related if isinstance(related, (list, tuple)) else [related]
+            if whole is None:
+                continue
+            for part in related:
+                if part is None:
+                    continue
+                parts.setdefault(whole.id(), []).append(part.id())
+                parts.setdefault(part.id(), [])
+                kinds[whole.id()], kinds[part.id()] = whole.is_a(), part.is_a()
+    check_chains(source, parts, kinds, "decompositions", MAX_DECOMPOSITION_DEPTH, CORPUS_DECOMPOSITION_DEPTH)
+
+
 class UnbuiltElementsWarning(UserWarning):
     """Structural elements of the storey (walls, slabs) whose body geometry ifcopenshell could not
     build: they are left out of the scene, and the message names them.
@@ -365,10 +407,17 @@ def load_ifc_scene(
         raise SceneFileError(source, "no such file" if not path.exists() else "not a regular file")
     _check_complete(source, path)
     try:
+        check_file_size(source, path.stat().st_size)
+        # Cycles and deep chains of references are refused before ifcopenshell follows them.
+        check_references(source, path.read_bytes())
+    except OSError as exc:
+        raise SceneFileError(source, f"cannot read the file: {exc.strerror or exc}") from exc
+    try:
         model = ifcopenshell.open(str(path))
     except Exception as exc:  # ifcopenshell raises its own error types, or OSError, for bad input
         raise IfcError(source, f"cannot read as IFC: {type(exc).__name__}: {exc}") from exc
     _check_placements(source, model)
+    _check_decomposition(source, model)
 
     _check_units(source, model)
     try:

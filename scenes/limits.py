@@ -156,7 +156,7 @@ def check_file_size(source: str, size: int, limit: int = MAX_MESH_FILE_BYTES) ->
     if size > limit:
         raise StoreySizeError(
             source,
-            f"the file holds {size:,} bytes; nbs-env reads mesh files of up to {limit:,} bytes (the largest "
+            f"the file holds {size:,} bytes; nbs-env reads building files of up to {limit:,} bytes (the largest "
             f"storey it loads, {MAX_FACES:,} faces, takes about a third of that): is it the file you meant?",
         )
     _check_memory(

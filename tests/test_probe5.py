@@ -372,8 +372,13 @@ def _fzk(tmp_path: Path, old: str, new: str) -> Path:
     [
         (
             "#432= IFCLOCALPLACEMENT(#115,#431);",
+            "#432= IFCLOCALPLACEMENT(#12,#431);",
+            r"the placement #432 is relative to #12, an IfcOwnerHistory, not a placement",
+        ),
+        (  # relative to the building it places: a cycle of references
+            "#432= IFCLOCALPLACEMENT(#115,#431);",
             "#432= IFCLOCALPLACEMENT(#434,#431);",
-            r"the placement #432 is relative to #434, an IfcBuilding, not a placement",
+            r"references form a cycle: #432 \(IFCLOCALPLACEMENT\) -> #434 \(IFCBUILDING\) -> #432",
         ),
         ("#472= IFCDIRECTION((0.,0.,1.));", "#472= IFCDIRECTION((0.,0.,0.));", r"the direction #472 .* points nowhere"),
         (

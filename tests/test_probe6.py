@@ -67,15 +67,20 @@ def test_windows_over_one_stretch_of_wall_are_refused(tmp_path):
 @pytest.mark.parametrize(
     "factor, extra, message",
     [
-        ("#9001", "#9001= IFCMEASUREWITHUNIT(IFCLENGTHMEASURE(2.),#13);", r"the unit #13 converts to itself"),
+        (  # a cycle of references, refused before the units are read
+            "#990001",
+            "#990001= IFCMEASUREWITHUNIT(IFCLENGTHMEASURE(2.),#13);",
+            r"references form a cycle: #13 \(IFCCONVERSIONBASEDUNIT\) -> #990001 \(IFCMEASUREWITHUNIT\) -> #13",
+        ),
         (
-            "#9001",
-            "#9001= IFCMEASUREWITHUNIT(IFCLABEL('x'),#9002);\n#9002= IFCSIUNIT(*,.LENGTHUNIT.,$,.METRE.);",
+            "#990001",
+            "#990001= IFCMEASUREWITHUNIT(IFCLABEL('x'),#990002);\n#990002= IFCSIUNIT(*,.LENGTHUNIT.,$,.METRE.);",
             r"the unit #13 converts by 'x', not a positive number",
         ),
         (
-            "#9001",
-            "#9001= IFCMEASUREWITHUNIT(IFCLENGTHMEASURE(1.E-300),#9002);\n#9002= IFCSIUNIT(*,.LENGTHUNIT.,$,.METRE.);",
+            "#990001",
+            "#990001= IFCMEASUREWITHUNIT(IFCLENGTHMEASURE(1.E-300),#990002);\n"
+            "#990002= IFCSIUNIT(*,.LENGTHUNIT.,$,.METRE.);",
             r"the extrusion #\d+ is .* deep; .* \(the file's length unit is 1e-300 m: is it right\?\)",
         ),
     ],

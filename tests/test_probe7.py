@@ -91,3 +91,67 @@ def test_a_closed_stdout_or_stderr_drops_what_is_written_and_the_report_is_kept(
         assert proc.returncode == code, (command, proc.stderr)
         assert "Traceback" not in proc.stderr, proc.stderr
     assert json.loads((out / "metrics.json").read_text())["scans"] == 1
+
+
+# ---------------------------------------------------------------------- IFC reference cycles and chains
+def _ifc(tmp_path, edit):
+    from pathlib import Path
+
+    text = (Path(__file__).parent / "data" / "two_rooms.ifc").read_text()
+    head, tail = text.rsplit("ENDSEC;", 1)
+    path = tmp_path / "edited.ifc"
+    path.write_text(edit(head) + "ENDSEC;" + tail)
+    return path
+
+
+def _placement_chain(head: str) -> str:
+    chain = [f"#{1000 + i}=IFCLOCALPLACEMENT(#{999 + i if i else 25},#58);\n" for i in range(300)]
+    return head.replace("#59=IFCLOCALPLACEMENT(#25,#58);", "#59=IFCLOCALPLACEMENT(#1299,#58);") + "".join(chain)
+
+
+def _aggregation_chain(head: str) -> str:
+    proxies = [f"#{2000 + i}=IFCBUILDINGELEMENTPROXY('p{i}',$,'p',$,$,$,$,$,$);\n" for i in range(100)]
+    rels = [f"#{3000 + i}=IFCRELAGGREGATES('r{i}',$,$,$,#{2000 + i},(#{2001 + i}));\n" for i in range(99)]
+    return head + "".join(proxies + rels) + "#3200=IFCRELAGGREGATES('x',$,$,$,#2099,(#37));\n"
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        # ifcopenshell's geometry engine looped on it, deaf to SIGTERM
+        (
+            lambda h: (
+                h.replace("'SweptSolid',(#46));", "'SweptSolid',(#900));", 1)
+                + "#900=IFCBOOLEANRESULT(.DIFFERENCE.,#900,#46);\n"
+            ),
+            r"the file's references form a cycle: #900 \(IFCBOOLEANRESULT\) -> #900 \(IFCBOOLEANRESULT\)",
+        ),
+        # a RecursionError traceback from ifcopenshell's placement
+        (_placement_chain, r"starts a chain of 30\d references, at most 160 \(real files hold 14 at most\)"),
+        # a part of itself: the loader looped forever; a long chain took it through every element
+        (
+            lambda h: h + "#901=IFCRELAGGREGATES('x',$,$,$,#37,(#37));\n",
+            r"the file's decompositions form a cycle: #37 \(IfcWall\) -> #37 \(IfcWall\)",
+        ),
+        (_aggregation_chain, r"#2000 \(IfcBuildingElementProxy\) starts a chain of 100 decompositions, at most 64"),
+        (lambda h: h + "#37=IFCWALL('x',$,'again',$,$,#59,#48,$,$);\n", r"instance #37 is defined twice"),
+    ],
+)
+def test_ifc_references_that_cycle_or_chain_too_deep_are_refused_before_a_reader_follows_them(edit, message, tmp_path):
+    pytest.importorskip("ifcopenshell")
+    from scenes import IfcError
+
+    with pytest.raises(IfcError, match=message):
+        load_scene(str(_ifc(tmp_path, edit)), storey=0)
+
+
+def test_references_inside_strings_and_comments_are_no_references(tmp_path):
+    pytest.importorskip("ifcopenshell")
+    # A name holding '#37', a ';' and a quote, and a comment naming #37: none is an edge or a statement.
+    path = _ifc(
+        tmp_path,
+        lambda h: h.replace("'wall south'", "'wall ''#37''; #37=IFCWALL('").replace(
+            "#47=IFCSHAPE", "/* #47 refers to #47; */ #47=IFCSHAPE"
+        ),
+    )
+    assert len(load_scene(str(path), storey=0).mesh.faces) > 0
