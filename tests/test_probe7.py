@@ -155,3 +155,52 @@ def test_references_inside_strings_and_comments_are_no_references(tmp_path):
         ),
     )
     assert len(load_scene(str(path), storey=0).mesh.faces) > 0
+
+
+def test_a_command_with_nothing_to_keep_stops_at_a_signal_not_at_its_end():
+    """`nbs scenes info` recorded a SIGTERM and went on to its end: a load of minutes was deaf to it."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    code = (
+        "import sys, train.cli as c\n"
+        "def forever(args):\n"
+        "    print('working', file=sys.stderr, flush=True)\n"
+        "    while True:\n"
+        "        pass\n"
+        "c.run = forever\n"
+        "sys.exit(c.main(['scenes', 'info', 'l_room']))\n"
+    )
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.Popen([sys.executable, "-c", code], cwd=root, stderr=subprocess.PIPE, text=True)
+    assert proc.stderr.readline().strip() == "working"
+    sent = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    err = proc.communicate(timeout=60)[1]
+    assert proc.returncode == 128 + signal.SIGTERM and time.monotonic() - sent < 10
+    assert err.strip() == "nbs: stopped by SIGTERM" and "Traceback" not in err
+
+
+def test_a_signal_recorded_while_libraries_loaded_stops_the_command_when_it_starts():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = (
+        "import os, signal, time\n"
+        "from train.stopping import defer_signals, interrupt_on_signals, pending_signal\n"
+        "defer_signals()\n"
+        "os.kill(os.getpid(), signal.SIGTERM)\n"
+        "time.sleep(0.2)\n"
+        "assert pending_signal() == signal.SIGTERM\n"
+        "try:\n"
+        "    interrupt_on_signals()\n"
+        "except KeyboardInterrupt:\n"
+        "    print('stopped')\n"
+    )
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=60)
+    assert proc.stdout.strip() == "stopped", proc.stderr

@@ -793,6 +793,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     the system refuses (a name too long, a loop of links) exits 1 naming it."""
     from train.stopping import defer_signals
 
+    # A caller in the same process (a test, a notebook) gets its handlers back.
+    handlers = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS} if argv is not None and _main_thread() else {}
     defer_signals()
     if argv is None:
         _fill_closed_descriptors()
@@ -825,6 +827,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             if previous is not None and hasattr(stream, "reconfigure"):
                 with contextlib.suppress(Exception):
                     stream.reconfigure(errors=previous)
+        for sig, handler in handlers.items():
+            if handler is not None:  # None: set outside Python, which cannot be put back
+                signal.signal(sig, handler)
     if argv is None:
         # The process's own command line, whose work is done and said: a stop signal from here on
         # finds nothing to stop. Python restores the default handlers while it shuts down (half a
@@ -834,6 +839,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         for sig in STOP_SIGNALS:
             signal.signal(sig, signal.SIG_IGN)
     return code
+
+
+def _main_thread() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
 
 
 def _fill_closed_descriptors() -> None:
@@ -860,8 +871,9 @@ def _checked_main(argv: Sequence[str] | None) -> int:
         code = _main(argv)
         sys.stdout.flush()  # output still buffered fails here, named, not at the interpreter's exit
     except KeyboardInterrupt:
-        print("nbs: interrupted", file=sys.stderr)
-        return exit_code(pending_signal() or signal.SIGINT)
+        stop = pending_signal() or signal.SIGINT
+        print(f"nbs: stopped by {signal.Signals(stop).name}", file=sys.stderr)
+        return exit_code(stop)
     except BrokenPipeError:  # the reader of stdout went away (`nbs scenes list | head -1`): as `cat` does
         with contextlib.suppress(OSError):
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
@@ -896,6 +908,9 @@ def _main(argv: Sequence[str] | None = None) -> int:
 
         undefer_signals()  # it waits for Ctrl-C itself
         return run_view(args)
+    from train.stopping import interrupt_on_signals
+
+    interrupt_on_signals()  # nothing to keep: a stop signal stops it now, not at its end
     try:
         return run(args)
     except SceneError as exc:

@@ -28,6 +28,7 @@ __all__ = [
     "defer_signals",
     "exit_code",
     "ignore_interrupts",
+    "interrupt_on_signals",
     "pending_signal",
     "start_resource_tracker",
     "undefer_signals",
@@ -106,6 +107,26 @@ def defer_signals() -> None:
     if threading.current_thread() is threading.main_thread():
         for sig in STOP_SIGNALS:
             signal.signal(sig, _record)
+
+
+def _interrupt(sig: int, frame: FrameType | None) -> None:
+    global _pending, _pending_at
+    if _pending is None:
+        _pending, _pending_at = sig, time.monotonic()
+    raise KeyboardInterrupt
+
+
+def interrupt_on_signals() -> None:
+    """For a command with nothing to keep (``nbs scenes info``, ``show``, ``generate``, whose files are
+    written whole or not at all): from here SIGINT and SIGTERM stop it at the next Python line, and
+    one recorded while it loaded its libraries does so now. Deferred to its end, a SIGTERM waited out
+    a load of minutes. (A call into C++ that does not return, ifcopenshell's geometry, still defers
+    it until it does: the loaders refuse the inputs that made one loop.)"""
+    if threading.current_thread() is threading.main_thread():
+        for sig in STOP_SIGNALS:
+            signal.signal(sig, _interrupt)
+    if _pending is not None:
+        raise KeyboardInterrupt
 
 
 def undefer_signals() -> None:
