@@ -204,3 +204,45 @@ def test_a_signal_recorded_while_libraries_loaded_stops_the_command_when_it_star
     root = Path(__file__).resolve().parents[1]
     proc = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=60)
     assert proc.stdout.strip() == "stopped", proc.stderr
+
+
+@pytest.mark.parametrize(
+    ("patched", "argv", "line"),
+    [
+        ("run_scan", ["scan", "--scene", "l_room", "--out", "OUT"], "nbs scan: interrupted"),
+        ("run", ["scenes", "info", "l_room"], "nbs: stopped by SIGINT"),
+    ],
+)
+def test_an_interrupt_a_c_extension_turns_into_its_own_error_is_an_interrupt(patched, argv, line, tmp_path):
+    """A second Ctrl-C inside `import open3d` came out as `ImportError: initialization failed` and a
+    70-line traceback blaming the install."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = (
+        "import sys, train.cli as c\n"
+        "def boom(args):\n"
+        "    try:\n"
+        "        raise KeyboardInterrupt\n"
+        "    except KeyboardInterrupt as exc:\n"
+        "        raise ImportError('initialization failed') from exc\n"
+        f"c.{patched} = boom\n"
+        f"sys.exit(c.main({[str(tmp_path / 'o') if a == 'OUT' else a for a in argv]!r}))\n"
+    )
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=120)
+    assert (proc.returncode, proc.stderr.strip()) == (130, line)
+
+
+def test_an_error_of_its_own_is_not_taken_for_an_interrupt():
+    from train.cli import interrupted
+
+    try:
+        try:
+            raise ValueError("x")
+        except ValueError as exc:
+            raise ImportError("y") from exc
+    except ImportError as exc:
+        assert not interrupted(exc)
+    assert interrupted(KeyboardInterrupt())

@@ -841,6 +841,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     return code
 
 
+def interrupted(exc: BaseException) -> bool:
+    """Whether ``exc`` is a ``KeyboardInterrupt`` or was caused by one: raised inside a C extension's
+    import (open3d's, torch's), an interrupt comes out as ``ImportError: initialization failed``."""
+    seen: set[int] = set()
+    node: BaseException | None = exc
+    while node is not None and id(node) not in seen:
+        if isinstance(node, KeyboardInterrupt):
+            return True
+        seen.add(id(node))
+        node = node.__cause__ or node.__context__
+    return False
+
+
 def _main_thread() -> bool:
     import threading
 
@@ -860,6 +873,12 @@ def _fill_closed_descriptors() -> None:
                 os.close(null)
 
 
+def _stopped(sig: int | None) -> int:
+    stop = sig or signal.SIGINT
+    print(f"nbs: stopped by {signal.Signals(stop).name}", file=sys.stderr)
+    return exit_code(stop)
+
+
 def _checked_main(argv: Sequence[str] | None) -> int:
     from train.stopping import pending_signal
 
@@ -871,9 +890,7 @@ def _checked_main(argv: Sequence[str] | None) -> int:
         code = _main(argv)
         sys.stdout.flush()  # output still buffered fails here, named, not at the interpreter's exit
     except KeyboardInterrupt:
-        stop = pending_signal() or signal.SIGINT
-        print(f"nbs: stopped by {signal.Signals(stop).name}", file=sys.stderr)
-        return exit_code(stop)
+        return _stopped(pending_signal())
     except BrokenPipeError:  # the reader of stdout went away (`nbs scenes list | head -1`): as `cat` does
         with contextlib.suppress(OSError):
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
@@ -881,6 +898,10 @@ def _checked_main(argv: Sequence[str] | None) -> int:
     except OSError as exc:
         print(f"nbs: error: {_os_error(exc)}", file=sys.stderr)
         return EXIT_SCENE_ERROR
+    except Exception as exc:
+        if not interrupted(exc):
+            raise
+        return _stopped(pending_signal())
     late = pending_signal()
     if late is not None and code == 0:  # a command with no steps to stop at finished meanwhile
         print(f"nbs: stopped by {signal.Signals(late).name}", file=sys.stderr)
@@ -901,6 +922,11 @@ def _main(argv: Sequence[str] | None = None) -> int:
         try:
             return run_scan(args) if args.command == "scan" else run_compare(args)
         except KeyboardInterrupt:  # Ctrl-C while the command was still setting up, before its handler
+            print(f"nbs {args.command}: interrupted", file=sys.stderr)
+            return exit_code(signal.SIGINT)
+        except Exception as exc:  # the same, raised inside a C extension's import as its ImportError
+            if not interrupted(exc):
+                raise
             print(f"nbs {args.command}: interrupted", file=sys.stderr)
             return exit_code(signal.SIGINT)
     if args.command == "view":
