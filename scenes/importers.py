@@ -482,21 +482,27 @@ def _read_ply(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
             trimesh.util.wrap_as_stream(data), file_type="ply", force="mesh", process=False, skip_materials=True
         )
     except Exception as exc:
-        # numpy's reason ("setting an array element with a sequence") names no record: find it.
-        row = _ascii_row_error(data)
-        raise InvalidMeshError(source, row or f"cannot parse as ply: {type(exc).__name__}: {exc}") from exc
-    if not isinstance(mesh, trimesh.Trimesh):
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), []
-    vertices = np.asarray(mesh.vertices, dtype=float)
-    raw = mesh.metadata.get("_ply_raw", {}).get("face", {})
-    columns = raw.get("data")
-    props = list(raw.get("properties", {}))
-    n_raw = int(raw.get("length", 0) or 0)
-    if columns is None or "label" not in props:
-        faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
-        # Without labels every face is clutter, which the structure check then reports with a hint.
-        n = len(faces)
-        return vertices, faces, np.full(n, SurfaceClass.CLUTTER.value), np.full(n, -1), []
+        if b"format binary_" in data[: data.find(b"end_header")]:
+            # trimesh reads binary lists of one length only: a file mixing triangles and quads, as
+            # most exporters write, is read record by record here (and its damage named).
+            vertices, columns, props, n_raw = _read_binary_ply(source, data)
+        else:
+            # numpy's reason ("setting an array element with a sequence") names no record: find it.
+            row = _ascii_row_error(data)
+            raise InvalidMeshError(source, row or f"cannot parse as ply: {type(exc).__name__}: {exc}") from exc
+    else:
+        if not isinstance(mesh, trimesh.Trimesh):
+            return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), []
+        vertices = np.asarray(mesh.vertices, dtype=float)
+        raw = mesh.metadata.get("_ply_raw", {}).get("face", {})
+        columns = raw.get("data")
+        props = list(raw.get("properties", {}))
+        n_raw = int(raw.get("length", 0) or 0)
+        if columns is None or "label" not in props:
+            faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
+            # Without labels every face is clutter, which the structure check then reports with a hint.
+            n = len(faces)
+            return vertices, faces, np.full(n, SurfaceClass.CLUTTER.value), np.full(n, -1), []
     # trimesh reorders mixed triangles and polygons, so triangulate the raw polygons here to keep
     # each face next to its own label.
     index_prop = next((p for p in props if p in ("vertex_indices", "vertex_index")), None)
@@ -504,7 +510,11 @@ def _read_ply(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
         raise InvalidMeshError(source, "the PLY face element has no vertex_indices list")
     try:
         polys = _ply_polygons(columns[index_prop], n_raw)
-        label_raw = _ply_integers(columns["label"], n_raw, "label")
+        label_raw = (
+            _ply_integers(columns["label"], n_raw, "label")
+            if "label" in props
+            else np.full(n_raw, SurfaceClass.CLUTTER.value)  # unlabelled: the structure check says so
+        )
         room_raw = _ply_integers(columns["room"], n_raw, "room") if "room" in props else np.full(n_raw, -1)
     except (KeyError, IndexError, ValueError, TypeError) as exc:
         # The header declares the property, the body does not hold it where it should (an ASCII face
@@ -546,6 +556,101 @@ def _read_ply(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
         np.where(room_arr < 0, -1, room_arr),
         [],
     )
+
+
+#: numpy's and struct's codes of the PLY scalar types.
+_PLY_NUMPY = {
+    "char": "i1", "uchar": "u1", "int8": "i1", "uint8": "u1",
+    "short": "i2", "ushort": "u2", "int16": "i2", "uint16": "u2",
+    "int": "i4", "uint": "u4", "int32": "i4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}  # fmt: skip
+_STRUCT = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I", "f4": "f", "f8": "d"}
+
+
+def _read_binary_ply(source: str, data: bytes) -> tuple[np.ndarray, dict[str, Any], list[str], int]:
+    """A binary PLY read record by record (lists of any length), from a header
+    :func:`~scenes.headers.check_ply_header` has checked.
+
+    Returns
+    -------
+    vertices : (N, 3) float64
+    columns : dict
+        The face element's properties: a list property as an object array of index arrays, a
+        scalar as an array.
+    properties : list of str
+        The face element's property names, in order.
+    faces : int
+        The face records.
+
+    Raises
+    ------
+    InvalidMeshError
+        A list's count that runs past the file's end, or bytes left over after the last record.
+    """
+    import struct
+
+    end = data.find(b"end_header")
+    offset = data.find(b"\n", end) + 1
+    endian = "<"
+    elements: list[tuple[str, int, list[tuple[str, str, str | None]]]] = []
+    for line in data[:end].decode("ascii", errors="replace").split("\n"):
+        words = line.split()
+        if words[:1] == ["format"]:
+            endian = "<" if words[1] == "binary_little_endian" else ">"
+        elif words[:1] == ["element"]:
+            elements.append((words[1], int(words[2]), []))
+        elif words[:1] == ["property"] and words[1] == "list":
+            elements[-1][2].append((words[4], _PLY_NUMPY[words[3]], _PLY_NUMPY[words[2]]))
+        elif words[:1] == ["property"]:
+            elements[-1][2].append((words[2], _PLY_NUMPY[words[1]], None))
+    read: dict[str, dict[str, Any]] = {}
+    for name, count, props in elements:
+        if all(counter is None for _, _, counter in props):  # fixed-size records: one read
+            dtype = np.dtype([(p, endian + kind) for p, kind, _ in props])
+            if offset + count * dtype.itemsize > len(data):
+                raise InvalidMeshError(source, f"the PLY {name} records run past the end of the file")
+            records = np.frombuffer(data, dtype, count, offset)
+            offset += count * dtype.itemsize
+            read[name] = {p: records[p] for p, _, _ in props}
+            continue
+        columns: dict[str, list] = {p: [] for p, _, _ in props}
+        for i in range(count):
+            for prop, kind, counter in props:
+                try:
+                    if counter is None:
+                        columns[prop].append(struct.unpack_from(endian + _STRUCT[kind], data, offset)[0])
+                        offset += int(kind[1])
+                        continue
+                    (n,) = struct.unpack_from(endian + _STRUCT[counter], data, offset)
+                    offset += int(counter[1])
+                    if n < 0 or offset + n * int(kind[1]) > len(data):
+                        raise struct.error("past the end")
+                    columns[prop].append(np.frombuffer(data, endian + kind, n, offset))
+                    offset += n * int(kind[1])
+                except struct.error:
+                    raise InvalidMeshError(
+                        source,
+                        f"PLY {name} {i}'s '{prop}' runs past the end of the file ({len(data) - offset:,} bytes "
+                        "are left): the file is truncated or its counts are wrong",
+                    ) from None
+        read[name] = columns
+    if offset != len(data):
+        raise InvalidMeshError(
+            source, f"{len(data) - offset:,} bytes follow the last record the PLY header declares: its counts are wrong"
+        )
+    vertex, face = read["vertex"], read["face"]
+    vertices = np.column_stack([np.asarray(vertex[a], dtype=float) for a in "xyz"]).reshape(-1, 3)
+    faces = next(count for name, count, _ in elements if name == "face")
+    out: dict[str, Any] = {}
+    for prop, values in face.items():
+        if isinstance(values, list) and values and isinstance(values[0], np.ndarray):
+            column = np.empty(len(values), dtype=object)
+            column[:] = values
+            out[prop] = column
+        else:
+            out[prop] = np.asarray(values)
+    return vertices, out, list(face), faces
 
 
 def _ascii_row_error(data: bytes) -> str | None:

@@ -363,7 +363,9 @@ def test_ascii_ply_whose_face_lines_do_not_match_the_header(tmp_path):
     header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
     faces = "element face 1\nproperty list uchar int vertex_indices\nproperty uchar label\nend_header\n"
     p.write_text(header + faces + "0 0 0\n1 0 0\n0 1 0\n3 0 1 99\n0\n")
-    with pytest.raises(InvalidMeshError, match=r"split\.ply.*record 0 \(line 14\) holds 4 values; .* need 5"):
+    with pytest.raises(
+        InvalidMeshError, match=r"split\.ply.*declares 3 vertex and 1 face records, 4 lines, but the body holds 5"
+    ):
         load_mesh_scene(p)
 
 

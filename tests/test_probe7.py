@@ -246,3 +246,52 @@ def test_an_error_of_its_own_is_not_taken_for_an_interrupt():
     except ImportError as exc:
         assert not interrupted(exc)
     assert interrupted(KeyboardInterrupt())
+
+
+# ---------------------------------------------------------------------- binary PLY with lists of several lengths
+def _binary_ply(faces: list[str], endian: str = "<") -> bytes:
+    import struct
+
+    vertices = [(0, 0, 0), (4, 0, 0), (4, 3, 0), (0, 3, 0), (0, 0, 2.5), (4, 0, 2.5), (4, 3, 2.5), (0, 3, 2.5)]
+    name = "binary_little_endian" if endian == "<" else "binary_big_endian"
+    header = (
+        f"ply\nformat {name} 1.0\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\n"
+        f"element face {len(faces)}\nproperty list uchar int vertex_indices\nproperty uchar label\n"
+        "property int room\nend_header\n"
+    ).encode()
+    body = b"".join(struct.pack(endian + "3f", *v) for v in vertices)
+    for row in faces:
+        n, *rest = (int(x) for x in row.split())
+        body += struct.pack(f"{endian}B{n}iBi", n, *rest)
+    return header + body
+
+
+@pytest.mark.parametrize("endian", ["<", ">"])
+def test_a_binary_ply_mixing_triangles_and_quads_loads_as_its_ascii_twin(endian, tmp_path):
+    """trimesh reads binary lists of one length only: the mix most exporters write was refused."""
+    mixed = ["3 0 1 2 0 0", "3 0 2 3 0 0", *GOOD_FACES[1:]]  # a floor of two triangles, walls of quads
+    (tmp_path / "a.ply").write_text(_ply_text(mixed))
+    (tmp_path / "b.ply").write_bytes(_binary_ply(mixed, endian))
+    a, b = load_scene(str(tmp_path / "a.ply")), load_scene(str(tmp_path / "b.ply"))
+    assert len(b.mesh.faces) == len(a.mesh.faces) == 12
+    assert (b.mesh.faces == a.mesh.faces).all() and (b.face_labels == a.face_labels).all()
+    assert abs(b.mesh.vertices - a.mesh.vertices).max() < 1e-6
+
+
+@pytest.mark.parametrize(
+    "damage, message",
+    [
+        (lambda d: d[:-3], r"PLY face 6's 'room' runs past the end of the file \(1 bytes are left\)"),
+        (lambda d: d + b"\0\0", r"2 bytes follow the last record the PLY header declares"),
+        (
+            lambda d: d.replace(b"\x04\x00\x00\x00\x00", b"\xff\x00\x00\x00\x00", 1),
+            r"PLY face \d's 'vertex_indices' runs past",
+        ),
+    ],
+)
+def test_a_damaged_binary_ply_with_lists_of_several_lengths_is_named(damage, message, tmp_path):
+    mixed = ["3 0 1 2 0 0", "3 0 2 3 0 0", *GOOD_FACES[1:]]
+    path = tmp_path / "b.ply"
+    path.write_bytes(damage(_binary_ply(mixed)))
+    with pytest.raises(InvalidMeshError, match=message):
+        load_scene(str(path))
