@@ -334,8 +334,12 @@ class NBSEnv(gym.Env):
     def _check_action(self, action: Any) -> int:
         # What Discrete.contains takes: a Python or numpy integer, or a 0-d integer array (not a
         # bool, not a float that happens to be whole, not a one-element list or array).
+        # A masked array is an ndarray whose masked value has no integer (numpy's MaskError).
         integer = (isinstance(action, (int, np.integer)) and not isinstance(action, (bool, np.bool_))) or (
-            isinstance(action, np.ndarray) and action.shape == () and np.issubdtype(action.dtype, np.integer)
+            isinstance(action, np.ndarray)
+            and action.shape == ()
+            and np.issubdtype(action.dtype, np.integer)
+            and not np.ma.is_masked(action)
         )
         if not integer or not (0 <= int(action) < self.n_actions):
             raise InvalidActionError(

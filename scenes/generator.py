@@ -199,7 +199,13 @@ def generate_storey(seed: int, config: GeneratorConfig | None = None, **options:
     ------
     StoreyValidationError
         When no valid storey was drawn in ``max_attempts`` tries.
+    TypeError, ValueError
+        ``seed`` is not an integer >= 0 (numpy's own messages named neither the seed nor the function).
     """
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(f"the generator's seed must be an integer >= 0, got {type(seed).__name__} {seed!r:.40}")
+    if seed < 0:
+        raise ValueError(f"the generator's seed must be an integer >= 0, got {seed}")
     config = replace(config or GeneratorConfig(), **options) if options else (config or GeneratorConfig())
     rng = np.random.default_rng(seed)
     last: Exception | None = None

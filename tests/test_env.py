@@ -239,7 +239,21 @@ def test_masked_action_is_penalised_without_a_scan_and_bad_actions_raise():
     obs2, reward, terminated, truncated, info2 = env.step(masked)
     assert info2["invalid_action"] and info2["scans"] == scans and reward == -1.0
     assert not terminated and not truncated and same(obs, obs2)
-    for bad in (-1, 64, 2.5, "a", None, "3", 1.0, np.array([3]), float("inf"), True, [0], np.float64(2.0)):
+    for bad in (
+        -1,
+        64,
+        2.5,
+        "a",
+        None,
+        "3",
+        1.0,
+        np.array([3]),
+        float("inf"),
+        True,
+        [0],
+        np.float64(2.0),
+        np.ma.masked_array(0, mask=True),
+    ):
         with pytest.raises(InvalidActionError, match="action must be an integer"):
             env.step(bad)
     # What Discrete.contains takes is taken: numpy integers and 0-d integer arrays.

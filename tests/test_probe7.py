@@ -295,3 +295,12 @@ def test_a_damaged_binary_ply_with_lists_of_several_lengths_is_named(damage, mes
     path.write_bytes(damage(_binary_ply(mixed)))
     with pytest.raises(InvalidMeshError, match=message):
         load_scene(str(path))
+
+
+@pytest.mark.parametrize(("seed", "kind"), [(-1, ValueError), (1.5, TypeError), ("1", TypeError), (True, TypeError)])
+def test_a_generator_seed_that_is_no_integer_is_named(seed, kind):
+    """numpy's "expected non-negative integer" named neither the seed nor the generator."""
+    from scenes import generate_plan
+
+    with pytest.raises(kind, match=r"the generator's seed must be an integer >= 0"):
+        generate_plan(seed)
