@@ -304,3 +304,21 @@ def test_a_generator_seed_that_is_no_integer_is_named(seed, kind):
 
     with pytest.raises(kind, match=r"the generator's seed must be an integer >= 0"):
         generate_plan(seed)
+
+
+def test_two_outputs_naming_one_file_are_refused_before_the_work(tmp_path, capsys):
+    """`--out x.png --show x.png` wrote the plan, then its picture over it, and said both were written."""
+    from train.cli import EXIT_USAGE, main
+
+    (tmp_path / "d").mkdir()
+    for show in ("x.png", "d/../x.png"):
+        code = main(
+            ["scenes", "generate", "--seed", "1", "--out", str(tmp_path / "x.png"), "--show", str(tmp_path / show)]
+        )
+        err = capsys.readouterr().err
+        assert code == EXIT_USAGE and "--out and --show both name" in err, err
+    assert not (tmp_path / "x.png").exists()
+    link = tmp_path / "link.rrd"
+    link.symlink_to(tmp_path / "run")
+    code = main(["scan", "--scene", "l_room", "--out", str(tmp_path / "run"), "--record", str(link)])
+    assert code == EXIT_USAGE and "--out and --record both name" in capsys.readouterr().err

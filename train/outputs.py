@@ -181,6 +181,18 @@ def check_outputs(outputs: Iterable[Output]) -> None:
         For the first path that cannot be written or may not be replaced: ``"--out r: its folder
         x does not exist"``.
     """
+    outputs = list(outputs)
+    seen: dict[Path, Output] = {}
+    for output in outputs:
+        try:
+            where = output.path.resolve()  # a link and its target, `a/../b` and `b`: one file
+        except (OSError, RuntimeError):
+            where = output.path.absolute()
+        if where in seen:
+            raise OutputError(
+                f"{seen[where].flag} and {output.flag} both name {_shown(output.path)}: one would overwrite the other"
+            )
+        seen[where] = output
     for output in outputs:
         problem = utf8_problem(output.flag, output.path, "choose another")
         if problem is not None:
