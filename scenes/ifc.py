@@ -226,6 +226,9 @@ def _check_placements(source: str, model: Any) -> None:
         ended.update(chain)
 
 
+#: How far from the origin a storey may lie, in metres: the deepest mine shaft and the highest
+#: building are within a few kilometres, and a float of 1e300 sorted a storey out of its place.
+MAX_ELEVATION = 10_000.0
 #: The relations that make a building's tree (whole → parts), with their attributes, as
 #: ``ifcopenshell.util.element`` walks them: aggregation, nesting, containment, openings and fillings.
 _DECOMPOSITIONS = (
@@ -329,9 +332,34 @@ def _check_geometry_values(source: str, model: Any, scale: float) -> None:
         ratios = [float(r) for r in direction.DirectionRatios or ()]
         if not ratios or not all(math.isfinite(r) for r in ratios) or not any(ratios):
             raise IfcError(source, f"the direction #{direction.id()} {tuple(ratios)} points nowhere")
+        if len(ratios) not in (2, 3):
+            raise IfcError(source, f"the direction #{direction.id()} has {len(ratios)} components, not 2 or 3")
     for point in model.by_type("IfcCartesianPoint"):
         if not all(math.isfinite(float(c)) for c in point.Coordinates or ()):
             raise IfcError(source, f"the point #{point.id()} has a coordinate that is not a finite number")
+        if len(point.Coordinates or ()) not in (2, 3):
+            raise IfcError(
+                source, f"the point #{point.id()} has {len(point.Coordinates or ())} coordinates, not 2 or 3"
+            )
+    for solid in model.by_type("IfcExtrudedAreaSolid"):
+        along = solid.ExtrudedDirection
+        if along is not None and len(along.DirectionRatios or ()) != 3:
+            # The engine read a 2-component direction as lying in the plan: a wall extruded sideways.
+            raise IfcError(
+                source,
+                f"the extrusion #{solid.id()} runs along #{along.id()}, a direction of "
+                f"{len(along.DirectionRatios or ())} components; an extrusion's has 3",
+            )
+    for operator in model.by_type("IfcCartesianTransformationOperator"):
+        for name in ("Scale", "Scale2", "Scale3"):
+            try:
+                value = getattr(operator, name)
+            except AttributeError:  # a 2-D operator has no third
+                continue
+            if value is not None and not (math.isfinite(float(value)) and float(value) > 0):
+                raise IfcError(
+                    source, f"the transformation #{operator.id()} scales by {float(value):g}; a scale is a number > 0"
+                )
     for solid in model.by_type("IfcExtrudedAreaSolid"):
         depth = float(solid.Depth) * scale
         if not (math.isfinite(depth) and MIN_EXTRUSION <= depth <= MAX_EXTRUSION):
@@ -428,7 +456,7 @@ def load_ifc_scene(
         raise IfcError(source, f"the length unit is {scale:g} metres, not a length")
     _check_geometry_values(source, model, scale)
     mapping = _merge_class_map(source, model, class_map)
-    storeys = _sorted_storeys(model, scale)
+    storeys = _sorted_storeys(source, model, scale)
     if not storeys:
         raise IfcError(source, "no storey: the file has no IfcBuildingStorey")
     index = _select_storey(source, storeys, storey)
@@ -524,7 +552,7 @@ def load_ifc_scene(
 
 
 # ------------------------------------------------------------------------------------- storeys
-def _sorted_storeys(model: Any, scale: float) -> list[_Storey]:
+def _sorted_storeys(source: str, model: Any, scale: float) -> list[_Storey]:
     import ifcopenshell.util.placement
 
     storeys = []
@@ -535,6 +563,13 @@ def _sorted_storeys(model: Any, scale: float) -> list[_Storey]:
             z = float(ifcopenshell.util.placement.get_local_placement(entity.ObjectPlacement)[2, 3]) * scale
         else:
             z = float(entity.Elevation or 0.0) * scale
+        if not (math.isfinite(z) and abs(z) <= MAX_ELEVATION):
+            # It would sort first or last and shift every index (--storey 0 another storey).
+            raise IfcError(
+                source,
+                f"the storey #{entity.id()} {entity.Name!r:.40} lies at {z:g} m; storeys lie within "
+                f"{MAX_ELEVATION:,.0f} m of the origin (the file's length unit is {scale:g} m: is it right?)",
+            )
         storeys.append((z, order, _Storey(entity, entity.Name or f"#{entity.id()}", entity.LongName or "", z)))
     return [s for _, _, s in sorted(storeys, key=lambda t: (t[0], t[1]))]
 

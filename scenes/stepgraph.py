@@ -12,6 +12,7 @@ the standard library and refuses a file whose references form a cycle or a chain
 from __future__ import annotations
 
 import re
+import warnings
 
 from scenes.errors import IfcError
 
@@ -33,17 +34,46 @@ MAX_REFERENCE_DEPTH = 160
 
 # Strings ('' escapes a quote) and comments may hold anything, '#12' and ';' included.
 _STRINGS_AND_COMMENTS = re.compile(rb"'(?:[^']|'')*'|/\*.*?\*/", re.DOTALL)
+
+
+def _blank(data: bytes) -> bytes:
+    """``data`` with every string emptied and every comment a space (a comment ends no statement and
+    starts none)."""
+    return _STRINGS_AND_COMMENTS.sub(lambda m: b" " if m.group(0).startswith(b"/*") else b"''", data)
+
+
 _INSTANCE = re.compile(rb"\s*#(\d+)\s*=\s*([A-Za-z0-9_]*)")
 _REFERENCE = re.compile(rb"#(\d+)")
+_BAD_NAME = re.compile(rb"#[^\d\s][^,)\s;]{0,10}")
 
 
-def reference_graph(data: bytes) -> tuple[dict[int, list[int]], dict[int, str], list[int]]:
+class DanglingReferencesWarning(UserWarning):
+    """References to instances the file does not define: the reader leaves them empty.
+
+    Attributes
+    ----------
+    source : str
+    count : int
+        How many references dangle.
+    """
+
+    def __init__(self, source: str, count: int, examples: str) -> None:
+        self.source, self.count = source, count
+        super().__init__(
+            f"{source}: {count:,} reference(s) name instances the file does not define ({examples}"
+            f"{', ...' if count > 3 else ''}); what they held is missing: is the file complete?"
+        )
+
+
+def reference_graph(data: bytes, *, blank: bool = True) -> tuple[dict[int, list[int]], dict[int, str], list[int]]:
     """The instances of a STEP file's DATA sections and the instances each refers to.
 
     Parameters
     ----------
     data : bytes
         The file.
+    blank : bool
+        Empty its strings and comments first (False: the caller has).
 
     Returns
     -------
@@ -55,7 +85,7 @@ def reference_graph(data: bytes) -> tuple[dict[int, list[int]], dict[int, str], 
     repeated : list of int
         Ids defined more than once (the last definition is in ``refers``).
     """
-    text = _STRINGS_AND_COMMENTS.sub(b"''", data)
+    text = _blank(data) if blank else data
     refers: dict[int, list[int]] = {}
     kinds: dict[int, str] = {}
     repeated: list[int] = []
@@ -116,9 +146,20 @@ def check_references(source: str, data: bytes) -> None:
     IfcError
         Naming the cycle's instances and entities, or the deepest chain's first instance and length.
     """
-    refers, kinds, repeated = reference_graph(data)
+    text = _blank(data)
+    refers, kinds, repeated = reference_graph(text, blank=False)
     if repeated:
         raise IfcError(source, f"instance #{repeated[0]} is defined twice: a reader keeps one and drops the other")
+    odd = _BAD_NAME.search(text)
+    if odd is not None:
+        shown = odd.group(0).decode("ascii", errors="replace")
+        raise IfcError(source, f"{shown!r} names no instance (an instance is # and digits)")
+    dangling = [(i, r) for i, names in refers.items() for r in names if r not in refers]
+    if dangling:
+        # Real exporters leave a few (a window style's missing property sets); a file cut short and
+        # given its end marker leaves many, and loses what the missing part held.
+        pairs = ", ".join(f"#{i} -> #{r}" for i, r in dangling[:3])
+        warnings.warn(DanglingReferencesWarning(source, len(dangling), pairs), stacklevel=3)
     check_chains(source, refers, kinds, "references", MAX_REFERENCE_DEPTH, CORPUS_DEEPEST)
 
 

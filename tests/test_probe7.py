@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import pytest
 
 from scenes import InvalidMeshError, load_scene
@@ -154,7 +156,9 @@ def test_references_inside_strings_and_comments_are_no_references(tmp_path):
             "#47=IFCSHAPE", "/* #47 refers to #47; */ #47=IFCSHAPE"
         ),
     )
-    assert len(load_scene(str(path), storey=0).mesh.faces) > 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no reference dangles: the comment hid no statement
+        assert len(load_scene(str(path), storey=0).mesh.faces) > 0
 
 
 def test_a_command_with_nothing_to_keep_stops_at_a_signal_not_at_its_end():
@@ -322,3 +326,61 @@ def test_two_outputs_naming_one_file_are_refused_before_the_work(tmp_path, capsy
     link.symlink_to(tmp_path / "run")
     code = main(["scan", "--scene", "l_room", "--out", str(tmp_path / "run"), "--record", str(link)])
     assert code == EXIT_USAGE and "--out and --record both name" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        # read as lying in the plan: the wall extruded sideways, without a word
+        (
+            "#40=IFCDIRECTION((0.,0.,1.));",
+            "#40=IFCDIRECTION((0.,1.));",
+            r"the extrusion #46 runs along #40, a direction of 2",
+        ),
+        ("#40=IFCDIRECTION((0.,0.,1.));", "#40=IFCDIRECTION((0.,0.,1.,0.));", r"the direction #40 has 4 components"),
+        # sorted after every other storey: --storey 0 became the upper one
+        (
+            "'EG',$,$,#25,$,$,$,0.);",
+            "'EG',$,$,$,$,$,$,1.E300);",
+            r"the storey #14 'EG' lies at 1e\+300 m; storeys lie within 10,000 m of the origin",
+        ),
+    ],
+)
+def test_ifc_directions_and_elevations_no_building_has_are_refused(old, new, message, tmp_path):
+    pytest.importorskip("ifcopenshell")
+    from scenes import IfcError
+
+    with pytest.raises(IfcError, match=message):
+        load_scene(str(_ifc(tmp_path, lambda h: h.replace(old, new))), storey=0)
+
+
+@pytest.mark.parametrize("scale", ["0.", "-1."])
+def test_a_mapped_item_scaled_by_zero_or_less_is_refused(scale, tmp_path):
+    pytest.importorskip("ifcopenshell")
+    from scenes import IfcError
+    from tests.test_probe5 import _fzk
+
+    old = "#19184= IFCCARTESIANTRANSFORMATIONOPERATOR3D($,$,#19182,$,$);"
+    path = _fzk(tmp_path, old, old.replace(",$,$);", f",{scale},$);"))
+    with pytest.raises(
+        IfcError, match=rf"the transformation #19184 scales by {scale.rstrip('.')}; a scale is a number > 0"
+    ):
+        load_scene(str(path), storey=0)
+
+
+def test_a_reference_that_is_no_instance_name_is_refused_and_dangling_ones_are_said(tmp_path):
+    """`#-115` was read without a word; a file cut in half and given back its end marker lost its
+    ceilings silently (its relations name instances it no longer holds)."""
+    pytest.importorskip("ifcopenshell")
+    from scenes import IfcError
+    from scenes.stepgraph import DanglingReferencesWarning
+
+    with pytest.raises(IfcError, match=r"'#-25' names no instance"):
+        load_scene(
+            str(_ifc(tmp_path, lambda h: h.replace("#59=IFCLOCALPLACEMENT(#25,", "#59=IFCLOCALPLACEMENT(#-25,")))
+        )
+    cut = _ifc(tmp_path, lambda h: h + "#990=IFCRELAGGREGATES('x',$,$,$,#14,(#991,#992));\n")
+    with pytest.warns(
+        DanglingReferencesWarning, match=r"2 reference\(s\) name instances the file does not define \(#990 -> #991"
+    ):
+        load_scene(str(cut), storey=0)
