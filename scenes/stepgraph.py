@@ -19,6 +19,7 @@ from scenes.errors import IfcError
 __all__ = [
     "CORPUS_DEEPEST",
     "MAX_REFERENCE_DEPTH",
+    "DanglingReferencesWarning",
     "check_chains",
     "check_references",
     "deepest_chains",
