@@ -149,6 +149,13 @@ class GeneratorConfig:
         object.__setattr__(self, "wall_thickness", pair("wall_thickness", number, 0.01, 3.0, "metres"))
         object.__setattr__(self, "door_width", pair("door_width", number, 0.5, 10.0, "metres"))
         object.__setattr__(self, "door_height", pair("door_height", number, 1.0, 30.0, "metres"))
+        # A door reaches at most 0.3 m below the ceiling (a lintel): a taller one was cut to that
+        # height without a word.
+        if self.door_height[1] > self.ceiling_height[0] - 0.3:
+            raise ValueError(
+                f"door_height {list(self.door_height)} must stay 0.3 m below the lowest ceiling "
+                f"(ceiling_height {list(self.ceiling_height)}): at most {self.ceiling_height[0] - 0.3:g} m"
+            )
         if not (integer(self.max_attempts) and 1 <= self.max_attempts <= 100_000):
             raise ValueError(f"max_attempts must be an integer within [1, 100,000], got {self.max_attempts!r}")
         object.__setattr__(self, "max_attempts", plain(self.max_attempts))

@@ -197,9 +197,13 @@ def check_source(text: str) -> None:
     suffix = path.suffix.lower()
     if not suffix and "/" not in text and "\\" not in text:
         if text not in list_scenes():
-            raise UnknownSceneError(
-                text, f"no bundled scene of that name and no such file; bundled: {', '.join(list_scenes())}"
-            )
+            if path.is_dir():
+                problem = "a folder, not a scene file"
+            elif path.exists():
+                problem = f"a file without a type suffix ({', '.join(SUPPORTED_EXTENSIONS)})"
+            else:
+                problem = "no bundled scene of that name and no such file"
+            raise UnknownSceneError(text, f"{problem}; bundled: {', '.join(list_scenes())}")
         return
     if suffix not in SUPPORTED_EXTENSIONS:
         raise UnsupportedFormatError(

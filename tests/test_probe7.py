@@ -384,3 +384,25 @@ def test_a_reference_that_is_no_instance_name_is_refused_and_dangling_ones_are_s
         DanglingReferencesWarning, match=r"2 reference\(s\) name instances the file does not define \(#990 -> #991"
     ):
         load_scene(str(cut), storey=0)
+
+
+def test_a_folder_or_a_file_without_a_suffix_given_as_a_scene_is_said_to_be_one(tmp_path, monkeypatch):
+    from scenes import UnknownSceneError
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "plans").mkdir()
+    (tmp_path / "storey").write_text("{}")
+    with pytest.raises(UnknownSceneError, match=r"plans: a folder, not a scene file"):
+        load_scene("plans")
+    with pytest.raises(UnknownSceneError, match=r"storey: a file without a type suffix \(\.json"):
+        load_scene("storey")
+
+
+def test_generator_doors_taller_than_the_ceiling_allows_and_endless_episodes_are_refused():
+    from scenes.generator import GeneratorConfig
+    from train.ppo import TrainConfig
+
+    with pytest.raises(ValueError, match=r"door_height \[29, 30\] must stay 0\.3 m below the lowest ceiling"):
+        GeneratorConfig(door_height=(29, 30))
+    with pytest.raises(ValueError, match=r"max_episode_steps must be at most 100,000"):
+        TrainConfig(max_episode_steps=10**12)

@@ -31,6 +31,7 @@ from nbs_env import threads
 from nbs_env.atomic import replacing, write_text
 from nbs_env.config import Config, EnvConfig, _integer, _require
 from nbs_env.config.checks import _within
+from nbs_env.config.rooms import MAX_SCANS
 from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES
 from policies.learned import NetworkConfig, build_network, save_checkpoint
@@ -163,6 +164,11 @@ class TrainConfig(Config):
             _integer(self, name, 1)
         for name in ("seed", "eval_every", "checkpoint_every", "bc_steps"):
             _integer(self, name, 0)
+        # An episode's steps are its scans at most (evaluation runs with max_scans = this).
+        _require(
+            self.max_episode_steps <= MAX_SCANS,
+            f"max_episode_steps must be at most {MAX_SCANS:,} (a run's most scans), got {self.max_episode_steps:,}",
+        )
         # Each validation storey is an episode per evaluation: ten thousand is days of evaluating.
         _require(
             self.eval_storeys <= MAX_EVAL_STOREYS,
