@@ -15,6 +15,7 @@ import base64
 import binascii
 import json
 import math
+import re
 import struct
 from pathlib import Path
 from typing import Any
@@ -39,7 +40,7 @@ _PLY_FORMATS = ("ascii", "binary_little_endian", "binary_big_endian")
 #: What a PLY header line after the first may start with.
 _PLY_KEYWORDS = ("format", "comment", "obj_info", "element", "property")
 #: Where a header must have ended: real headers are a few hundred bytes.
-_PLY_HEADER_MAX = 1 << 16
+_PLY_HEADER_MAX = 1 << 20
 
 
 def check_ply_header(source: str, data: bytes) -> None:
@@ -58,8 +59,18 @@ def check_ply_header(source: str, data: bytes) -> None:
         More faces declared than :data:`~scenes.limits.MAX_FACES`.
     """
     end = data.find(b"end_header", 0, _PLY_HEADER_MAX)
-    if not data.startswith(b"ply") or end < 0:
+    if not data.startswith(b"ply"):
         raise InvalidMeshError(source, "not a PLY file: no 'ply' ... 'end_header' header at its start")
+    if end < 0:
+        raise InvalidMeshError(
+            source, f"no 'end_header' in the PLY file's first {_PLY_HEADER_MAX:,} bytes (a header is a few hundred)"
+        )
+    if end > 0 and data[end - 1 : end] != b"\n":
+        # Readers end the header at the first "end_header" anywhere on a line (trimesh does).
+        lineno = data.count(b"\n", 0, end) + 1
+        raise InvalidMeshError(
+            source, f"PLY header line {lineno} holds 'end_header' within it; readers end the header there"
+        )
     newline = data.find(b"\n", end)
     body = len(data) - newline - 1 if newline >= 0 else 0
     # Keywords are ASCII; a comment in another encoding must not stop the check.
@@ -107,6 +118,11 @@ def check_ply_header(source: str, data: bytes) -> None:
                 raise InvalidMeshError(
                     source, f"PLY header line {lineno}: a list's count is an integer type, got {words[2]!r}"
                 )
+            if any(name == words[-1] for name, _ in elements[-1][4]):
+                # Readers keep one of the two columns (which, they differ) or fail inside.
+                raise InvalidMeshError(
+                    source, f"PLY header line {lineno}: the {elements[-1][0]} element's property {words[-1]!r} again"
+                )
             elements[-1][2] += _PLY_TYPES[kind]
             elements[-1][3] += 1
             elements[-1][4].append((words[-1], words[1] == "list"))
@@ -140,6 +156,12 @@ def check_ply_header(source: str, data: bytes) -> None:
             last -= 1
         rows = data.count(b"\n", newline + 1, last) + 1 if last > newline + 1 else 0
         records = sum(count for _, count, *_ in elements)
+        blank = re.compile(rb"\n[ \t\r]*\n").search(data, newline, last)
+        if blank is not None:
+            lineno = data.count(b"\n", 0, blank.start()) + 2
+            raise InvalidMeshError(
+                source, f"line {lineno:,} of the PLY body is blank: readers take each line for a record"
+            )
         if rows > records:
             declared = " and ".join(f"{c:,} {n}" for n, c, *_ in elements)
             raise InvalidMeshError(

@@ -43,9 +43,10 @@ def _blank(data: bytes) -> bytes:
     return _STRINGS_AND_COMMENTS.sub(lambda m: b" " if m.group(0).startswith(b"/*") else b"''", data)
 
 
-_INSTANCE = re.compile(rb"\s*#(\d+)\s*=\s*([A-Za-z0-9_]*)")
-_REFERENCE = re.compile(rb"#(\d+)")
-_BAD_NAME = re.compile(rb"#[^\d\s][^,)\s;]{0,10}")
+# ifcopenshell reads "# 12" and "#\n12" as #12: so are they read here.
+_INSTANCE = re.compile(rb"\s*#\s*(\d+)\s*=\s*([A-Za-z0-9_]*)")
+_REFERENCE = re.compile(rb"#\s*(\d+)")
+_BAD_NAME = re.compile(rb"#(?!\s*\d)[^,)\s;]{0,10}")
 
 
 class DanglingReferencesWarning(UserWarning):

@@ -406,3 +406,53 @@ def test_generator_doors_taller_than_the_ceiling_allows_and_endless_episodes_are
         GeneratorConfig(door_height=(29, 30))
     with pytest.raises(ValueError, match=r"max_episode_steps must be at most 100,000"):
         TrainConfig(max_episode_steps=10**12)
+
+
+# ---------------------------------------------------------------------- probe 8
+def test_a_reference_written_with_a_blank_after_its_hash_is_a_reference(tmp_path):
+    """ifcopenshell reads `# 900` and `#\\n900` as #900: the reference check read neither, and a cycle
+    written so hung or crashed the geometry engine again."""
+    pytest.importorskip("ifcopenshell")
+    from scenes import IfcError
+
+    for written in ("# 900", "#\n900"):
+        path = _ifc(
+            tmp_path,
+            lambda h, w=written: (
+                h.replace("'SweptSolid',(#46));", "'SweptSolid',(#900));", 1)
+                + f"#900=IFCBOOLEANRESULT(.DIFFERENCE.,{w},#46);\n"
+            ),
+        )
+        with pytest.raises(IfcError, match=r"references form a cycle: #900 \(IFCBOOLEANRESULT\) -> #900"):
+            load_scene(str(path), storey=0)
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        # trimesh kept one of the two columns (ASCII: silently the wrong one; binary: a numpy traceback)
+        (
+            lambda t: t.replace("property float z\n", "property float z\nproperty int x\n"),
+            r"line 7: the vertex element's property 'x' again",
+        ),
+        (
+            lambda t: t.replace("format ascii 1.0\n", "format ascii 1.0\ncomment see end_header below\n"),
+            r"line 3 holds 'end_header' within it",
+        ),
+        (lambda t: t.replace("\n4 0 1 2 3 0 0\n", "\n\n4 0 1 2 3 0 0\n"), r"line 20 of the PLY body is blank"),
+    ],
+)
+def test_ply_headers_and_bodies_readers_misread_are_named(edit, message, tmp_path):
+    path = tmp_path / "bad.ply"
+    path.write_text(edit(_ply_text(GOOD_FACES)))
+    with pytest.raises(InvalidMeshError, match=message):
+        load_scene(str(path))
+
+
+def test_a_ply_header_of_many_comments_loads(tmp_path):
+    """A valid PLY with a 77 kB header was "not a PLY file"."""
+    path = tmp_path / "long.ply"
+    text = _ply_text(GOOD_FACES)
+    comments = ("comment " + "y" * 70 + "\n") * 1000
+    path.write_text(text.replace("format ascii 1.0\n", "format ascii 1.0\n" + comments))
+    assert len(load_scene(str(path)).mesh.faces) == 12
