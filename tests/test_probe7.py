@@ -456,3 +456,17 @@ def test_a_ply_header_of_many_comments_loads(tmp_path):
     comments = ("comment " + "y" * 70 + "\n") * 1000
     path.write_text(text.replace("format ascii 1.0\n", "format ascii 1.0\n" + comments))
     assert len(load_scene(str(path)).mesh.faces) == 12
+
+
+def test_a_report_that_would_write_over_its_own_scene_is_refused(tmp_path, capsys):
+    """`nbs scan --scene D/cloud.ply --out D --force` wrote the report's cloud.ply over the scene."""
+    from scenes.importers import export_scene
+    from train.cli import EXIT_USAGE, main
+
+    scene = tmp_path / "cloud.ply"
+    export_scene(load_scene("l_room"), scene)
+    before = scene.read_bytes()
+    code = main(["scan", "--scene", str(scene), "--out", str(tmp_path), "--force", "--max-scans", "1"])
+    err = capsys.readouterr().err
+    assert code == EXIT_USAGE and f"--out writes cloud.ply in {tmp_path}, which is --scene" in err, err
+    assert scene.read_bytes() == before

@@ -391,8 +391,9 @@ def run(args: argparse.Namespace) -> int:
         outputs = [Output("--out", args.out, "file")]
         if args.action == "generate" and args.show is not None:
             outputs.append(Output("--show", args.show, "file"))
+        reads = [("scene", Path(args.scene))] if args.action == "show" else []
         try:
-            check_outputs(outputs)
+            check_outputs(outputs, reads=reads)
         except OutputError as exc:
             print(f"nbs scenes {args.action}: error: {exc}", file=sys.stderr)
             return EXIT_USAGE
@@ -578,11 +579,15 @@ def run_scan(args: argparse.Namespace) -> int:
             return _scan_error(f"--record {args.record}: a rerun recording ends in .rrd", EXIT_USAGE)
     out = args.out if args.out is not None else _default_out(args.scene)
     replace = None if args.force else "pass --force to overwrite it"
-    outputs = [Output("--out", out, "folder", replace=replace)]
+    from nbs_env.export import REPORT_FILES
+
+    outputs = [Output("--out", out, "folder", replace=replace, files=REPORT_FILES)]
     if args.record is not None:
         outputs.append(Output("--record", args.record, "file", replace=replace, example="run.rrd"))
     try:
-        check_outputs(outputs)  # before the scan: a path found unwritable after it would lose it
+        # Before the scan: a path found unwritable after it would lose it, and the scene must not be
+        # one of the files the report writes (--force onto the scene's own folder overwrote it).
+        check_outputs(outputs, reads=[("--scene", Path(args.scene))])
     except OutputError as exc:
         return _scan_error(exc, EXIT_USAGE)
     with StopRequest() as stop:

@@ -45,6 +45,8 @@ class Output:
         it"``), said when it is refused; None: an existing file or non-empty folder is fine.
     example : str
         For a file: a name to suggest when the path is a folder (``"run.rrd"``).
+    files : tuple of str
+        For a folder: the names the command writes in it (a report's), checked against its inputs.
     """
 
     flag: str
@@ -52,6 +54,7 @@ class Output:
     kind: Literal["folder", "file"] = "folder"
     replace: str | None = None
     example: str = ""
+    files: tuple[str, ...] = ()
 
 
 class _FolderLike(type(Path())):  # type: ignore[misc]  # PosixPath or WindowsPath
@@ -172,27 +175,49 @@ def utf8_problem(flag: str, name: object, advice: str = "rename it") -> str | No
     return None
 
 
-def check_outputs(outputs: Iterable[Output]) -> None:
+def _where(path: Path) -> Path:
+    """``path`` as the file system finds it: a link and its target, ``a/../b`` and ``b`` are one."""
+    try:
+        return path.resolve()
+    except (OSError, RuntimeError):
+        return path.absolute()
+
+
+def check_outputs(outputs: Iterable[Output], reads: Iterable[tuple[str, Path]] = ()) -> None:
     """Check every output path of a command before it starts (module docstring); creates nothing.
+
+    Parameters
+    ----------
+    outputs : iterable of Output
+    reads : iterable of (str, Path)
+        The command's input files by option (``("--scene", Path("d/cloud.ply"))``): none may be a
+        file an output writes.
 
     Raises
     ------
     OutputError
         For the first path that cannot be written or may not be replaced: ``"--out r: its folder
-        x does not exist"``.
+        x does not exist"``; two outputs naming one file; an output that would write over an input.
     """
     outputs = list(outputs)
     seen: dict[Path, Output] = {}
     for output in outputs:
-        try:
-            where = output.path.resolve()  # a link and its target, `a/../b` and `b`: one file
-        except (OSError, RuntimeError):
-            where = output.path.absolute()
+        where = _where(output.path)
         if where in seen:
             raise OutputError(
                 f"{seen[where].flag} and {output.flag} both name {_shown(output.path)}: one would overwrite the other"
             )
         seen[where] = output
+    written = {where: (output, None) for where, output in seen.items() if output.kind == "file"}
+    for output in outputs:
+        written.update({_where(output.path / name): (output, name) for name in output.files})
+    for flag, path in reads:
+        if _where(Path(path)) in written:
+            output, name = written[_where(Path(path))]
+            what = f"writes {name} in {_shown(output.path)}" if name else f"writes {_shown(output.path)}"
+            raise OutputError(
+                f"{output.flag} {what}, which is {flag} {_shown(Path(path))}: choose another {output.flag}"
+            )
     for output in outputs:
         problem = utf8_problem(output.flag, output.path, "choose another")
         if problem is not None:
