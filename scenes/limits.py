@@ -22,9 +22,13 @@ Limits
     interior probes, the ray caster's tree) grows with the count, and beyond this it runs to minutes
     and gigabytes for a model no scan plan needs at that detail.
 :data:`BYTES_PER_FACE`, the memory a mesh's load takes per face
-    Measured: a binary PLY of 4.9 million faces peaked at 3.7 GB. A file whose declared faces need
-    more than the process may still allocate (its address-space limit, ``ulimit -v``, or the memory
-    the machine has available) is refused before it is read: it aborted inside glibc, with no message.
+    Measured on the most demanding storey met: ``l_room`` subdivided to 348,160 faces (a binary PLY
+    of triangles and quads) peaked at 1.42 GB in ``nbs scenes info`` (about 3 KB a face beyond the
+    libraries' 0.4 GB), where a 4.9-million-face PLY of simpler geometry peaked at 3.7 GB. A file whose
+    declared faces need more than the process may still allocate (its address-space limit,
+    ``ulimit -v``, or the memory the machine has available) is refused before it is read: at 800
+    bytes a face a 1.4-million-face storey passed the check and aborted inside the OpenMP runtime
+    with no message.
 :data:`MAX_MESH_FILE_BYTES`, 1 GiB, a mesh file read whole (checked by :func:`check_file_size`)
     An OBJ of the largest storey (5 million faces) takes some 300 MB of text; a binary file less. A
     file is read into memory before it is parsed, so one of gigabytes (a point cloud, a disk image
@@ -87,7 +91,7 @@ __all__ = [
 MAX_STOREY_WIDTH = 500.0
 MAX_STOREY_HEIGHT = 50.0
 MAX_FACES = 5_000_000
-BYTES_PER_FACE = 800
+BYTES_PER_FACE = 3072
 MIN_STOREY_WIDTH = 1.0
 MAX_MESH_FILE_BYTES = 1 << 30
 #: The memory a mesh file's bytes take while it is read and parsed, per byte of the file: its bytes,

@@ -470,3 +470,19 @@ def test_a_report_that_would_write_over_its_own_scene_is_refused(tmp_path, capsy
     err = capsys.readouterr().err
     assert code == EXIT_USAGE and f"--out writes cloud.ply in {tmp_path}, which is --scene" in err, err
     assert scene.read_bytes() == before
+
+
+def test_running_out_of_memory_is_one_line(monkeypatch, capsys):
+    """`--voxel 0.01` under a memory limit ended in a 63-line MemoryError traceback."""
+    import numpy as np
+
+    import train.cli as cli
+
+    def greedy_for_memory(args):
+        np.zeros(1 << 62, dtype=np.uint8)  # numpy refuses before asking the system
+
+    monkeypatch.setattr(cli, "run_scan", greedy_for_memory)
+    assert cli.main(["scan", "--scene", "l_room"]) == cli.EXIT_SCENE_ERROR
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("nbs: error: out of memory (Unable to allocate") and "--voxel" in err
+    assert len(err.splitlines()) == 1

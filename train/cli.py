@@ -903,6 +903,16 @@ def _checked_main(argv: Sequence[str] | None) -> int:
     except OSError as exc:
         print(f"nbs: error: {_os_error(exc)}", file=sys.stderr)
         return EXIT_SCENE_ERROR
+    except MemoryError as exc:
+        # Under an address-space or container limit numpy says so (without one, Linux's OOM killer
+        # ends the process and no line can be printed).
+        reason = " ".join(str(exc).split())[:160] or "MemoryError"
+        print(
+            f"nbs: error: out of memory ({reason}); a finer voxel (--voxel), a larger storey or a longer run "
+            "needs more: free memory or coarsen the voxel",
+            file=sys.stderr,
+        )
+        return EXIT_SCENE_ERROR
     except Exception as exc:
         if not interrupted(exc):
             raise
