@@ -65,6 +65,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
@@ -185,7 +186,9 @@ def _check_complete(source: str, path: Path) -> None:
     """A STEP file (ISO 10303-21) must end with its end marker: ifcopenshell reads a truncated one
     without a word and loses whatever the missing part held (ceilings, spaces, whole storeys)."""
     with open(path, "rb") as fh:
-        head = fh.read(64).lstrip(b"\xef\xbb\xbf \t\r\n")
+        # Before the magic: a byte-order mark, blanks and comments (a file may open with a
+        # /* comment */, and its truncation must not pass for "not a STEP file").
+        head = re.sub(rb"^(?:\s|\xef\xbb\xbf|/\*.*?\*/)*", b"", fh.read(1 << 16), flags=re.DOTALL)
         if not head.startswith(b"ISO-10303-21;"):
             return  # not a STEP text file; ifcopenshell says what it is or is not
         fh.seek(0, 2)

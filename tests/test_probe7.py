@@ -486,3 +486,18 @@ def test_running_out_of_memory_is_one_line(monkeypatch, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith("nbs: error: out of memory (Unable to allocate") and "--voxel" in err
     assert len(err.splitlines()) == 1
+
+
+def test_a_truncated_ifc_that_opens_with_a_comment_is_still_found_truncated(tmp_path):
+    pytest.importorskip("ifcopenshell")
+    from pathlib import Path
+
+    from scenes import IfcError
+
+    text = (Path(__file__).parent / "data" / "two_rooms.ifc").read_text()
+    path = tmp_path / "cut.ifc"
+    path.write_text("/* exported by hand */\n" + text)
+    assert len(load_scene(str(path), storey=0).mesh.faces) > 0
+    path.write_text("/* exported by hand */\n" + text[: len(text) // 2])
+    with pytest.raises(IfcError, match=r"truncated, the file does not end with END-ISO-10303-21;"):
+        load_scene(str(path), storey=0)
