@@ -361,9 +361,10 @@ def test_a_mesh_whose_faces_need_more_memory_than_is_left_is_refused_before_read
     from scenes.errors import StoreySizeError
 
     monkeypatch.setattr(limits, "memory_left", lambda: (2**30, "its address-space limit, ulimit -v"))
-    with pytest.raises(StoreySizeError, match=r"4,000,000 faces takes about 3\.0 GiB.*1\.0 GiB more"):
+    need = 4_000_000 * limits.BYTES_PER_FACE / 2**30
+    with pytest.raises(StoreySizeError, match=rf"4,000,000 faces takes about {need:.1f} GiB.*1\.0 GiB more"):
         limits.check_face_count("big.ply", 4_000_000)
-    limits.check_face_count("small.ply", 1_000_000)  # 0.7 GiB: fits
+    limits.check_face_count("small.ply", 2**30 // limits.BYTES_PER_FACE - 1)  # just fits
 
 
 @pytest.mark.skipif(not Path("/proc/meminfo").is_file(), reason="reads Linux's /proc")
