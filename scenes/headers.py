@@ -307,7 +307,7 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
             _side_file(source, path, image["uri"], f"images[{i}]")
     nodes = _items(source, doc, "nodes")
     _check_node_tree(source, nodes)
-    _check_scenes_and_modes(source, doc, nodes)
+    drawn = _check_scenes_and_modes(source, doc, nodes)
     buffer_length = []
     for i, buffer in enumerate(buffers):
         declared = _natural(source, buffer, "byteLength", f"buffers[{i}]")
@@ -386,6 +386,9 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
                 f"{where} declares {count:,} elements, which need {need:,} bytes, but bufferViews[{view}] "
                 f"has {length:,}",
             )
+    # Instances multiply a mesh's faces: 100,000 nodes of one small mesh, a 7.7 MB file, were built
+    # into 31 million faces before the face bound was met (and the memory ran out first).
+    check_face_count(source, drawn)
 
 
 def _check_extensions(source: str, doc: dict) -> None:
@@ -511,10 +514,12 @@ def _side_file(source: str, path: Path, uri: str, where: str) -> Path | None:
     return side
 
 
-def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> None:
+def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> int:
     """``scene`` names a scene and each scene's ``nodes`` name nodes (an IndexError in the reader);
     a node with a mesh holds no camera (the reader keeps the camera and drops the mesh without a
-    word); a primitive's ``mode`` is one of glTF's seven (99 made the part vanish)."""
+    word); a node's mesh and a primitive's accessors exist (a missing one was dropped without a word,
+    -1 read as the last); a primitive's ``mode`` is one of glTF's seven (99 made the part vanish),
+    and not a fan (the reader drops fans). Returns the faces the nodes draw, instances counted."""
     scenes = _items(source, doc, "scenes")
     if "scenes" in doc and not scenes:
         raise InvalidMeshError(source, "the file's scenes list is empty: it shows nothing")
@@ -528,6 +533,8 @@ def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> None:
             isinstance(n, int) and not isinstance(n, bool) and 0 <= n < len(nodes) for n in roots
         ):
             raise InvalidMeshError(source, f"scenes[{i}].nodes must name nodes 0..{len(nodes) - 1}")
+    meshes = _items(source, doc, "meshes")
+    accessors = _items(source, doc, "accessors")
     for i, node in enumerate(nodes):
         if "mesh" in node and "camera" in node:
             raise InvalidMeshError(
@@ -535,14 +542,44 @@ def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> None:
                 f"nodes[{i}] holds both a mesh and a camera, and the reader keeps only the camera: give the "
                 "camera a node of its own",
             )
-    for m, mesh in enumerate(_items(source, doc, "meshes")):
+        # A mesh the reader cannot find is dropped without a word (and -1 is the last one in Python).
+        if "mesh" in node and _natural(source, node, "mesh", f"nodes[{i}]") >= len(meshes):
+            raise InvalidMeshError(
+                source, f"nodes[{i}].mesh is {node['mesh']}, but the file has {len(meshes)} mesh(es)"
+            )
+    faces: list[int] = []  # each mesh's triangles, for the instances' total below
+    for m, mesh in enumerate(meshes):
         primitives = mesh.get("primitives", [])
+        faces.append(0)
         for p, primitive in enumerate(primitives if isinstance(primitives, list) else ()):
+            where = f"meshes[{m}].primitives[{p}]"
             mode = primitive.get("mode", 4) if isinstance(primitive, dict) else 4
             if not (isinstance(mode, int) and not isinstance(mode, bool) and 0 <= mode <= 6):
+                raise InvalidMeshError(source, f"{where}.mode is {repr(mode)[:40]}; glTF's modes are 0 to 6")
+            if mode == 6:
+                # trimesh drops a fan whole, silently: the part vanished from the storey.
                 raise InvalidMeshError(
-                    source, f"meshes[{m}].primitives[{p}].mode is {repr(mode)[:40]}; glTF's modes are 0 to 6"
+                    source, f"{where} is a triangle fan (mode 6), which the reader does not read: export triangles"
                 )
+            if not isinstance(primitive, dict):
+                continue
+            attributes = primitive.get("attributes")
+            if not isinstance(attributes, dict) or "POSITION" not in attributes:
+                raise InvalidMeshError(source, f"{where}.attributes has no POSITION")
+            for role, value in (
+                *attributes.items(),
+                *([("indices", primitive["indices"])] if "indices" in primitive else []),
+            ):
+                if not (isinstance(value, int) and not isinstance(value, bool) and 0 <= value < len(accessors)):
+                    shown = f"{where}.{role}" if role == "indices" else f"{where}.attributes.{role}"
+                    raise InvalidMeshError(
+                        source, f"{shown} is {repr(value)[:40]}, but the file has {len(accessors)} accessor(s)"
+                    )
+            counted = accessors[primitive["indices"] if "indices" in primitive else attributes["POSITION"]]
+            count = counted.get("count", 0) if isinstance(counted, dict) else 0
+            if isinstance(count, int) and mode in (4, 5):  # triangles, or a strip's count - 2
+                faces[m] += count // 3 if mode == 4 else max(count - 2, 0)
+    return sum(faces[node["mesh"]] for node in nodes if "mesh" in node)
 
 
 #: A node's transform: its properties and their number of components (glTF 2.0).

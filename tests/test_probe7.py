@@ -501,3 +501,55 @@ def test_a_truncated_ifc_that_opens_with_a_comment_is_still_found_truncated(tmp_
     path.write_text("/* exported by hand */\n" + text[: len(text) // 2])
     with pytest.raises(IfcError, match=r"truncated, the file does not end with END-ISO-10303-21;"):
         load_scene(str(path), storey=0)
+
+
+# ---------------------------------------------------------------------- probe 9: glTF references, fans, instances
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        # a part vanished without a word (and -1 was the last mesh or accessor)
+        (lambda d: d["nodes"][0].update(mesh=99), r"nodes\[0\]\.mesh is 99, but the file has \d+ mesh"),
+        (lambda d: d["nodes"][0].update(mesh=-1), r"nodes\[0\]\.mesh must be an integer >= 0, got -1"),
+        (
+            lambda d: d["meshes"][0]["primitives"][0]["attributes"].update(POSITION=-1),
+            r"meshes\[0\]\.primitives\[0\]\.attributes\.POSITION is -1, but the file has \d+ accessor",
+        ),
+        (lambda d: d["meshes"][0]["primitives"][0].update(indices=99), r"primitives\[0\]\.indices is 99"),
+        (lambda d: d["meshes"][0]["primitives"][0].update(attributes={}), r"attributes has no POSITION"),
+        # trimesh drops a triangle fan whole
+        (lambda d: d["meshes"][0]["primitives"][0].update(mode=6), r"is a triangle fan \(mode 6\)"),
+    ],
+)
+def test_gltf_references_fans_and_instances_are_checked_before_the_reader(edit, message, tmp_path):
+    from tests.test_scene_probe2 import gltf_doc, room_parts, write_gltf
+
+    doc = gltf_doc(room_parts())
+    assert len(load_scene(str(write_gltf(tmp_path / "ok.gltf", doc))).mesh.faces) > 0
+    edit(doc)
+    with pytest.raises(InvalidMeshError, match=message):
+        load_scene(str(write_gltf(tmp_path / "x.gltf", doc)))
+
+
+def test_the_faces_a_gltf_s_instances_draw_are_counted_before_the_reader_builds_them(tmp_path, monkeypatch):
+    """100,000 nodes of one small mesh (a 7.7 MB file) were built into 31 million faces before the
+    face bound was met, and the memory ran out first. Here the bound is lowered to the room's faces."""
+    import scenes.limits as limits
+    from scenes import StoreySizeError
+    from tests.test_scene_probe2 import gltf_doc, room_parts, write_gltf
+
+    doc = gltf_doc(room_parts())
+    room = len(load_scene(str(write_gltf(tmp_path / "ok.gltf", doc))).mesh.faces)
+    monkeypatch.setattr(limits, "MAX_FACES", room + 10)
+    assert len(load_scene(str(write_gltf(tmp_path / "ok.gltf", doc))).mesh.faces) == room
+    doc["nodes"].extend({"name": f"clutter_{i}", "mesh": 0} for i in range(10))
+    doc["scenes"][0]["nodes"].extend(range(len(doc["nodes"]) - 10, len(doc["nodes"])))
+    import scenes.importers as importers
+
+    def never(*args, **kwargs):
+        raise AssertionError("the reader built the instances")
+
+    monkeypatch.setattr(importers.trimesh, "load", never)
+    with pytest.raises(
+        StoreySizeError, match=rf"the mesh has [\d,]+ faces \(the most nbs-env loads is {room + 10:,}\)"
+    ):
+        load_scene(str(write_gltf(tmp_path / "x.gltf", doc)))
