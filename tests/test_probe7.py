@@ -553,3 +553,13 @@ def test_the_faces_a_gltf_s_instances_draw_are_counted_before_the_reader_builds_
         StoreySizeError, match=rf"the mesh has [\d,]+ faces \(the most nbs-env loads is {room + 10:,}\)"
     ):
         load_scene(str(write_gltf(tmp_path / "x.gltf", doc)))
+
+
+def test_a_training_seed_numpy_cannot_take_is_refused_by_name():
+    """`nbs train --seed 4294967296` ended in a traceback from stable-baselines3's set_random_seed."""
+    from nbs_env.errors import ConfigError
+    from train.ppo import TrainConfig
+
+    assert TrainConfig(seed=2**32 - 1).seed == 2**32 - 1
+    with pytest.raises(ConfigError, match=r"seed must be below 2\*\*32 = 4,294,967,296, got 4,294,967,296"):
+        TrainConfig(seed=2**32)

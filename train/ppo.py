@@ -164,6 +164,8 @@ class TrainConfig(Config):
             _integer(self, name, 1)
         for name in ("seed", "eval_every", "checkpoint_every", "bc_steps"):
             _integer(self, name, 0)
+        # stable-baselines3 seeds numpy's legacy generator, which takes 32 bits (a traceback beyond).
+        _require(self.seed < 2**32, f"seed must be below 2**32 = {2**32:,}, got {self.seed:,}")
         # An episode's steps are its scans at most (evaluation runs with max_scans = this).
         _require(
             self.max_episode_steps <= MAX_SCANS,
