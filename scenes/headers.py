@@ -173,6 +173,11 @@ def check_ply_header(source: str, data: bytes) -> None:
     check_face_count(source, sum(count for name, count, *_ in elements if name == "face"))
 
 
+# The words and numbers of an ASCII PLY body, as C readers (and numpy's, which trimesh uses) read them.
+_PLY_BLANKS = re.compile(r"[ \t]+")
+_ASCII_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?(?:nan|inf|infinity)", re.I)
+
+
 def ascii_ply_row_error(data: bytes) -> str | None:
     """Say which record of an ASCII PLY body does not hold what its element's properties need.
 
@@ -204,8 +209,12 @@ def ascii_ply_row_error(data: bytes) -> str | None:
         for k in range(count):
             if row >= len(rows):
                 return f"element '{name}' declares {count:,} records, the body ends at record {k:,}"
-            words = rows[row].split()
+            words = _PLY_BLANKS.split(rows[row].strip(" \t\r"))
             where = f"element '{name}' record {k:,} (line {header_lines + row + 1:,})"
+            if not all(_ASCII_NUMBER.fullmatch(w) for w in words if w):
+                # numpy's reader stops there, Python's float would read "1_0" and Arabic-Indic digits
+                return f"{where} holds a value that is no ASCII number: {rows[row].strip()[:80]!r}"
+            words = [w for w in words if w]
             need, at = 0, 0
             for listed in is_list:
                 if not listed:
@@ -223,10 +232,6 @@ def ascii_ply_row_error(data: bytes) -> str | None:
                 at += 1 + length
             if len(words) != need:
                 return f"{where} holds {len(words)} values; its header's properties need {need}"
-            try:
-                [float(w) for w in words]
-            except ValueError:
-                return f"{where} holds a value that is not a number: {rows[row].strip()[:80]!r}"
             row += 1
     return None
 
@@ -457,8 +462,12 @@ def _check_sparse(source: str, doc: dict) -> None:
 
 def _glb_chunks(source: str, data: bytes) -> tuple[bytes, int]:
     """The JSON chunk of a GLB and the length of its BIN chunk (0 without one)."""
-    if len(data) < 20 or data[:4] != _GLB_MAGIC:
+    if data[:4] != _GLB_MAGIC:
         raise InvalidMeshError(source, "not a GLB file: it does not start with the 'glTF' magic")
+    if len(data) < 20:
+        raise InvalidMeshError(
+            source, f"the GLB file is {len(data)} bytes: a header with no JSON chunk after it (it is truncated)"
+        )
     (length,) = struct.unpack_from("<I", data, 8)
     if length > len(data):
         raise InvalidMeshError(
@@ -477,7 +486,9 @@ def _glb_chunks(source: str, data: bytes) -> tuple[bytes, int]:
         offset += 8 + chunk_length
     if not chunks or chunks[0][0] != _CHUNK_JSON:
         raise InvalidMeshError(source, "the GLB file's first chunk is not its JSON")
-    return chunks[0][1], sum(len(c) for t, c in chunks[1:2] if t == _CHUNK_BIN)
+    # The specification has readers skip chunks of types they do not know, wherever they stand, and
+    # the reader takes the first BIN chunk after the JSON as buffer 0.
+    return chunks[0][1], next((len(c) for t, c in chunks[1:] if t == _CHUNK_BIN), 0)
 
 
 def _buffer_bytes(source: str, path: Path, buffer: dict, index: int, bin_length: int | None) -> int | None:

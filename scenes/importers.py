@@ -342,34 +342,42 @@ def _read_obj(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
     """Parse OBJ text into vertices (V, 3), faces (F, 3), labels (F,), raw rooms (F,), unlabelled names."""
     if b"\0" in data:
         raise InvalidMeshError(source, "binary data: not an OBJ text file")
-    text = data.decode("utf-8", errors="replace").replace("\\\r\n", " ").replace("\\\n", " ")
+    # The format's grammar, not Python's: lines end at \n, \r\n or \r (not at the other characters
+    # str.splitlines breaks at), words are separated by blanks and tabs (not by a no-break space), and
+    # numbers are ASCII (Python's int and float read "1_0" as 10 and Arabic-Indic digits as digits,
+    # where every other OBJ reader fails or reads another number). A byte-order mark is no part of the
+    # first line: it hid a first "v" line's keyword, and the vertex was dropped.
+    text = data.decode("utf-8-sig", errors="replace").replace("\r\n", "\n").replace("\r", "\n")
+    text = text.replace("\\\n", " ")
     coords: list[str] = []
+    coord_lines: list[int] = []
     tris: list[tuple[int, int, int]] = []
     tri_part: list[int] = []
     parts: dict[tuple[str | None, str | None], int] = {}
     obj: str | None = None
     group: str | None = None
-    for lineno, raw in enumerate(text.splitlines(), start=1):
-        line = raw.strip()
+    for lineno, raw in enumerate(text.split("\n"), start=1):
+        line = raw.strip(_OBJ_BLANKS)
         if not line or line[0] == "#":
             continue
-        key, *tail = line.split(None, 1)  # any whitespace: tabs separate as spaces do
+        key, *tail = _OBJ_SPLIT.split(line, maxsplit=1)
         rest = tail[0] if tail else ""
         if key == "v":
-            xyz = rest.split()
+            xyz = _OBJ_SPLIT.split(rest)
             if len(xyz) < 3:
                 raise InvalidMeshError(source, f"line {lineno}: a vertex needs x y z, got {line!r}")
             coords.append(" ".join(xyz[:3]))
+            coord_lines.append(lineno)
         elif key == "f":
-            refs = rest.split()
+            refs = _OBJ_SPLIT.split(rest)
             if len(refs) < 3:
                 raise InvalidMeshError(source, f"line {lineno}: a face needs 3 or more vertices: {line!r}")
             idx = []
             for ref in refs:
-                try:
-                    i = int(ref.split("/", 1)[0])
-                except ValueError:
-                    raise InvalidMeshError(source, f"line {lineno}: bad vertex reference {ref!r}") from None
+                number = ref.split("/", 1)[0]
+                if not _OBJ_INDEX.fullmatch(number):
+                    raise InvalidMeshError(source, f"line {lineno}: bad vertex reference {ref!r}")
+                i = int(number)
                 if i == 0:
                     raise InvalidMeshError(source, f"line {lineno}: vertex indices start at 1, got 0")
                 # A file of n bytes has fewer than n vertices: a larger index (which may not even fit
@@ -393,11 +401,22 @@ def _read_obj(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
             group = rest.strip() or None
         # Everything else (vt, vn, usemtl, mtllib, s, l, ...) does not matter for labelled geometry.
 
+    joined = "\n".join(coords)
+    odd = _OBJ_NOT_NUMBER.search(joined)
     try:
-        vertices = np.array([c.split() for c in coords], dtype=float).reshape(-1, 3)
+        if odd is not None:
+            raise ValueError(odd.group())
+        vertices = np.array([c.split(" ") for c in coords], dtype=float).reshape(-1, 3)
     except ValueError:
-        bad = next(c for c in coords if not _floats_ok(c))
-        raise InvalidMeshError(source, f"a vertex has a non-numeric coordinate: 'v {bad}'") from None
+        k = (
+            joined.count("\n", 0, odd.start())
+            if odd is not None
+            else next(k for k, c in enumerate(coords) if not _floats_ok(c))
+        )
+        raise InvalidMeshError(
+            source,
+            f"line {coord_lines[k]}: a vertex has a coordinate that is no ASCII number: {('v ' + coords[k])[:80]!r}",
+        ) from None
     faces = np.array(tris, dtype=np.int64).reshape(-1, 3)
     part_of = np.array(tri_part, dtype=np.int64)
 
@@ -417,10 +436,17 @@ def _read_obj(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
 
 def _floats_ok(text: str) -> bool:
     try:
-        [float(t) for t in text.split()]
+        [float(t) for t in text.split(" ")]
     except ValueError:
         return False
     return True
+
+
+# The OBJ grammar's blanks, indices and numbers (ASCII; nan and inf are left to the finite check).
+_OBJ_BLANKS = " \t\v\f"
+_OBJ_SPLIT = re.compile(r"[ \t\v\f]+")
+_OBJ_INDEX = re.compile(r"[+-]?[0-9]+")
+_OBJ_NOT_NUMBER = re.compile(r"[^0-9+\-.eEnaiftyNAIFTY \n]")
 
 
 # ------------------------------------------------------------------------------------- glTF/GLB

@@ -20,7 +20,15 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["MAX_JSON_BYTES", "MAX_JSON_DEPTH", "JSONNestingError", "JSONSizeError", "read_json", "read_json_file"]
+__all__ = [
+    "MAX_JSON_BYTES",
+    "MAX_JSON_DEPTH",
+    "JSONDuplicateKeyError",
+    "JSONNestingError",
+    "JSONSizeError",
+    "read_json",
+    "read_json_file",
+]
 
 #: Deepest nesting of arrays and objects read. A floor plan nests 4 levels (plan, rooms, room, polygon,
 #: point), a glTF header about 5, a checkpoint description 3: 64 leaves room for any honest document and stays
@@ -51,6 +59,28 @@ class JSONSizeError(json.JSONDecodeError):
 
     def __str__(self) -> str:
         return str(self.msg)
+
+
+class JSONDuplicateKeyError(JSONSizeError):
+    """A JSON object that names one key twice. The JSON standard leaves such a document's meaning open
+    and Python keeps the last value, so a plan or a glTF header edited by hand would be read as what
+    its author did not see first; refused instead, naming the key (no line and column: the decoder's
+    hook is not told where it is)."""
+
+
+class _RepeatedKeyError(ValueError):
+    pass
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    document = dict(pairs)
+    if len(document) != len(pairs):
+        seen: set[str] = set()
+        for key, _ in pairs:
+            if key in seen:
+                raise _RepeatedKeyError(key)
+            seen.add(key)
+    return document
 
 
 def read_json_file(path: str | os.PathLike[str], *, max_bytes: int = MAX_JSON_BYTES, **kwargs: Any) -> Any:
@@ -86,10 +116,14 @@ def read_json_file(path: str | os.PathLike[str], *, max_bytes: int = MAX_JSON_BY
 def read_json(text: str, *, max_depth: int = MAX_JSON_DEPTH, **kwargs: Any) -> Any:
     """``json.loads(text, **kwargs)``, refusing documents nested deeper than ``max_depth`` before decoding.
 
+    Unless the caller passes its own ``object_pairs_hook``, an object that names a key twice is refused.
+
     Raises
     ------
     JSONNestingError
         The document is nested deeper than ``max_depth`` (a ``json.JSONDecodeError``).
+    JSONDuplicateKeyError
+        An object names a key twice (a ``json.JSONDecodeError``).
     json.JSONDecodeError
         Invalid JSON, as ``json.loads`` raises it, or an integer too long to convert.
     """
@@ -105,8 +139,11 @@ def read_json(text: str, *, max_depth: int = MAX_JSON_DEPTH, **kwargs: Any) -> A
             at = len(masked[: int(brackets[deeper[0]])].decode("utf-8", errors="surrogatepass"))  # in characters
             raise JSONNestingError(f"nested deeper than {max_depth} levels", text, at)
     del masked, codes, brackets
+    kwargs.setdefault("object_pairs_hook", _unique_keys)
     try:
         return json.loads(text, **kwargs)
+    except _RepeatedKeyError as exc:
+        raise JSONDuplicateKeyError(f"the key {exc.args[0][:80]!r} appears twice in one object") from None
     except ValueError as exc:
         if isinstance(exc, json.JSONDecodeError) or "integer string conversion" not in str(exc):
             raise  # bad JSON, or a caller's own refusal (parse_constant refusing NaN)

@@ -526,7 +526,7 @@ def test_garbage_bytes(tmp_path, ext):
     ("text", "match"),
     [
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\no floor\nf 1 2 9\n", "refer to vertex 9 .*outside 1..3"),
-        ("v 0 0 zero\nf 1 1 1\n", "non-numeric"),
+        ("v 0 0 zero\nf 1 1 1\n", "line 1: a vertex has a coordinate that is no ASCII number"),
         ("v 0 0 0\no floor\nf 1 2\n", "line 3: a face needs 3"),
         ("v 0 0 0\no floor\nf 0 1 1\n", "start at 1"),
         # Beyond an int64 (it was an OverflowError) and before the first vertex: the line is named.

@@ -16,6 +16,7 @@ import argparse
 import contextlib
 import dataclasses
 import json
+import math
 import os
 import re
 import signal
@@ -35,7 +36,7 @@ from nbs_env.config.rooms import MAX_SCANS
 from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES
 from policies.learned import NetworkConfig, build_network, save_checkpoint
-from scenes.jsonio import read_json_file
+from scenes.jsonio import MAX_JSON_BYTES, read_json, read_json_file
 from train.arguments import add_robot_arguments, config_from_arguments, parse_range, scene_option_error
 
 __all__ = ["TrainConfig", "check_memory", "main", "memory_claim", "train"]
@@ -808,6 +809,9 @@ def train(
     # it reproduces, and the room rules the policy then requires (policies.learned.trained_rules).
     recorded = {**config.to_dict(), "config": config.env_config().to_dict()}
     log = out / CURVE
+    # A resumed run's curve is read whole before any step: a damaged one was found by the plot at the
+    # end of the session, after the training it records had been done.
+    earlier = _curve(log) if state is not None else []
     if state is None:
         write_text(log, "")
     greedy = GreedyPolicy()
@@ -815,7 +819,6 @@ def train(
     if config.eval_every:
         # A resumed run's greedy and teacher are the ones its curve already holds: the same storeys,
         # the same robot.
-        earlier = _curve(log)
         baseline = earlier[-1]["greedy"] if earlier and earlier[-1].get("greedy") else None
         taught = earlier[-1].get("teacher") if earlier else None
         if baseline is None:
@@ -950,22 +953,62 @@ def train(
     return final, model
 
 
+#: The figures of each policy in a learning-curve record, as :func:`evaluate` gives them.
+CURVE_FIGURES = ("structure_sensed_pct", "scans", "path_length_m")
+
+
 def _curve(log: Path) -> list[dict]:
-    """The records of ``learning_curve.jsonl`` (none where there is no file)."""
-    if not log.is_file():
+    """The records of ``learning_curve.jsonl`` (none where there is no file), each checked to be one
+    that :func:`plot_learning_curve` and a resumed run can use.
+
+    Raises
+    ------
+    ModelFileError
+        Naming the line that is no JSON object or lacks a figure.
+    """
+    if not log.exists():
         return []
+    try:
+        if not log.is_file():
+            raise ValueError("not a regular file")
+        if log.stat().st_size > MAX_JSON_BYTES:
+            raise ValueError(f"more than the {MAX_JSON_BYTES:,} bytes a curve of nbs-env may hold")
+        text = log.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise ModelFileError(f"{log}: cannot be read as a learning curve ({exc})") from None
     records = []
-    for k, line in enumerate(log.read_text().splitlines(), start=1):
+    for k, line in enumerate(text.splitlines(), start=1):
         if not line.strip():
             continue
         try:
-            record = json.loads(line)
+            record = read_json(line)
         except json.JSONDecodeError as exc:
             raise ModelFileError(f"{log}: line {k} is not JSON ({exc}); remove it to continue") from None
-        if not isinstance(record, dict):
-            raise ModelFileError(f"{log}: line {k} is not a record (a JSON object); remove it to continue")
+        problem = _curve_record_problem(record)
+        if problem:
+            raise ModelFileError(f"{log}: line {k} {problem}; remove it to continue")
         records.append(record)
     return records
+
+
+def _curve_record_problem(record: Any) -> str | None:
+    """What makes one learning-curve record unusable, or None."""
+    if not isinstance(record, dict):
+        return "is not a record (a JSON object)"
+    steps = record.get("timesteps")
+    if type(steps) is not int or not 0 <= steps <= MAX_STATE_TIMESTEPS:
+        return f"has timesteps {str(steps)[:40]}, not a count of steps (0..{MAX_STATE_TIMESTEPS:,})"
+    for policy in ("learned", "greedy", "teacher"):
+        figures = record.get(policy)
+        if figures is None and policy != "learned":
+            continue
+        if not isinstance(figures, dict):
+            return f"has no {policy} figures (a JSON object of {', '.join(CURVE_FIGURES)})"
+        for key in CURVE_FIGURES:
+            value = figures.get(key)
+            if type(value) not in (int, float) or not math.isfinite(value):
+                return f"has {policy}.{key} {str(value)[:40]}, not a finite number"
+    return None
 
 
 def _previous_seconds(out: Path) -> float:
@@ -1100,7 +1143,7 @@ def plot_learning_curve(log: str | Path, out: str | Path) -> Path | None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    records = [json.loads(line) for line in Path(log).read_text().splitlines() if line.strip()]
+    records = _curve(Path(log))
     if not records:
         return None
     steps = [r["timesteps"] for r in records]
