@@ -17,6 +17,7 @@ import json
 import math
 import re
 import struct
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 from urllib.parse import unquote
@@ -25,7 +26,7 @@ from scenes.errors import InvalidMeshError
 from scenes.jsonio import read_json
 from scenes.limits import MAX_FACES, check_face_count
 
-__all__ = ["ascii_ply_row_error", "check_gltf_layout", "check_ply_header"]
+__all__ = ["PlyElement", "PlyHeader", "PlyProperty", "ascii_ply_row_error", "check_gltf_layout", "check_ply_header"]
 
 # ------------------------------------------------------------------------------------------ PLY
 #: Bytes of a binary PLY scalar, by every type name the format allows.
@@ -43,12 +44,55 @@ _PLY_KEYWORDS = ("format", "comment", "obj_info", "element", "property")
 _PLY_HEADER_MAX = 1 << 20
 
 
-def check_ply_header(source: str, data: bytes) -> None:
-    """Refuse a PLY file whose header declares more records than the bytes after it can hold.
+@dataclass(frozen=True)
+class PlyProperty:
+    """One property of a PLY element: ``type`` is its values' PLY type name, ``count_type`` a list's
+    count type (None for a scalar)."""
+
+    name: str
+    type: str
+    count_type: str | None = None
+
+
+@dataclass(frozen=True)
+class PlyElement:
+    """One element of a PLY header: its name, its record count and its properties in order."""
+
+    name: str
+    count: int
+    properties: tuple[PlyProperty, ...]
+
+    @property
+    def least_binary_bytes(self) -> int:
+        """The fewest bytes a binary record takes: its scalars', and each list's count (it may be empty)."""
+        return sum(_PLY_TYPES[p.count_type or p.type] for p in self.properties)
+
+
+@dataclass(frozen=True)
+class PlyHeader:
+    """A PLY header as :func:`check_ply_header` read and checked it; ``body`` is the offset of the
+    first byte after ``end_header``'s line."""
+
+    encoding: str
+    elements: tuple[PlyElement, ...]
+    body: int
+
+    def element(self, name: str) -> PlyElement:
+        return next(e for e in self.elements if e.name == name)
+
+
+def check_ply_header(source: str, data: bytes) -> PlyHeader:
+    """Read a PLY header, refusing one a reader would misread or that declares more records than the
+    bytes after it can hold.
 
     Each record of an element takes at least: in a binary file, the bytes of its scalar properties
     and of each list's count (a list may be empty); in an ASCII file, two characters per property (a
     digit and a separator). The face count is checked against :data:`~scenes.limits.MAX_FACES` too.
+
+    Returns
+    -------
+    PlyHeader
+        The header, for the readers of the body.
 
     Raises
     ------
@@ -77,8 +121,7 @@ def check_ply_header(source: str, data: bytes) -> None:
     # Lines end at \n (a lone \r ends none, as in PLY readers); the last piece is what precedes end_header.
     lines = data[:end].decode("ascii", errors="replace").split("\n")[:-1]
     encoding = None
-    # [name, declared count, least bytes of a binary record, properties, their names]
-    elements: list[list] = []
+    elements: list[tuple[str, int, list[PlyProperty]]] = []
     for lineno, line in enumerate(lines, start=1):
         words = line.split()
         if lineno == 1:
@@ -104,7 +147,7 @@ def check_ply_header(source: str, data: bytes) -> None:
                 raise InvalidMeshError(source, f"PLY header line {lineno}: expected 'element NAME COUNT', got {line!r}")
             if any(e[0] == words[1] for e in elements):
                 raise InvalidMeshError(source, f"PLY header line {lineno}: a second element {words[1]!r}")
-            elements.append([words[1], int(words[2]), 0, 0, []])
+            elements.append((words[1], int(words[2]), []))
         elif not words:  # a reader splits each line into words: trimesh's ended in an IndexError
             raise InvalidMeshError(source, f"PLY header line {lineno} is blank")
         elif words[:1] == ["property"] and not elements:
@@ -118,18 +161,22 @@ def check_ply_header(source: str, data: bytes) -> None:
                 raise InvalidMeshError(
                     source, f"PLY header line {lineno}: a list's count is an integer type, got {words[2]!r}"
                 )
-            if any(name == words[-1] for name, _ in elements[-1][4]):
+            if any(p.name == words[-1] for p in elements[-1][2]):
                 # Readers keep one of the two columns (which, they differ) or fail inside.
                 raise InvalidMeshError(
                     source, f"PLY header line {lineno}: the {elements[-1][0]} element's property {words[-1]!r} again"
                 )
-            elements[-1][2] += _PLY_TYPES[kind]
-            elements[-1][3] += 1
-            elements[-1][4].append((words[-1], words[1] == "list"))
+            listed = words[1] == "list"
+            elements[-1][2].append(PlyProperty(words[-1], words[3] if listed else kind, kind if listed else None))
     if encoding is None:
         raise InvalidMeshError(source, "the PLY header has no 'format' line")
+    header = PlyHeader(
+        encoding,
+        tuple(PlyElement(name, count, tuple(props)) for name, count, props in elements),
+        newline + 1 if newline >= 0 else len(data),
+    )
     # trimesh reads what it finds: without these it returned no faces or failed inside.
-    names = {e[0]: dict(e[4]) for e in elements}  # element: {property: is a list}
+    names = {e.name: {p.name: p.count_type is not None for p in e.properties} for e in header.elements}
     for element in ("vertex", "face"):
         if element not in names:
             raise InvalidMeshError(source, f"the PLY header declares no {element} element: no mesh")
@@ -139,11 +186,11 @@ def check_ply_header(source: str, data: bytes) -> None:
     if not any(names["face"].get(p) for p in ("vertex_indices", "vertex_index")):
         raise InvalidMeshError(source, "the PLY face element has no vertex_indices list")
     need = 0
-    for k, (_, count, binary_bytes, properties, _) in enumerate(elements):
-        least = 2 * properties if encoding == "ascii" else binary_bytes
-        need += count * max(least, 1)  # a record takes a byte at least (an ASCII newline)
+    for k, element in enumerate(header.elements):
+        least = 2 * len(element.properties) if encoding == "ascii" else element.least_binary_bytes
+        need += element.count * max(least, 1)  # a record takes a byte at least (an ASCII newline)
         if need > body:
-            declared = " and ".join(f"{c:,} {n}" for n, c, *_ in elements[: k + 1])
+            declared = " and ".join(f"{e.count:,} {e.name}" for e in header.elements[: k + 1])
             raise InvalidMeshError(
                 source,
                 f"the PLY header declares {declared} records, at least {need:,} bytes, but {body:,} bytes "
@@ -155,7 +202,7 @@ def check_ply_header(source: str, data: bytes) -> None:
         while last > newline + 1 and data[last - 1 : last].isspace():
             last -= 1
         rows = data.count(b"\n", newline + 1, last) + 1 if last > newline + 1 else 0
-        records = sum(count for _, count, *_ in elements)
+        records = sum(e.count for e in header.elements)
         blank = re.compile(rb"\n[ \t\r]*\n").search(data, newline, last)
         if blank is not None:
             lineno = data.count(b"\n", 0, blank.start()) + 2
@@ -163,14 +210,15 @@ def check_ply_header(source: str, data: bytes) -> None:
                 source, f"line {lineno:,} of the PLY body is blank: readers take each line for a record"
             )
         if rows > records:
-            declared = " and ".join(f"{c:,} {n}" for n, c, *_ in elements)
+            declared = " and ".join(f"{e.count:,} {e.name}" for e in header.elements)
             raise InvalidMeshError(
                 source,
                 f"the PLY header declares {declared} records, {records:,} lines, but the body holds {rows:,} lines: "
                 "its counts are wrong",
             )
     # The bytes are there: a storey too large to load, told before trimesh reads it.
-    check_face_count(source, sum(count for name, count, *_ in elements if name == "face"))
+    check_face_count(source, header.element("face").count)
+    return header
 
 
 # The words and numbers of an ASCII PLY body, as C readers (and numpy's, which trimesh uses) read them.
@@ -178,34 +226,32 @@ _PLY_BLANKS = re.compile(r"[ \t]+")
 _ASCII_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?(?:nan|inf|infinity)", re.I)
 
 
-def ascii_ply_row_error(data: bytes) -> str | None:
+def ascii_ply_row_error(data: bytes, header: PlyHeader) -> str | None:
     """Say which record of an ASCII PLY body does not hold what its element's properties need.
 
     Called after a parse failed, to replace numpy's "setting an array element with a sequence" by
     the element, the record and its line. Rows are read as trimesh reads them: one record per line,
-    ``str.splitlines``, numbers separated by blanks.
+    ``str.splitlines``, ASCII numbers separated by blanks and tabs.
+
+    Parameters
+    ----------
+    data : bytes
+        The whole file.
+    header : PlyHeader
+        :func:`check_ply_header`'s reading of it.
 
     Returns
     -------
     str or None
-        The first mismatch, or ``None`` if every record of a header-checked file holds its
-        properties (the failure lay elsewhere).
+        The first mismatch, or ``None`` if every record holds its properties (the failure lay
+        elsewhere).
     """
-    end = data.find(b"end_header", 0, _PLY_HEADER_MAX)
-    newline = data.find(b"\n", end)
-    if end < 0 or newline < 0:
-        return None
-    elements: list[tuple[str, int, list[bool]]] = []  # name, count, per property: is a list
-    for line in data[:end].decode("ascii", errors="replace").split("\n"):
-        words = line.split()
-        if words[:1] == ["element"] and len(words) == 3 and words[2].isdigit():
-            elements.append((words[1], int(words[2]), []))
-        elif words[:1] == ["property"] and elements:
-            elements[-1][2].append(words[1:2] == ["list"])
-    header_lines = data[: newline + 1].count(b"\n")
-    rows = data[newline + 1 :].decode("utf-8", errors="replace").splitlines()
+    header_lines = data[: header.body].count(b"\n")
+    rows = data[header.body :].decode("utf-8", errors="replace").splitlines()
     row = 0
-    for name, count, is_list in elements:
+    for element in header.elements:
+        name, count = element.name, element.count
+        is_list = [p.count_type is not None for p in element.properties]
         for k in range(count):
             if row >= len(rows):
                 return f"element '{name}' declares {count:,} records, the body ends at record {k:,}"

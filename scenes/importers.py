@@ -76,7 +76,7 @@ import shapely
 import trimesh
 
 from scenes.errors import InvalidMeshError, MissingStructureError, SceneFileError, UnsupportedFormatError
-from scenes.headers import ascii_ply_row_error, check_gltf_layout, check_ply_header
+from scenes.headers import PlyElement, PlyHeader, ascii_ply_row_error, check_gltf_layout, check_ply_header
 from scenes.interior import with_derived_rooms
 from scenes.limits import MAX_FACES, check_face_count, check_file_size, check_storey_size, unit_scale
 from scenes.model import Room, Scene, SurfaceClass
@@ -267,8 +267,7 @@ def load_mesh_scene(path: str | Path, *, y_up: bool = False, units: str = "m", n
     if ext == ".obj":
         vertices, faces, labels, rooms, unlabelled = _read_obj(source, data)
     elif ext == ".ply":
-        check_ply_header(source, data)
-        vertices, faces, labels, rooms, unlabelled = _read_ply(source, data)
+        vertices, faces, labels, rooms, unlabelled = _read_ply(source, data, check_ply_header(source, data))
     else:
         check_gltf_layout(source, path, data)
         vertices, faces, labels, rooms, unlabelled = _read_gltf(source, path, ext)
@@ -499,8 +498,10 @@ def _read_gltf(source: str, path: Path, ext: str) -> tuple[np.ndarray, np.ndarra
 
 
 # ------------------------------------------------------------------------------------------ PLY
-def _read_ply(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]:
-    """Read a PLY mesh with per-face ``label`` (and optional ``room``) properties."""
+def _read_ply(
+    source: str, data: bytes, header: PlyHeader
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """Read a PLY mesh with per-face ``label`` (and optional ``room``) properties, its header read."""
     try:
         # From the bytes already read and checked, with no resolver and no materials: a header's
         # "comment TextureFile NAME" made trimesh open NAME, and a fifo there hung the load.
@@ -508,13 +509,13 @@ def _read_ply(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
             trimesh.util.wrap_as_stream(data), file_type="ply", force="mesh", process=False, skip_materials=True
         )
     except Exception as exc:
-        if b"format binary_" in data[: data.find(b"end_header")]:
+        if header.encoding != "ascii":
             # trimesh reads binary lists of one length only: a file mixing triangles and quads, as
             # most exporters write, is read record by record here (and its damage named).
-            vertices, columns, props, n_raw = _read_binary_ply(source, data)
+            vertices, columns, props, n_raw = _read_binary_ply(source, data, header)
         else:
             # numpy's reason ("setting an array element with a sequence") names no record: find it.
-            row = _ascii_row_error(data)
+            row = ascii_ply_row_error(data, header)
             raise InvalidMeshError(source, row or f"cannot parse as ply: {type(exc).__name__}: {exc}") from exc
     else:
         if not isinstance(mesh, trimesh.Trimesh):
@@ -545,7 +546,7 @@ def _read_ply(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
     except (KeyError, IndexError, ValueError, TypeError) as exc:
         # The header declares the property, the body does not hold it where it should (an ASCII face
         # line with fewer or more values than the header lists): name the record where one is to blame.
-        row = _ascii_row_error(data)
+        row = ascii_ply_row_error(data, header) if header.encoding == "ascii" else None
         if row is None and isinstance(exc, _PlyValueError):
             row = str(exc)
         raise InvalidMeshError(
@@ -594,9 +595,9 @@ _PLY_NUMPY = {
 _STRUCT = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I", "f4": "f", "f8": "d"}
 
 
-def _read_binary_ply(source: str, data: bytes) -> tuple[np.ndarray, dict[str, Any], list[str], int]:
+def _read_binary_ply(source: str, data: bytes, header: PlyHeader) -> tuple[np.ndarray, dict[str, Any], list[str], int]:
     """A binary PLY read record by record (lists of any length), from a header
-    :func:`~scenes.headers.check_ply_header` has checked.
+    :func:`~scenes.headers.check_ply_header` has read and checked.
 
     Returns
     -------
@@ -616,20 +617,13 @@ def _read_binary_ply(source: str, data: bytes) -> tuple[np.ndarray, dict[str, An
     """
     import struct
 
-    end = data.find(b"end_header")
-    offset = data.find(b"\n", end) + 1
-    endian = "<"
-    elements: list[tuple[str, int, list[tuple[str, str, str | None]]]] = []
-    for line in data[:end].decode("ascii", errors="replace").split("\n"):
-        words = line.split()
-        if words[:1] == ["format"]:
-            endian = "<" if words[1] == "binary_little_endian" else ">"
-        elif words[:1] == ["element"]:
-            elements.append((words[1], int(words[2]), []))
-        elif words[:1] == ["property"] and words[1] == "list":
-            elements[-1][2].append((words[4], _PLY_NUMPY[words[3]], _PLY_NUMPY[words[2]]))
-        elif words[:1] == ["property"]:
-            elements[-1][2].append((words[2], _PLY_NUMPY[words[1]], None))
+    offset = header.body
+    endian = "<" if header.encoding == "binary_little_endian" else ">"
+
+    def numpy_codes(element: PlyElement) -> list[tuple[str, str, str | None]]:
+        return [(p.name, _PLY_NUMPY[p.type], p.count_type and _PLY_NUMPY[p.count_type]) for p in element.properties]
+
+    elements = [(e.name, e.count, numpy_codes(e)) for e in header.elements]
     read: dict[str, dict[str, Any]] = {}
     for name, count, props in elements:
         if all(counter is None for _, _, counter in props):  # fixed-size records: one read
@@ -677,12 +671,6 @@ def _read_binary_ply(source: str, data: bytes) -> tuple[np.ndarray, dict[str, An
         else:
             out[prop] = np.asarray(values)
     return vertices, out, list(face), faces
-
-
-def _ascii_row_error(data: bytes) -> str | None:
-    """The first ASCII record that does not fit its header, or ``None`` (or a binary file)."""
-    head = data[: data.find(b"end_header")]
-    return ascii_ply_row_error(data) if b"format ascii" in head else None
 
 
 class _PlyValueError(ValueError):
