@@ -22,6 +22,7 @@ No gymnasium import: :class:`~nbs_env.env.NBSEnv` puts spaces, reward and observ
 from __future__ import annotations
 
 import copy
+import numbers
 import os
 import time
 from dataclasses import dataclass, field
@@ -56,6 +57,9 @@ STAGES = ("scan", "registration", "roi", "classification", "voxels", "planning")
 #: A room with no NVP ended as an ``"earlier room"`` when at least this share of its RoI lies in the
 #: rooms scanned before: the space beyond its door was scanned as part of one of them.
 EARLIER_ROOM_SHARE = 0.5
+#: Metres a start's given z may lie from the floor under it (the robot stands on the floor; a floor
+#: drawn a little off level, or a height read off another model of the building, is still that floor).
+START_HEIGHT_TOLERANCE = 0.5
 
 
 @dataclass(frozen=True)
@@ -228,6 +232,11 @@ def resolve_scene(
     if start is not None:
         given = start
         try:
+            # Numbers, not what numpy turns into them: "1.5" and True were taken as 1.5 and 1.0.
+            if isinstance(start, (str, bytes)) or not all(
+                isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_)) for v in start
+            ):
+                raise TypeError
             start = np.asarray(start, dtype=float)
         except (TypeError, ValueError):
             start = np.full(1, np.nan)
@@ -261,6 +270,15 @@ def resolve_scene(
         scene = copy.copy(scene)  # the cached scene keeps its own start
         scene.start = start
     xy = scene.start[:2]
+    if start is not None and len(start) == 3:
+        floor = scene.floor_height_at(xy)
+        if abs(float(start[2]) - floor) > START_HEIGHT_TOLERANCE:
+            # The robot stands on the floor: a start above it put the scanner above the ceiling,
+            # and the error came from the region of interest, naming no start.
+            raise InvalidPoseError(
+                f"{scene.name}: start {np.round(start, 3).tolist()} is {float(start[2]) - floor:+.2f} m from the "
+                f"floor under it (at z = {floor:.3f} m); give (x, y) and the floor's height is taken"
+            )
     inside = not scene.rooms or any(shapely.contains_xy(Polygon(r.polygon), *xy) for r in scene.rooms)
     if not inside or not point_is_free(scene, xy, float(scene.start[2]), config.robot.navigation.robot_radius):
         raise InvalidPoseError(

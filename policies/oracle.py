@@ -77,6 +77,39 @@ class OraclePlan:
         hit = np.flatnonzero(self.coverage_pct >= pct - 1e-9)
         return int(hit[0]) + 1 if len(hit) else None
 
+    @classmethod
+    def from_dict(cls, record: dict) -> OraclePlan:
+        """The plan :meth:`to_dict` wrote, each field checked against the others.
+
+        Raises
+        ------
+        ValueError
+            Naming the field that is missing, of the wrong kind or out of range: positions not
+            (m, 3) finite metres, a coverage curve of another length than the positions, falling,
+            outside 0..100 or above the best coverage, more scans than candidates.
+        """
+        try:
+            positions = np.asarray(record["positions"], dtype=float).reshape(-1, 3)
+            coverage = np.asarray(record["coverage_pct"], dtype=float)
+            best = float(record["max_coverage_pct"])
+            candidates, samples = record["candidates"], record["samples"]
+            rooms = {int(k): float(v) for k, v in record.get("room_max_pct", {}).items()}
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise ValueError(f"not an oracle plan ({type(exc).__name__}: {exc})") from None
+        if type(candidates) is not int or type(samples) is not int or candidates < 0 or samples < 0:
+            raise ValueError("candidates and samples are not counts")
+        if not np.isfinite(positions).all():
+            raise ValueError("a position is not finite")
+        if coverage.ndim != 1 or len(coverage) != len(positions) or len(positions) > max(candidates, 1):
+            raise ValueError(
+                f"{len(coverage)} coverage values for {len(positions)} positions of {candidates} candidates"
+            )
+        if not (0 <= best <= 100) or not all(0 <= v <= 100 for v in rooms.values()):  # NaN fails too
+            raise ValueError("a best coverage outside 0..100 %")
+        if not (((coverage >= 0) & (coverage <= best + 1e-6)).all() and (np.diff(coverage) >= -1e-9).all()):
+            raise ValueError("the coverage curve falls, or leaves 0..max_coverage_pct")
+        return cls(positions, coverage, best, candidates, samples, rooms)
+
     def to_dict(self) -> dict:
         return {
             "positions": self.positions.round(3).tolist(),

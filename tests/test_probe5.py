@@ -341,7 +341,14 @@ def test_a_record_of_another_schema_or_an_oracle_with_nan_is_not_reused():
 
     record = {"spec": {"scene": "l_room", "policy": "random", "seed": 0}, "metrics": {"schema": 99}}
     assert record_problem(record) == "its schema is 99, not 'nbs-metrics/1'"
-    plan = {"max_coverage_pct": 90.0, "coverage_pct": [50.0, 90.0], "room_max_pct": {"0": 90.0}}
+    plan = {
+        "positions": [[1.0, 1.0, 0.0], [2.0, 1.0, 0.0]],
+        "coverage_pct": [50.0, 90.0],
+        "max_coverage_pct": 90.0,
+        "candidates": 10,
+        "samples": 100,
+        "room_max_pct": {"0": 90.0},
+    }
     assert _oracle_usable(plan)
     assert not _oracle_usable({**plan, "positions": [[float("nan"), 0.0, 0.0]]})
     assert not _oracle_usable({**plan, "coverage_pct": [50.0, 190.0]})

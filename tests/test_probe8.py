@@ -10,7 +10,7 @@ import struct
 import pytest
 
 from scenes import InvalidMeshError, load_scene
-from tests.test_train_probe3 import _files, _train, run, tiny_run  # noqa: F401  (fixtures)
+from tests.test_train_probe3 import _files, _train
 from train.cli import EXIT_USAGE
 
 
@@ -95,6 +95,20 @@ def test_a_json_object_naming_a_key_twice_is_refused_wherever_json_is_read(glb_p
 
 
 # ---------------------------------------------------------------------- a damaged learning curve
+@pytest.fixture(scope="module")
+def finished_run(tmp_path_factory):
+    """A finished run of 16 steps with a checkpoint at 8 (as test_train_probe3's)."""
+    pytest.importorskip("sb3_contrib")
+    from train.ppo import TrainConfig, train
+
+    out = tmp_path_factory.mktemp("curve") / "run"
+    config = TrainConfig(
+        timesteps=16, envs=1, seed=0, rooms=(1, 1), n_steps=8, batch_size=8, completion="policy", checkpoint_every=8
+    )
+    train(config, out, progress=False)
+    return out
+
+
 @pytest.mark.parametrize(
     "line, message",
     [
@@ -108,8 +122,12 @@ def test_a_json_object_naming_a_key_twice_is_refused_wherever_json_is_read(glb_p
         ('{"timesteps": 8, "timesteps": 9}', r"line 2 is not JSON \(the key 'timesteps' appears twice"),
     ],
 )
-def test_a_damaged_learning_curve_is_refused_before_a_resumed_run_trains(line, message, run, capsys):
+def test_a_damaged_learning_curve_is_refused_before_a_resumed_run_trains(line, message, finished_run, tmp_path, capsys):
     """The curve was read whole only by the plot at the end: the run trained, then ended in a traceback."""
+    import shutil
+
+    run = tmp_path / "run"
+    shutil.copytree(finished_run, run)
     curve = run / "learning_curve.jsonl"
     good = {"timesteps": 0, "learned": {"structure_sensed_pct": 50.0, "scans": 3, "path_length_m": 4.5}}
     curve.write_text(json.dumps(good) + "\n" + line + "\n")
@@ -168,3 +186,107 @@ def test_an_ascii_ply_value_in_another_grammar_is_named_with_its_record(old, new
     path.write_text(_ply_text(GOOD_FACES).replace(old, new, 1), encoding="utf-8")
     with pytest.raises(InvalidMeshError, match=r"element 'vertex' record 1 \(line 13\) holds a value that is no ASCII"):
         load_scene(str(path))
+
+
+# ---------------------------------------------------------------------- records of earlier runs
+@pytest.fixture(scope="module")
+def compared(tmp_path_factory):
+    from tests.test_compare_resume_records import nbs
+
+    out = tmp_path_factory.mktemp("compare") / "out"
+    args = ["compare", "--scenes", "l_room", "--policies", "random", "--seeds", "0", "--preset", "fast"]
+    done = nbs(*args, "--max-scans", "1", "--quiet", "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    return out
+
+
+def _grid():
+    from train.compare import grid
+
+    return grid("l_room", "random", "0", "fast", {"max_scans": 1})
+
+
+@pytest.mark.parametrize(
+    "edit",
+    [
+        lambda p: p["coverage_pct"].append(100.0),  # a curve longer than the positions
+        lambda p: p.update(positions=p["positions"][:-1]),
+        lambda p: p["coverage_pct"].reverse(),  # coverage that falls
+        lambda p: p.update(max_coverage_pct=p["coverage_pct"][-1] / 2),  # the curve above the best
+        lambda p: p.update(candidates=0),
+        lambda p: p.update(samples=-1),
+    ],
+)
+def test_resume_runs_the_oracle_again_when_its_record_is_none_it_could_have_written(edit, compared, tmp_path):
+    """An oracle.json whose coverage curve had more values than positions was reused: the table's
+    "scans the oracle needs" read from a curve no plan had."""
+    import shutil
+
+    from policies.oracle import OraclePlan
+    from train.compare import load_finished
+
+    out = tmp_path / "out"
+    shutil.copytree(compared, out)
+    assert "l_room" in load_finished(out, _grid())["oracles"]
+    stored = json.loads((out / "oracle.json").read_text())
+    OraclePlan.from_dict(stored["l_room"])  # the record as written is one
+    edit(stored["l_room"])
+    with pytest.raises(ValueError):
+        OraclePlan.from_dict(stored["l_room"])
+    (out / "oracle.json").write_text(json.dumps(stored))
+    assert "l_room" not in load_finished(out, _grid())["oracles"]
+
+
+@pytest.mark.parametrize("in_the_way", ["runs/l_room", "runs/l_room/random", "runs/l_room/random/seed1"])
+def test_a_file_where_a_run_s_folder_goes_is_refused_before_any_run(in_the_way, tmp_path, capsys, monkeypatch):
+    """Found when the run was written: the run (and with a file high up, every run) was lost."""
+    import train.compare as compare
+    from train.cli import main as nbs
+
+    def never(*args, **kwargs):
+        raise AssertionError("a run started")
+
+    monkeypatch.setattr(compare, "run_grid", never)
+    out = tmp_path / "out"
+    (out / in_the_way).parent.mkdir(parents=True)
+    (out / in_the_way).write_text("mine")
+    argv = ["compare", "--scenes", "l_room", "--policies", "random", "--seeds", "0,1", "--preset", "fast"]
+    code = nbs([*argv, "--max-scans", "1", "--quiet", "--out", str(out), "--resume"])
+    err = capsys.readouterr().err
+    assert code == EXIT_USAGE and err.count("\n") == 1, err
+    assert f"{out / in_the_way} is a file where the folder of the run of scene 'l_room', policy 'random'" in err
+    assert (out / in_the_way).read_text() == "mine"
+
+
+# ---------------------------------------------------------------------- reset options
+@pytest.fixture(scope="module")
+def l_room_env():
+    from nbs_env import NBSEnv
+
+    env = NBSEnv("fast", scene="l_room")
+    env.reset(seed=0)
+    return env
+
+
+@pytest.mark.parametrize("start", [["3", "4.5"], [True, 4.5], "34", [[3, 4.5]], [3, None]])
+def test_a_start_of_anything_but_numbers_is_refused_by_name(start, l_room_env):
+    """numpy turned "3" into 3.0 and True into 1.0: a start read from a text file kept its strings."""
+    from nbs_env.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"options\['start'\] must be 2 or 3 finite numbers"):
+        l_room_env.reset(seed=0, options={"start": start})
+
+
+def test_a_start_off_the_floor_is_refused_naming_the_start(l_room_env):
+    """A start 100 m up put the scanner above the ceiling: the error came from the region of
+    interest and named no start."""
+    import numpy as np
+
+    from nbs_env.errors import InvalidPoseError
+
+    x, y, z = l_room_env.storey.scene.start
+    for given, height in (([x, y], z), ((x, y, z + 0.2), z + 0.2), (np.array([x, y, z]), z)):  # on the floor or near
+        l_room_env.reset(seed=0, options={"start": given})
+        assert l_room_env.storey.scene.start[2] == pytest.approx(height)
+    with pytest.raises(InvalidPoseError, match=r"start \[3\.0, 4\.5, 100\.0\] is \+100\.00 m from the floor under it"):
+        l_room_env.reset(seed=0, options={"start": [x, y, 100]})

@@ -285,7 +285,7 @@ def run_compare(args: argparse.Namespace) -> int:
             from train.ray_connect import resolve_address
 
             resolve_address(args.address)
-        out = check_out_dir(args.out, keep=args.resume or args.force)  # before anything runs
+        out = check_out_dir(args.out, keep=args.resume or args.force, specs=specs)  # before anything runs
         finished = load_finished(out, specs) if args.resume else None
     except (CompareError, ConfigError) as exc:
         return error(exc, EXIT_USAGE)

@@ -955,7 +955,7 @@ def write_outputs(
 _RUN_FILES = ("run.json", "metrics.json", "error.txt")
 
 
-def check_out_dir(out: str | Path, *, keep: bool = False) -> Path:
+def check_out_dir(out: str | Path, *, keep: bool = False, specs: Sequence[RunSpec] = ()) -> Path:
     """``out`` as a folder this process can write into (created if missing), before any run starts.
 
     Parameters
@@ -964,6 +964,9 @@ def check_out_dir(out: str | Path, *, keep: bool = False) -> Path:
     keep : bool
         What an earlier grid left there may stay (``--resume`` reuses it, ``--force`` writes over
         it); else a folder that is not empty is refused.
+    specs : sequence of RunSpec, optional
+        The runs the grid will record: where one's folder, or a folder above it, is a file, the grid
+        is refused before it runs (found when the run was written, it cost the run).
 
     Raises
     ------
@@ -1000,6 +1003,14 @@ def check_out_dir(out: str | Path, *, keep: bool = False) -> Path:
             if runs.is_dir()
             else None
         )
+    if odd is None:
+        in_the_way = _file_in_the_way(out, specs)
+        if in_the_way is not None:
+            path, spec = in_the_way
+            raise CompareError(
+                f"--out {out}: {path} is a file where the folder of the run of scene {spec.scene!r}, policy "
+                f"{spec.policy!r}, seed {spec.seed} goes; move it away or choose another --out"
+            )
     if odd is not None:
         path, what = odd
         raise CompareError(
@@ -1007,6 +1018,20 @@ def check_out_dir(out: str | Path, *, keep: bool = False) -> Path:
             "replace it by the file or remove it, or choose another --out"
         )
     return out
+
+
+def _file_in_the_way(out: Path, specs: Sequence[RunSpec]) -> tuple[Path, RunSpec] | None:
+    """The first file (not a folder) found where a run's folder, or a folder above it, goes."""
+    checked: set[Path] = set()
+    for spec in specs:
+        folder = _run_folder(out, asdict(spec))
+        for path in reversed([folder, *folder.parents[: len(folder.relative_to(out).parts) - 1]]):
+            if path in checked:
+                continue
+            checked.add(path)
+            if path.exists() and not path.is_dir():
+                return path, spec
+    return None
 
 
 def write_record(out: str | Path, kind: str, record: dict[str, Any]) -> None:
@@ -1334,15 +1359,15 @@ def _check_scene(scene: str) -> None:
 
 
 def _oracle_usable(plan: dict[str, Any]) -> bool:
-    """An oracle record holds what the table reads of it: its best coverage, its curve, its rooms'."""
+    """An oracle record is one the oracle could have written (:meth:`OraclePlan.from_dict`): the
+    table reads its best coverage, its curve against the scans, its rooms'."""
+    from policies.oracle import OraclePlan
+
     try:
-        best = float(plan["max_coverage_pct"])
-        curve = np.asarray(plan["coverage_pct"], dtype=float)
-        rooms = {str(k): float(v) for k, v in plan.get("room_max_pct", {}).items()}
-    except (KeyError, TypeError, ValueError, AttributeError):
+        OraclePlan.from_dict(plan)
+    except ValueError:
         return False
-    in_range = bool(0 <= best <= 100) and all(0 <= v <= 100 for v in rooms.values())  # NaN fails too
-    return curve.ndim == 1 and bool(((curve >= 0) & (curve <= 100)).all()) and in_range and _finite_leaves(plan)
+    return _finite_leaves(plan)
 
 
 def _finite_leaves(node: Any) -> bool:
