@@ -355,28 +355,35 @@ def _read_obj(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
     parts: dict[tuple[str | None, str | None], int] = {}
     obj: str | None = None
     group: str | None = None
+    # str.split is the format's split on ASCII text without the separators only Python counts as
+    # blanks (\x1c-\x1f), and three times as fast as the expression's.
+    split = str.split if text.isascii() and not _PYTHON_ONLY_BLANKS.search(text) else _obj_split
     for lineno, raw in enumerate(text.split("\n"), start=1):
         line = raw.strip(_OBJ_BLANKS)
         if not line or line[0] == "#":
             continue
-        key, *tail = _OBJ_SPLIT.split(line, maxsplit=1)
+        key, *tail = split(line, None, 1)
         rest = tail[0] if tail else ""
         if key == "v":
-            xyz = _OBJ_SPLIT.split(rest)
+            xyz = split(rest)
             if len(xyz) < 3:
                 raise InvalidMeshError(source, f"line {lineno}: a vertex needs x y z, got {line!r}")
             coords.append(" ".join(xyz[:3]))
             coord_lines.append(lineno)
         elif key == "f":
-            refs = _OBJ_SPLIT.split(rest)
+            refs = split(rest)
             if len(refs) < 3:
                 raise InvalidMeshError(source, f"line {lineno}: a face needs 3 or more vertices: {line!r}")
             idx = []
             for ref in refs:
                 number = ref.split("/", 1)[0]
-                if not _OBJ_INDEX.fullmatch(number):
-                    raise InvalidMeshError(source, f"line {lineno}: bad vertex reference {ref!r}")
-                i = int(number)
+                try:
+                    # On ASCII text without "_", int reads the format's integers and nothing else.
+                    if not number.isascii() or "_" in number:
+                        raise ValueError(number)
+                    i = int(number)
+                except ValueError:
+                    raise InvalidMeshError(source, f"line {lineno}: bad vertex reference {ref!r}") from None
                 if i == 0:
                     raise InvalidMeshError(source, f"line {lineno}: vertex indices start at 1, got 0")
                 # A file of n bytes has fewer than n vertices: a larger index (which may not even fit
@@ -441,10 +448,18 @@ def _floats_ok(text: str) -> bool:
     return True
 
 
-# The OBJ grammar's blanks, indices and numbers (ASCII; nan and inf are left to the finite check).
+# The OBJ grammar's blanks and numbers (ASCII; nan and inf are left to the finite check).
 _OBJ_BLANKS = " \t\v\f"
 _OBJ_SPLIT = re.compile(r"[ \t\v\f]+")
-_OBJ_INDEX = re.compile(r"[+-]?[0-9]+")
+_PYTHON_ONLY_BLANKS = re.compile(r"[\x1c-\x1f]")
+
+
+def _obj_split(text: str, sep: None = None, maxsplit: int = -1) -> list[str]:
+    """``text.split()`` with the OBJ format's blanks (not a no-break space)."""
+    words = _OBJ_SPLIT.split(text.strip(_OBJ_BLANKS), maxsplit=max(maxsplit, 0))
+    return [w for w in words if w]
+
+
 _OBJ_NOT_NUMBER = re.compile(r"[^0-9+\-.eEnaiftyNAIFTY \n]")
 
 
