@@ -1083,6 +1083,7 @@ def write_report(
     policy_times: dict[int, float] | None = None,
     run_started: float | None = None,
     full_cloud: bool = False,
+    steps: str | Path | None = None,
 ) -> dict[str, Any]:
     """Write the episode's report files (:data:`REPORT_FILES`) into ``out_dir``.
 
@@ -1104,6 +1105,10 @@ def write_report(
         ``cloud.laz`` holds every measured point of the kept scans (the E57's, placed with their
         estimated poses, classified by the nearest working-copy point of their room: module
         docstring) instead of the rooms' 5 cm working copies. Needs the env's kept scans.
+    steps : str or Path, optional
+        A folder of pictures drawn during the episode (``nbs scan``'s ``step_NNN.png``), moved in as
+        ``out_dir/steps`` with the report files, replacing an earlier report's (and removing it when
+        the folder is empty): the pictures and the report are one run's, whatever stopped it.
 
     Returns
     -------
@@ -1140,6 +1145,14 @@ def write_report(
                 exc.filename = str(final / Path(exc.filename).name)
             raise
         written = {p.name for p in out.iterdir()}
+        if steps is not None:
+            # The earlier pictures leave with the earlier report: renames only, which a full disk
+            # does not stop.
+            old_steps = final / "steps"
+            if old_steps.exists():
+                os.replace(old_steps, out / ".old-steps")
+            if any(Path(steps).iterdir()):
+                os.replace(steps, old_steps)
         for name in sorted(written):
             os.replace(out / name, final / name)
         for name in set(REPORT_FILES) - written:  # an earlier report's scans.e57, not this run's

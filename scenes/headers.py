@@ -20,13 +20,21 @@ import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-from urllib.parse import unquote
+from urllib.parse import unquote, urlsplit
 
 from scenes.errors import InvalidMeshError
 from scenes.jsonio import read_json
 from scenes.limits import MAX_FACES, check_face_count
 
-__all__ = ["PlyElement", "PlyHeader", "PlyProperty", "ascii_ply_row_error", "check_gltf_layout", "check_ply_header"]
+__all__ = [
+    "PlyElement",
+    "PlyHeader",
+    "PlyProperty",
+    "ascii_ply_row_error",
+    "check_gltf_layout",
+    "check_ply_header",
+    "side_file_path",
+]
 
 # ------------------------------------------------------------------------------------------ PLY
 #: Bytes of a binary PLY scalar, by every type name the format allows.
@@ -548,6 +556,10 @@ def _buffer_bytes(source: str, path: Path, buffer: dict, index: int, bin_length:
     if not isinstance(uri, str):
         raise InvalidMeshError(source, f"buffers[{index}].uri is not a string")
     if uri.startswith("data:"):
+        if not uri.partition(",")[0].endswith(";base64"):
+            raise InvalidMeshError(
+                source, f"buffers[{index}].uri is a data: URI that is not base64 (glTF's buffers are)"
+            )
         try:
             return len(base64.b64decode(uri.partition(",")[2], validate=False))
         except (binascii.Error, ValueError):
@@ -556,10 +568,34 @@ def _buffer_bytes(source: str, path: Path, buffer: dict, index: int, bin_length:
     return side.stat().st_size if side is not None else None
 
 
+def side_file_path(source: str, path: Path, uri: str, where: str = "a uri") -> Path:
+    """The local file a glTF ``uri`` that is no ``data:`` URI names.
+
+    The ``uri`` is a URI reference (glTF 2.0, RFC 3986): percent-escapes are decoded (``buf%20one.bin``
+    is ``buf one.bin``), a relative reference is resolved against the glTF file's folder (``../b.bin``
+    included, as exporters write shared buffers), and a ``file:`` URI names its path.
+
+    Raises
+    ------
+    InvalidMeshError
+        A URI of another scheme (``http:``): nbs-env reads local files only.
+    """
+    parts = urlsplit(uri)
+    scheme = parts.scheme.lower()
+    if scheme == "file":
+        return Path(unquote(parts.path))
+    if scheme and len(scheme) > 1:  # one letter: a Windows drive, as some exporters write
+        raise InvalidMeshError(
+            source,
+            f"{where}.uri {uri[:80]!r} is a {scheme}: URI; nbs-env reads local files only (save it beside the glTF)",
+        )
+    return path.parent / unquote(uri)
+
+
 def _side_file(source: str, path: Path, uri: str, where: str) -> Path | None:
-    """The file a relative ``uri`` names beside ``path``; None when it is not there (the parser says
+    """The file a ``uri`` names (:func:`side_file_path`); None when it is not there (the parser says
     so). A fifo or a device would hang the parser or feed it without end: refused."""
-    side = path.parent / unquote(uri)
+    side = side_file_path(source, path, uri, where)
     try:
         if not side.exists():
             return None

@@ -76,7 +76,14 @@ import shapely
 import trimesh
 
 from scenes.errors import InvalidMeshError, MissingStructureError, SceneFileError, UnsupportedFormatError
-from scenes.headers import PlyElement, PlyHeader, ascii_ply_row_error, check_gltf_layout, check_ply_header
+from scenes.headers import (
+    PlyElement,
+    PlyHeader,
+    ascii_ply_row_error,
+    check_gltf_layout,
+    check_ply_header,
+    side_file_path,
+)
 from scenes.interior import with_derived_rooms
 from scenes.limits import MAX_FACES, check_face_count, check_file_size, check_storey_size, unit_scale
 from scenes.model import Room, Scene, SurfaceClass
@@ -464,11 +471,38 @@ _OBJ_NOT_NUMBER = re.compile(r"[^0-9+\-.eEnaiftyNAIFTY \n]")
 
 
 # ------------------------------------------------------------------------------------- glTF/GLB
+class _SideFiles(trimesh.resolvers.Resolver):
+    """The buffers a glTF names, found as :func:`scenes.headers.side_file_path` finds them (trimesh's
+    own resolver neither decodes ``%20`` nor follows ``../``), and read only."""
+
+    def __init__(self, source: str, path: Path) -> None:
+        self.source, self.path = source, path
+
+    def get(self, key: str) -> bytes:
+        return side_file_path(self.source, self.path, key).read_bytes()
+
+    def write(self, name: str, data: Any) -> None:
+        raise PermissionError("a glTF is read, never written, here")
+
+    def namespaced(self, namespace: str) -> _SideFiles:
+        return _SideFiles(self.source, self.path.parent / namespace / self.path.name)
+
+    def keys(self) -> list[str]:
+        return []
+
+
 def _read_gltf(source: str, path: Path, ext: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]:
     """Flatten a glTF scene graph into world-space vertices, faces, labels and raw rooms."""
     try:
         # Without materials: no texture is read (a file of the geometry only is what is scanned).
-        scene = trimesh.load(str(path), file_type=ext[1:], force="scene", process=False, skip_materials=True)
+        scene = trimesh.load(
+            str(path),
+            file_type=ext[1:],
+            force="scene",
+            process=False,
+            skip_materials=True,
+            resolver=_SideFiles(source, path),
+        )
     except Exception as exc:  # trimesh raises many types for malformed files
         raise InvalidMeshError(source, f"cannot parse as {ext[1:]}: {type(exc).__name__}: {exc}") from exc
     parents = scene.graph.transforms.parents
@@ -521,7 +555,11 @@ def _read_ply(
         # From the bytes already read and checked, with no resolver and no materials: a header's
         # "comment TextureFile NAME" made trimesh open NAME, and a fifo there hung the load.
         mesh = trimesh.load(
-            trimesh.util.wrap_as_stream(data), file_type="ply", force="mesh", process=False, skip_materials=True
+            trimesh.util.wrap_as_stream(_integers_widened(header, data) if header.encoding == "ascii" else data),
+            file_type="ply",
+            force="mesh",
+            process=False,
+            skip_materials=True,
         )
     except Exception as exc:
         if header.encoding != "ascii":
@@ -550,14 +588,17 @@ def _read_ply(
     index_prop = next((p for p in props if p in ("vertex_indices", "vertex_index")), None)
     if index_prop is None:
         raise InvalidMeshError(source, "the PLY face element has no vertex_indices list")
+    declared = {p.name: p.type for p in header.element("face").properties}
     try:
-        polys = _ply_polygons(columns[index_prop], n_raw)
+        polys = _ply_polygons(columns[index_prop], n_raw, declared[index_prop])
         label_raw = (
-            _ply_integers(columns["label"], n_raw, "label")
+            _ply_integers(columns["label"], n_raw, "label", declared["label"])
             if "label" in props
             else np.full(n_raw, SurfaceClass.CLUTTER.value)  # unlabelled: the structure check says so
         )
-        room_raw = _ply_integers(columns["room"], n_raw, "room") if "room" in props else np.full(n_raw, -1)
+        room_raw = (
+            _ply_integers(columns["room"], n_raw, "room", declared["room"]) if "room" in props else np.full(n_raw, -1)
+        )
     except (KeyError, IndexError, ValueError, TypeError) as exc:
         # The header declares the property, the body does not hold it where it should (an ASCII face
         # line with fewer or more values than the header lists): name the record where one is to blame.
@@ -692,9 +733,39 @@ class _PlyValueError(ValueError):
     """A PLY face element's values that are not what its header says they mean."""
 
 
-def _ply_polygons(column: np.ndarray, n: int) -> list[np.ndarray]:
+def _integers_widened(header: PlyHeader, data: bytes) -> bytes:
+    """An ASCII PLY whose integer properties are declared ``double``, for trimesh: it reads ASCII
+    values as float64 and casts them to the declared type, so a ``uchar`` label of 256 became 0 (a
+    wall read as floor) and an ``int`` index of 2^32 another vertex. Read wide, each value is checked
+    against its declared type (:func:`_ply_integers`, :func:`_ply_polygons`). Floats keep their type:
+    a ``float`` coordinate is the float32 every reader makes of it."""
+
+    def wide(kind: str) -> str:
+        return kind if kind in ("float", "float32", "double", "float64") else "double"
+
+    lines = ["ply", "format ascii 1.0"]
+    for element in header.elements:
+        lines.append(f"element {element.name} {element.count}")
+        for p in element.properties:
+            listed = f"list {p.count_type} " if p.count_type else ""
+            lines.append(f"property {listed}{wide(p.type)} {p.name}")
+    lines.append("end_header\n")
+    return "\n".join(lines).encode() + data[header.body :]
+
+
+def _outside(values: np.ndarray, kind: str) -> np.ndarray:
+    """Which whole ``values`` do not fit the PLY integer type ``kind`` (none for a float type)."""
+    code = _PLY_NUMPY[kind]
+    if code[0] == "f":
+        return np.zeros(values.shape, bool)
+    info = np.iinfo(code)
+    return (values < info.min) | (values > info.max)
+
+
+def _ply_polygons(column: np.ndarray, n: int, kind: str = "int") -> list[np.ndarray]:
     """The vertex lists of the raw PLY face element, whatever layout trimesh left them in; their
-    indices must be whole numbers (a list of floats is allowed by the format, 15.5 names no vertex)."""
+    indices must be whole numbers (a list of floats is allowed by the format, 15.5 names no vertex)
+    within their declared type ``kind``."""
     col = np.asarray(column)
     if col.dtype.names and "f1" in col.dtype.names:  # binary: (count, indices) records
         polys = list(np.asarray(col["f1"]).reshape(n, -1))
@@ -709,12 +780,18 @@ def _ply_polygons(column: np.ndarray, n: int) -> list[np.ndarray]:
             raise _PlyValueError(f"PLY face {i} has a vertex index that is not a whole number: {poly.tolist()[:6]}")
         if poly.dtype.kind not in "iuf":
             raise _PlyValueError(f"PLY face {i}'s vertex indices are not numbers")
+        if poly.dtype.kind == "f" and _outside(poly, kind).any():
+            raise _PlyValueError(
+                f"PLY face {i} has vertex index {poly[_outside(poly, kind)][0]:.0f}, which its header's type "
+                f"{kind!r} cannot hold"
+            )
         out.append(poly.astype(np.int64))
     return out
 
 
-def _ply_integers(column: Any, n: int, name: str) -> np.ndarray:
-    """A per-face scalar property as (n,) int64; one value a face, whole numbers."""
+def _ply_integers(column: Any, n: int, name: str, kind: str = "int") -> np.ndarray:
+    """A per-face scalar property as (n,) int64; one value a face, whole numbers within their
+    declared type ``kind``."""
     values = np.asarray(column)
     if values.dtype == object or values.size != n:  # a face line short of its values, or with more
         raise _PlyValueError(f"the face element's '{name}' values do not match its header (one a face, {n:,} faces)")
@@ -723,6 +800,10 @@ def _ply_integers(column: Any, n: int, name: str) -> np.ndarray:
         raise _PlyValueError(f"face '{name}' values must be whole numbers")
     if values.dtype.kind not in "iuf":
         raise _PlyValueError(f"face '{name}' values are not numbers")
+    odd = _outside(values, kind) if values.dtype.kind == "f" else np.zeros(values.shape, bool)
+    if odd.any():
+        i = int(np.flatnonzero(odd)[0])
+        raise _PlyValueError(f"face {i}'s '{name}' is {values[i]:.0f}, which its header's type {kind!r} cannot hold")
     return values.astype(np.int64)
 
 

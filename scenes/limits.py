@@ -29,6 +29,14 @@ Limits
     ``ulimit -v``, or the memory the machine has available) is refused before it is read: at 800
     bytes a face a 1.4-million-face storey passed the check and aborted inside the OpenMP runtime
     with no message.
+:data:`MAX_STRUCTURE_SAMPLES`, 20 million, and :data:`BYTES_PER_SAMPLE`, the ground truth's samples
+    The evaluation samples the structural surface at one point per ``coverage_spacing``² (400 per m²
+    at the default 5 cm): a 150 m by 150 m open hall (50,000 m² of floor, ceiling and walls) is 20
+    million samples. Finding which face the interior (:func:`scenes.interior.interior_samples`) peaked
+    at 410 to 460 bytes a sample, measured on square halls of 30 and 60 m. A storey within the
+    extent bounds can still need more (a 490 m hall, 1.9·10^8 samples, asked for 1.45 GiB in one
+    array and many times that in all): it is refused, with the spacing that fits, before the samples
+    are made.
 :data:`MAX_MESH_FILE_BYTES`, 1 GiB, a mesh file read whole (checked by :func:`check_file_size`)
     An OBJ of the largest storey (5 million faces) takes some 300 MB of text; a binary file less. A
     file is read into memory before it is parsed, so one of gigabytes (a point cloud, a disk image
@@ -67,11 +75,13 @@ from scenes.labels import SurfaceClass
 
 __all__ = [
     "BYTES_PER_FACE",
+    "BYTES_PER_SAMPLE",
     "MAX_FACES",
     "MAX_MESH_FILE_BYTES",
     "MAX_ORIGIN_DISTANCE",
     "MAX_STOREY_HEIGHT",
     "MAX_STOREY_WIDTH",
+    "MAX_STRUCTURE_SAMPLES",
     "MIN_STOREY_HEIGHT",
     "MIN_STOREY_WIDTH",
     "READ_FACTOR",
@@ -81,6 +91,7 @@ __all__ = [
     "check_face_count",
     "check_file_size",
     "check_origin_distance",
+    "check_sample_count",
     "check_storey_shape",
     "check_storey_size",
     "machine_memory",
@@ -93,6 +104,8 @@ MAX_STOREY_HEIGHT = 50.0
 MAX_FACES = 5_000_000
 BYTES_PER_FACE = 3072
 MIN_STOREY_WIDTH = 1.0
+MAX_STRUCTURE_SAMPLES = 20_000_000
+BYTES_PER_SAMPLE = 512
 MAX_MESH_FILE_BYTES = 1 << 30
 #: The memory a mesh file's bytes take while it is read and parsed, per byte of the file: its bytes,
 #: their text and the parser's lists (an OBJ's lines), before the faces are counted.
@@ -139,6 +152,25 @@ def check_face_count(source: str, n_faces: int) -> None:
         f"loading the mesh's {n_faces:,} faces",
         "simplify or split the model, or free memory",
     )
+
+
+def check_sample_count(source: str, area: float, spacing: float) -> None:
+    """Raise :class:`StoreySizeError` when sampling ``area`` m² of structural surface every ``spacing``
+    metres makes more than :data:`MAX_STRUCTURE_SAMPLES` samples, or more than the memory the process
+    may still allocate (:data:`BYTES_PER_SAMPLE` each); the message gives the spacing that fits."""
+    n = area / spacing**2
+    fits = math.ceil(100 * math.sqrt(area / MAX_STRUCTURE_SAMPLES)) / 100
+    advice = (
+        f"the storey's structural surface is {area:,.0f} m²: set a coarser coverage_spacing than {spacing:g} m "
+        f"(--set coverage_spacing={max(fits, spacing * 2):g}), or split the storey"
+    )
+    if n > MAX_STRUCTURE_SAMPLES:
+        raise StoreySizeError(
+            source,
+            f"the evaluation would sample it at {n:,.0f} points (the most nbs-env makes is {MAX_STRUCTURE_SAMPLES:,}): "
+            + advice,
+        )
+    _check_memory(source, int(n * BYTES_PER_SAMPLE), f"sampling its structural surface ({n:,.0f} points)", advice)
 
 
 def _check_memory(source: str, need: int, what: str, advice: str) -> None:

@@ -15,7 +15,7 @@ import trimesh
 from scenes.errors import InvalidMeshError, MissingStructureError
 from scenes.geometry import auto_start
 from scenes.labels import STRUCTURAL_CLASSES, SurfaceClass
-from scenes.limits import check_storey_size
+from scenes.limits import check_sample_count, check_storey_size
 
 __all__ = [
     "STRUCTURAL_CLASSES",
@@ -274,6 +274,7 @@ class Scene:
     def _samples_of(self, spacing: float) -> StructureSamples:
         faces = np.flatnonzero(self.structural_mask())
         areas = self.face_areas[faces]
+        check_sample_count(self.name, float(areas.sum()), spacing)  # before any array of them is made
         # Running rounding keeps the total exact and gives tiny faces their share over many faces.
         cum = np.floor(np.cumsum(areas) / spacing**2 + 0.5).astype(np.int64)
         counts = np.diff(np.concatenate([[0], cum]))

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import struct
+import warnings
 
 import pytest
 
@@ -290,3 +291,145 @@ def test_a_start_off_the_floor_is_refused_naming_the_start(l_room_env):
         assert l_room_env.storey.scene.start[2] == pytest.approx(height)
     with pytest.raises(InvalidPoseError, match=r"start \[3\.0, 4\.5, 100\.0\] is \+100\.00 m from the floor under it"):
         l_room_env.reset(seed=0, options={"start": [x, y, 100]})
+
+
+# ---------------------------------------------------------------------- probe 10
+def _hall(side: float) -> dict:
+    from pathlib import Path
+
+    plan = json.loads((Path(__file__).parents[1] / "scenes" / "data" / "l_room.json").read_text())
+    plan["rooms"] = [{"name": "hall", "polygon": [[0, 0], [side, 0], [side, side], [0, side]]}]
+    for key in ("clutter", "doors", "windows"):
+        plan.pop(key, None)
+    plan["start"] = [5, 5]
+    return plan
+
+
+def test_a_storey_whose_ground_truth_samples_would_not_fit_is_refused_with_the_spacing_that_fits():
+    """A 490 m hall is within the extent bounds, but its 1.9e8 samples asked for 1.45 GiB in one array
+    (and many times that in all); the advice was to coarsen the voxel, which changes nothing."""
+    from scenes import StoreySizeError
+    from scenes.floorplan import FloorPlan
+
+    scene = load_scene(FloorPlan.from_dict(_hall(490), source="hall.json"))
+    with pytest.raises(StoreySizeError, match=r"would sample it at 194,000,194 points .* coverage_spacing=0\.16"):
+        scene.structure_samples(0.05)
+    small = load_scene(FloorPlan.from_dict(_hall(12), source="hall.json"))
+    assert len(small.structure_samples(0.05).points) == round(small.structural_area() / 0.05**2)
+
+
+def _scan(out, *extra: str) -> list[str]:
+    return ["scan", "--scene", "l_room", "--preset", "fast", "--out", str(out), "--quiet", *extra]
+
+
+def test_a_scan_that_fails_writing_its_report_keeps_the_earlier_report_with_its_own_pictures(
+    tmp_path, capsys, monkeypatch
+):
+    """The step pictures were written into --out/steps during the run: a report that then failed
+    (a full disk) left the earlier report with the failed run's pictures, and a run into a new
+    folder left a folder a rerun refused as an earlier report."""
+    import errno
+
+    import nbs_env.export as export
+    from train.cli import main as nbs
+
+    out = tmp_path / "report"
+    assert nbs(_scan(out, "--max-scans", "2")) == 0
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert {str(p) for p in before if p.parts[0] == "steps"} == {"steps/step_000.png", "steps/step_001.png"}
+
+    def full(env, folder, *args, **kwargs):
+        (folder / "metrics.json").write_text("{")
+        raise OSError(errno.ENOSPC, "No space left on device", str(folder / "cloud.laz"))
+
+    monkeypatch.setattr(export, "_write_report_files", full)
+    capsys.readouterr()
+    assert nbs(_scan(out, "--max-scans", "3", "--seed", "1", "--force")) != 0
+    assert "No space left on device" in capsys.readouterr().err
+    after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert after == before  # the earlier report whole, its own pictures, nothing of the failed run
+    assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == []
+
+    fresh = tmp_path / "fresh"
+    assert nbs(_scan(fresh, "--max-scans", "2")) != 0
+    assert not fresh.exists()  # a rerun is not refused as onto an earlier report
+
+
+@pytest.mark.parametrize(
+    "name, uri, folder",
+    [
+        ("escaped.gltf", "buf%20one.bin", "."),  # RFC 3986 escapes, as Blender writes names with blanks
+        ("up.gltf", "../plain.bin", "sub"),  # a buffer shared by the glTFs of several folders
+        ("url.gltf", "FILE_URI", "."),
+    ],
+)
+def test_a_gltf_buffer_named_by_any_uri_reference_to_a_local_file_loads(name, uri, folder, glb_parts, tmp_path):
+    """trimesh's resolver neither decodes %20 nor follows ../: valid files were refused with its
+    advice to pass `FilePathResolver(path, allow_anywhere=True)`."""
+    json_chunk, binary, faces = glb_parts
+    (tmp_path / "buf one.bin").write_bytes(binary)
+    (tmp_path / "plain.bin").write_bytes(binary)
+    doc = json.loads(json_chunk)
+    doc["buffers"] = [dict(doc["buffers"][0], uri=uri.replace("FILE_URI", (tmp_path / "plain.bin").as_uri()))]
+    path = tmp_path / folder / name
+    path.parent.mkdir(exist_ok=True)
+    path.write_text(json.dumps(doc))
+    assert len(load_scene(str(path)).mesh.faces) == faces
+
+
+@pytest.mark.parametrize(
+    "uri, message",
+    [
+        ("http://example.com/b.bin", r"uri 'http://example\.com/b\.bin' is a http: URI; nbs-env reads local"),
+        ("data:,abc", r"buffers\[0\]\.uri is a data: URI that is not base64"),
+    ],
+)
+def test_a_gltf_buffer_uri_nbs_env_cannot_read_is_named(uri, message, glb_parts, tmp_path):
+    json_chunk, _, _ = glb_parts
+    doc = json.loads(json_chunk)
+    doc["buffers"] = [dict(doc["buffers"][0], uri=uri)]
+    path = tmp_path / "x.gltf"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(InvalidMeshError, match=message):
+        load_scene(str(path))
+
+
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        ("4 0 4 5 1 2 0", "4 0 4 5 1 256 0", r"face 2's 'label' is 256, which its header's type 'uchar' cannot hold"),
+        ("4 0 4 5 1 2 0", "4 0 4 5 1 -1 0", r"face 2's 'label' is -1, which its header's type 'uchar' cannot hold"),
+        ("4 0 1 2 3 0 0", "4 0 4294967296 2 3 0 0", r"PLY face 0 has vertex index 4294967296, which its header's type"),
+        ("4 0 1 2 3 0 0", "4 0 1 2 3 0 2147483648", r"face 0's 'room' is 2147483648, which its header's type 'int'"),
+    ],
+)
+def test_an_ascii_ply_value_its_declared_type_cannot_hold_is_refused(old, new, message, tmp_path):
+    """Read as float64 and cast to the declared type, a uchar label of 256 became 0: a wall was read
+    as floor without a word, and an index of 2^32 named another vertex."""
+    from tests.test_probe6 import GOOD_FACES, _ply_text
+
+    path = tmp_path / "room.ply"
+    text = _ply_text(GOOD_FACES)
+    assert old in text
+    path.write_text(text.replace(old, new, 1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy's "invalid value encountered in cast" was printed too
+        with pytest.raises(InvalidMeshError, match=message):
+            load_scene(str(path))
+
+
+def test_more_env_workers_than_the_machine_takes_are_refused_before_any_starts(tmp_path, capsys, monkeypatch):
+    """500 spawn workers, each importing torch, were killed for memory with no message."""
+    import os
+
+    import train.ppo as ppo
+
+    def never(*args, **kwargs):
+        raise AssertionError("a worker started")
+
+    monkeypatch.setattr(ppo, "make_training_envs", never)
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    code, err = _train(["--out", str(tmp_path / "run"), "--envs", "5", "--timesteps", "32", "--quiet"], capsys)
+    assert code == EXIT_USAGE and err.count("\n") == 1, err
+    assert "--envs 5: this machine has 2 cores" in err and "pass at most --envs 4" in err, err
+    assert not (tmp_path / "run").exists()

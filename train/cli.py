@@ -19,8 +19,10 @@ import logging
 import math
 import os
 import re
+import shutil
 import signal
 import sys
+import tempfile
 import time
 import warnings
 from collections.abc import Sequence
@@ -618,21 +620,20 @@ def _scan(args: argparse.Namespace, policy, out: Path, cfg, stop: StopRequest) -
 
     env = NBSEnv(cfg, render_mode="rgb_array")
     options = {} if args.start is None else {"start": args.start}
-    steps_dir = out / "steps"
+    made_out = not out.exists()
+    steps_dir: Path | None = None
     bar = tqdm(total=cfg.max_scans, unit="scan", disable=args.quiet, file=sys.stderr, dynamic_ncols=True)
     k = -1
 
     def on_step(info: dict) -> None:
-        nonlocal k
+        nonlocal k, steps_dir
         k += 1
         if k == 0:
-            # The scene loaded and the first scan is taken: now the report has somewhere to go.
+            # The scene loaded and the first scan is taken: now the report has somewhere to go. The
+            # pictures wait in a folder of their own until the report is written, and move in with
+            # it: an earlier report (--force) keeps its own until then, whatever stops this run.
             out.mkdir(parents=True, exist_ok=True)
-            # An earlier report's pictures (--force) would pass for this run's steps.
-            for old in steps_dir.glob("step_*.png"):
-                old.unlink()
-            if not args.no_steps:
-                steps_dir.mkdir(exist_ok=True)
+            steps_dir = Path(tempfile.mkdtemp(prefix=".steps-", dir=out))
         if not args.no_steps:
             with replacing(steps_dir / f"step_{k:03d}.png") as temporary:
                 plt.imsave(temporary, env.render())
@@ -653,23 +654,40 @@ def _scan(args: argparse.Namespace, policy, out: Path, cfg, stop: StopRequest) -
 
     started = time.time()
     ran = False
-    with bar:
-        try:
-            policy_times = run_episode(env, policy, args.seed, options, on_step_recorded, stop=stop)
-            cut_short = stop()  # else the signal came after the episode's end: the report is whole
-            ran = True
-        except RuntimeError as exc:
-            bar.close()
-            return _scan_error(exc, EXIT_SCENE_ERROR)
-        finally:
-            if recorder is not None:
-                # Renamed into place for a run that ended or was stopped (its report says so), removed
-                # for one that failed: no recording then passes for a run that has no report.
-                recorder.close(keep=ran)
-    with stop.hold():  # a second Ctrl-C now would cost the report the first one asked for
-        metrics = write_report(
-            env, out, args.scene, policy, args.seed, policy_times, run_started=started, full_cloud=args.full_cloud
-        )
+    try:
+        with bar:
+            try:
+                policy_times = run_episode(env, policy, args.seed, options, on_step_recorded, stop=stop)
+                cut_short = stop()  # else the signal came after the episode's end: the report is whole
+                ran = True
+            except RuntimeError as exc:
+                bar.close()
+                return _scan_error(exc, EXIT_SCENE_ERROR)
+            finally:
+                if recorder is not None:
+                    # Renamed into place for a run that ended or was stopped (its report says so),
+                    # removed for one that failed: no recording then passes for a run with no report.
+                    recorder.close(keep=ran)
+        with stop.hold():  # a second Ctrl-C now would cost the report the first one asked for
+            metrics = write_report(
+                env,
+                out,
+                args.scene,
+                policy,
+                args.seed,
+                policy_times,
+                run_started=started,
+                full_cloud=args.full_cloud,
+                steps=steps_dir,
+            )
+    finally:
+        # A run that wrote no report leaves nothing: not its pictures, nor a folder it made (which a
+        # rerun would take for an earlier report).
+        if steps_dir is not None:
+            shutil.rmtree(steps_dir, ignore_errors=True)
+        if made_out:
+            with contextlib.suppress(OSError):
+                out.rmdir()  # only when empty
     files = [*REPORT_FILES, *([] if args.no_steps else [f"steps/ ({k + 1} pictures)"])]
     if not env.storey.scan_log:
         files.remove("scans.e57")

@@ -327,6 +327,29 @@ def check_memory(config: TrainConfig, backend: str = "local", behaviour_cloning:
     )
 
 
+def check_workers(config: TrainConfig, backend: str = "local", address: str | None = None) -> None:
+    """Refuse more env workers than twice this machine's cores where they would all run here (the
+    local backend, or a Ray instance started here), as ``nbs compare --jobs`` is refused.
+
+    Each worker imports torch and holds a storey, its maps and a scanner's rays (about 1 GB): beyond
+    the cores they only share them, and 500 of them were killed for memory with no message. Twice the
+    cores leaves room for a machine whose count is read low (a container's).
+
+    Raises
+    ------
+    ConfigError
+        Naming ``--envs`` and the most this machine takes.
+    """
+    cores = os.cpu_count() or 1
+    if config.envs > 2 * cores and (backend == "local" or address is None):
+        where = "local env workers" if backend == "local" else "env workers of a Ray instance started here"
+        raise ConfigError(
+            f"--envs {config.envs}: this machine has {cores} cores, and {where} beyond them only share them "
+            f"(each holds a storey and its maps, about 1 GB); pass at most --envs {2 * cores}, or --backend ray "
+            "--address for a cluster"
+        )
+
+
 def _env_factory(run: TrainConfig):
     """A picklable maker of one training env: the fast preset on the run's generated storeys, with
     its prices, completion and episode length."""
@@ -785,6 +808,7 @@ def train(
     state = latest_state(out) if resume else None
     # Checked before anything is built or written: what the options claim, and where Ray would run.
     check_memory(config, backend, behaviour_cloning=bool(config.bc_steps) and state is None)
+    check_workers(config, backend, address)
     if backend == "ray":
         _check_ray(address)
     # Checked before any worker starts: a bad checkpoint fails at once, not after the envs are up.
