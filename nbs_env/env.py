@@ -144,7 +144,7 @@ class NBSEnv(gym.Env):
 
     def __init__(self, config: EnvConfig | str | None = None, render_mode: str | None = None, **overrides: Any) -> None:
         if config is None or isinstance(config, str):
-            config = make_config(config or "default", **overrides)
+            config = make_config(config, **overrides)
         elif isinstance(config, EnvConfig) and overrides:
             config = make_config(config, **overrides)
         if not isinstance(config, EnvConfig):

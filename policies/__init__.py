@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from nbs_env import lazy_getattr
+from nbs_env.config.checks import parse_float
 from nbs_env.errors import ConfigError
 from policies.base import Policy, agreed_requirements, config_for
 from policies.greedy import GreedyPolicy
@@ -74,7 +75,7 @@ def _greedy(seed: int | None, option: str | None = None):
         if key not in ("near", "stop") or key in kwargs:
             raise UnknownPolicyError(usage)
         try:
-            kwargs[key] = float(value)
+            kwargs[key] = parse_float(value)
         except ValueError:
             raise UnknownPolicyError(usage) from None
     try:

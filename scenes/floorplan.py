@@ -434,10 +434,12 @@ def _rectangle(center: Sequence[float], length: float, depth: float, yaw_deg: fl
     return Polygon(rot + np.asarray(center, dtype=float))
 
 
+#: Metres within which two corners of a room are one, and a corner lies on the wall of its neighbours.
+CORNER_TOLERANCE = 1e-6
+
+
 def _simple_polygon(points: Sequence[Sequence[float]], source: str, path: str) -> Polygon:
-    pts = np.asarray(points, dtype=float)
-    if len(pts) >= 2 and np.allclose(pts[0], pts[-1]):
-        pts = pts[:-1]
+    pts = _corners(np.asarray(points, dtype=float))
     if len(pts) < 3:
         raise PlanGeometryError(source, "a polygon needs at least 3 distinct points", path=path)
     poly = Polygon(pts)
@@ -445,6 +447,27 @@ def _simple_polygon(points: Sequence[Sequence[float]], source: str, path: str) -
         reason = shapely.is_valid_reason(poly)
         raise PlanGeometryError(source, f"the polygon is not simple ({reason})", path=path)
     return orient(poly, 1.0)
+
+
+def _corners(pts: np.ndarray) -> np.ndarray:
+    """A room outline's corners: a corner written twice (or closing the ring) once, and a point on a
+    straight wall (where a neighbour's wall meets it, as plans traced from drawings have) none. Left
+    in, the walls' offset drops them and the room was refused as "too narrow"."""
+    while len(pts) >= 3:
+        following = np.roll(pts, -1, axis=0)
+        previous = np.roll(pts, 1, axis=0)
+        repeated = np.linalg.norm(following - pts, axis=1) <= CORNER_TOLERANCE
+        span = following - previous
+        length = np.linalg.norm(span, axis=1)
+        along = pts - previous
+        off_line = np.abs(span[:, 0] * along[:, 1] - span[:, 1] * along[:, 0]) / np.where(length > 0, length, 1.0)
+        # 180 degrees, not a spike back along the wall (that stays, and is refused as not simple)
+        straight = (off_line <= CORNER_TOLERANCE) & (np.einsum("ij,ij->i", along, following - pts) > 0)
+        drop = repeated | straight
+        if not drop.any():
+            break
+        pts = pts[~(np.arange(len(pts)) == int(np.flatnonzero(drop)[0]))]  # one at a time: neighbours change
+    return pts
 
 
 @dataclass(frozen=True)

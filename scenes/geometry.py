@@ -1,4 +1,5 @@
-"""Plan-view geometry shared by the loaders: obstacle footprints and the automatic start position."""
+"""Geometry shared by the loaders: polygon faces as triangles, obstacle footprints and the automatic
+start position."""
 
 from __future__ import annotations
 
@@ -18,11 +19,13 @@ if TYPE_CHECKING:
 
 __all__ = [
     "STOREY_CLEARANCE",
+    "CrossingPolygonError",
     "auto_start",
     "free_region",
     "obstacle_footprint",
     "point_is_free",
     "split_long_faces",
+    "triangulate_polygons",
 ]
 
 #: The clear floor (m, from any obstacle) that a storey promises: automatic starts keep it, and
@@ -240,3 +243,100 @@ def split_long_faces(
         origin = np.concatenate([origin, origin[idx]])
         eligible = np.concatenate([eligible, np.ones(len(idx), bool)])
     return vertices, faces, origin
+
+
+class CrossingPolygonError(ValueError):
+    """A polygon face whose outline crosses itself: no triangulation of it is the surface meant.
+    ``index`` is the polygon's position in the list given."""
+
+    def __init__(self, index: int) -> None:
+        super().__init__(f"polygon {index} crosses itself")
+        self.index = index
+
+
+def triangulate_polygons(vertices: np.ndarray, polygons: Sequence[Sequence[int]]) -> tuple[np.ndarray, np.ndarray]:
+    """Triangles of faces given as polygons of vertex indices (OBJ's and PLY's faces).
+
+    A convex polygon is fanned from its first corner, as every reader does. A concave one (an
+    L-shaped slab written as one face) is triangulated by ear clipping in its plane
+    (``mapbox_earcut``), as Blender and Assimp do: the fan covered what lies outside it, and an L
+    floor read so was a third larger, silently.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float
+    polygons : sequence of sequences of int
+        Each of 3 or more indices into ``vertices``. A polygon with an index outside them is fanned
+        (the caller's index check names it).
+
+    Returns
+    -------
+    triangles : (T, 3) int64
+        Each polygon's triangles together, in the polygons' order.
+    source : (T,) int64
+        The polygon each triangle comes from.
+
+    Raises
+    ------
+    CrossingPolygonError
+        A concave polygon whose outline crosses itself.
+    """
+
+    vertices = np.asarray(vertices, dtype=float)
+    lengths = np.fromiter((len(p) for p in polygons), dtype=np.int64, count=len(polygons))
+    parts_tris, parts_src = [], []
+    for n in np.unique(lengths):
+        rows = np.flatnonzero(lengths == n)
+        same = len(rows) == len(polygons)  # one size (triangles, or quads), the common file: no gather
+        corners = np.array(polygons if same else [polygons[i] for i in rows], dtype=np.int64).reshape(len(rows), n)
+        fan = np.arange(1, n - 1)
+        tris = np.stack([np.repeat(corners[:, :1], n - 2, axis=1), corners[:, fan], corners[:, fan + 1]], axis=2)
+        src = np.repeat(rows, n - 2)
+        if n > 3:
+            concave = _concave(vertices, corners)
+            for r in np.flatnonzero(concave):
+                tris[r] = corners[r][_ear_clipped(vertices[corners[r]], int(rows[r]))]
+        parts_tris.append(tris.reshape(-1, 3))
+        parts_src.append(src)
+    if not parts_tris:
+        return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+    if len(parts_tris) == 1:
+        return parts_tris[0], parts_src[0]
+    tris, src = np.concatenate(parts_tris), np.concatenate(parts_src)
+    order = np.argsort(src, kind="stable")
+    return tris[order], src[order]
+
+
+def _concave(vertices: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """(m,) bool: which polygons of ``corners`` (m, n) turn against their own normal at a corner."""
+    inside = (corners >= 0).all(axis=1) & (corners < len(vertices)).all(axis=1)
+    p = vertices[np.where(inside[:, None], corners, 0)]
+    edges = np.roll(p, -1, axis=1) - p
+    normal = np.cross(p, np.roll(p, -1, axis=1)).sum(axis=1)  # Newell's: twice the vector area
+    turns = np.einsum("mij,mj->mi", np.cross(np.roll(edges, 1, axis=1), edges), normal)
+    scale = np.einsum("mij,mij->mi", edges, edges).max(axis=1) * np.linalg.norm(normal, axis=1)
+    return inside & (turns < -1e-9 * scale[:, None]).any(axis=1)
+
+
+def _ear_clipped(points: np.ndarray, index: int) -> np.ndarray:
+    """(n-2, 3) local corner indices of one concave polygon's triangles, by ear clipping in its plane."""
+    import mapbox_earcut
+
+    normal = np.cross(points, np.roll(points, -1, axis=0)).sum(axis=0)
+    normal /= np.linalg.norm(normal)
+    u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    flat = np.column_stack([points @ u, points @ v])
+    if not Polygon(flat).is_valid:
+        raise CrossingPolygonError(index)
+    found = np.asarray(
+        mapbox_earcut.triangulate_float64(flat, np.array([len(points)], dtype=np.uint32)), dtype=np.int64
+    ).reshape(-1, 3)
+    if len(found) != len(points) - 2:
+        raise CrossingPolygonError(index)
+    # earcut winds its triangles its own way: turned to the polygon's, so the faces keep their normal
+    a, b, c = (flat[found[:, k]] for k in range(3))
+    cross = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    found[cross < 0] = found[cross < 0][:, ::-1]
+    return found

@@ -539,7 +539,7 @@ def load_ifc_scene(
         face_rooms,
         rooms=rooms,
         doors=door_list,
-        start=_file_start(chosen.entity, on_storey.values(), scale),
+        start=_file_start(source, chosen, on_storey.values(), scale),
         name=name if name is not None else f"{source}#{chosen.name}",
         metadata={
             "source": source,
@@ -782,8 +782,15 @@ def _is_external(space: Any) -> bool:
     return common.get("IsExternal") is True
 
 
-def _file_start(storey: Any, elements: Iterable[Any], scale: float) -> np.ndarray | None:
-    """The robot's start the file places on the storey (module docstring), world metres, or None."""
+def _file_start(source: str, chosen: _Storey, elements: Iterable[Any], scale: float) -> np.ndarray | None:
+    """The robot's start the file places on the storey (module docstring), world metres, or None.
+
+    Raises
+    ------
+    IfcError
+        The storey's ``Pset_NbsStart`` lacks ``StartX`` or ``StartY``, or one is no number (a label
+        ``'6.0'`` was dropped for the automatic start, a boolean taken as 1 m).
+    """
     import ifcopenshell.util.element
     import ifcopenshell.util.placement
 
@@ -792,8 +799,18 @@ def _file_start(storey: Any, elements: Iterable[Any], scale: float) -> np.ndarra
             return np.eye(4)
         return np.asarray(ifcopenshell.util.placement.get_local_placement(entity.ObjectPlacement), dtype=float)
 
-    props = ifcopenshell.util.element.get_psets(storey).get("Pset_NbsStart", {})
-    if isinstance(props.get("StartX"), (int, float)) and isinstance(props.get("StartY"), (int, float)):
+    storey = chosen.entity
+    props = ifcopenshell.util.element.get_psets(storey).get("Pset_NbsStart")
+    if props is not None:
+        for key in ("StartX", "StartY"):
+            value = props.get(key)
+            if type(value) not in (int, float) or not math.isfinite(value):
+                shown = "missing" if value is None else f"{value!r} ({type(value).__name__})"
+                raise IfcError(
+                    source,
+                    f"storey {chosen.name!r}: Pset_NbsStart.{key} is {shown}; the start is two lengths, "
+                    "StartX and StartY (IfcLengthMeasure), in the storey's coordinates",
+                )
         local = np.array([props["StartX"], props["StartY"], 0.0, 1.0], dtype=float)
         return (placement(storey) @ local)[:2] * scale
     for element in elements:

@@ -76,6 +76,7 @@ import shapely
 import trimesh
 
 from scenes.errors import InvalidMeshError, MissingStructureError, SceneFileError, UnsupportedFormatError
+from scenes.geometry import CrossingPolygonError, triangulate_polygons
 from scenes.headers import (
     PlyElement,
     PlyHeader,
@@ -357,8 +358,10 @@ def _read_obj(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
     text = text.replace("\\\n", " ")
     coords: list[str] = []
     coord_lines: list[int] = []
-    tris: list[tuple[int, int, int]] = []
-    tri_part: list[int] = []
+    polygons: list[list[int]] = []
+    polygon_part: list[int] = []
+    polygon_lines: list[int] = []
+    triangles = 0
     parts: dict[tuple[str | None, str | None], int] = {}
     obj: str | None = None
     group: str | None = None
@@ -400,12 +403,12 @@ def _read_obj(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
                         source, f"line {lineno}: vertex index {ref.split('/', 1)[0]} refers to no vertex of the file"
                     )
                 idx.append(i - 1 if i > 0 else len(coords) + i)
-            part = parts.setdefault((obj, group), len(parts))
-            for k in range(1, len(idx) - 1):
-                tris.append((idx[0], idx[k], idx[k + 1]))
-                tri_part.append(part)
-            if len(tris) > MAX_FACES:  # refused while the lists are still small
-                check_face_count(source, len(tris))
+            polygons.append(idx)
+            polygon_part.append(parts.setdefault((obj, group), len(parts)))
+            polygon_lines.append(lineno)
+            triangles += len(idx) - 2
+            if triangles > MAX_FACES:  # refused while the lists are still small
+                check_face_count(source, triangles)
         elif key == "o":
             # A new object ends the group: a group left over from the previous object must not
             # label this one.
@@ -430,8 +433,13 @@ def _read_obj(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
             source,
             f"line {coord_lines[k]}: a vertex has a coordinate that is no ASCII number: {('v ' + coords[k])[:80]!r}",
         ) from None
-    faces = np.array(tris, dtype=np.int64).reshape(-1, 3)
-    part_of = np.array(tri_part, dtype=np.int64)
+    try:
+        faces, polygon_of = triangulate_polygons(vertices, polygons)
+    except CrossingPolygonError as exc:
+        raise InvalidMeshError(
+            source, f"line {polygon_lines[exc.index]}: the face's outline crosses itself; split it into simple faces"
+        ) from None
+    part_of = np.asarray(polygon_part, dtype=np.int64)[polygon_of]
 
     n_parts = len(parts)
     part_cls = np.full(n_parts, SurfaceClass.CLUTTER.value, dtype=np.int64)
@@ -569,7 +577,11 @@ def _read_ply(
         else:
             # numpy's reason ("setting an array element with a sequence") names no record: find it.
             row = ascii_ply_row_error(data, header)
-            raise InvalidMeshError(source, row or f"cannot parse as ply: {type(exc).__name__}: {exc}") from exc
+            if row is not None:
+                raise InvalidMeshError(source, row) from exc
+            # Every row holds what its header says: trimesh failed on something else (lists of
+            # several lengths read as doubles, a 6-corner face beside quads), so read it here.
+            vertices, columns, props, n_raw = _read_ascii_ply(data, header)
     else:
         if not isinstance(mesh, trimesh.Trimesh):
             return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), []
@@ -623,18 +635,19 @@ def _read_ply(
             f"face {int(np.flatnonzero(odd)[0])}'s 'room' is {int(room_raw[odd][0])}; a room is -1 (none) or a "
             f"number up to {MAX_ROOM_NUMBER:,}",
         )
-    faces, src = [], []
     for i, poly in enumerate(polys):
         if len(poly) < 3:
             raise InvalidMeshError(source, f"PLY face {i} has {len(poly)} vertices; a face needs 3 or more")
-        for k in range(1, len(poly) - 1):
-            faces.append((poly[0], poly[k], poly[k + 1]))
-            src.append(i)
-    src_arr = np.array(src, dtype=np.int64)
+    try:
+        triangles, src_arr = triangulate_polygons(vertices, polys)
+    except CrossingPolygonError as exc:
+        raise InvalidMeshError(
+            source, f"PLY face {exc.index}'s outline crosses itself; split it into simple faces"
+        ) from None
     room_arr = room_raw.astype(np.int64)[src_arr] if len(src_arr) else np.zeros(0, np.int64)
     return (
         vertices,
-        np.array(faces, dtype=np.int64).reshape(-1, 3),
+        triangles,
         label_raw.astype(np.int64)[src_arr] if len(src_arr) else np.zeros(0, np.int64),
         np.where(room_arr < 0, -1, room_arr),
         [],
@@ -731,6 +744,49 @@ def _read_binary_ply(source: str, data: bytes, header: PlyHeader) -> tuple[np.nd
 
 class _PlyValueError(ValueError):
     """A PLY face element's values that are not what its header says they mean."""
+
+
+def _read_ascii_ply(data: bytes, header: PlyHeader) -> tuple[np.ndarray, dict[str, Any], list[str], int]:
+    """An ASCII PLY read record by record, as :func:`_read_binary_ply` reads a binary one, from a body
+    whose every row :func:`~scenes.headers.ascii_ply_row_error` found to hold its record. Values are
+    read as float64 and floats rounded to their declared type (a ``float`` coordinate is float32)."""
+    rows = data[header.body :].decode("ascii", errors="replace").splitlines()
+    read: dict[str, dict[str, Any]] = {}
+    at = 0
+    for element in header.elements:
+        block = rows[at : at + element.count]
+        at += element.count
+        props = element.properties
+        if not any(p.count_type for p in props):  # fixed-size records: one parse
+            values = np.array(" ".join(block).split(), dtype=float).reshape(element.count, len(props))
+            read[element.name] = {p.name: values[:, k] for k, p in enumerate(props)}
+            continue
+        columns: dict[str, list] = {p.name: [] for p in props}
+        for line in block:
+            words, k = line.split(), 0
+            for p in props:
+                if p.count_type is None:
+                    columns[p.name].append(float(words[k]))
+                    k += 1
+                    continue
+                n = int(float(words[k]))
+                columns[p.name].append(np.array(words[k + 1 : k + 1 + n], dtype=float))
+                k += 1 + n
+        read[element.name] = columns
+    kinds = {p.name: _PLY_NUMPY[p.type] for p in header.element("vertex").properties}
+    vertex, face = read["vertex"], read["face"]
+    vertices = np.column_stack(
+        [np.asarray(vertex[a], dtype=float).astype(kinds[a] if kinds[a][0] == "f" else "f8") for a in "xyz"]
+    ).astype(float)
+    out: dict[str, Any] = {}
+    for prop, values in face.items():
+        if values and isinstance(values[0], np.ndarray):
+            column = np.empty(len(values), dtype=object)
+            column[:] = values
+            out[prop] = column
+        else:
+            out[prop] = np.asarray(values, dtype=float)
+    return vertices.reshape(-1, 3), out, list(face), header.element("face").count
 
 
 def _integers_widened(header: PlyHeader, data: bytes) -> bytes:

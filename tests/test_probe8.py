@@ -433,3 +433,181 @@ def test_more_env_workers_than_the_machine_takes_are_refused_before_any_starts(t
     assert code == EXIT_USAGE and err.count("\n") == 1, err
     assert "--envs 5: this machine has 2 cores" in err and "pass at most --envs 4" in err, err
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("kind", ["on a straight wall", "written twice", "a nanometre apart", "closing the ring"])
+def test_a_room_corner_that_adds_nothing_to_the_outline_is_dropped(kind):
+    """A point where a neighbour's wall meets (a T junction, as plans traced from drawings have), or a
+    corner written twice, made the walls' offset drop a corner: the room was refused as "too narrow"."""
+    from pathlib import Path
+
+    from scenes.floorplan import FloorPlan
+
+    plan = json.loads((Path(__file__).parents[1] / "scenes" / "data" / "five_rooms.json").read_text())
+    faces = len(load_scene(FloorPlan.from_dict(plan, source="five_rooms.json")).mesh.faces)
+    ring = plan["rooms"][0]["polygon"]
+    (x0, y0), (x1, y1) = ring[0], ring[1]
+    plan["rooms"][0]["polygon"] = {
+        "on a straight wall": [ring[0], [(x0 + x1) / 2, (y0 + y1) / 2], *ring[1:]],
+        "written twice": [ring[0], ring[0], *ring[1:]],
+        "a nanometre apart": [ring[0], [x0 + 1e-9, y0], *ring[1:]],
+        "closing the ring": [*ring, ring[0]],
+    }[kind]
+    assert len(load_scene(FloorPlan.from_dict(plan, source="edited.json")).mesh.faces) == faces
+
+
+@pytest.mark.parametrize("start", [0, 2, 3])
+@pytest.mark.parametrize("fmt", ["obj", "ply"])
+def test_a_concave_polygon_face_is_triangulated_within_its_outline(start, fmt, tmp_path):
+    """An L-shaped floor written as one face was fanned from its first corner: from some corners the
+    fan covers the L's missing quarter, and the floor was a third larger, silently."""
+    import numpy as np
+
+    from scenes.labels import SurfaceClass
+
+    outline = [[0, 0], [8, 0], [8, 4], [4, 4], [4, 8], [0, 8]]
+    ring = list(range(6))[start:] + list(range(6))[:start]
+    vertices = [[x, y, 0] for x, y in outline] + [[x, y, 2.5] for x, y in outline]
+    walls = [[k, (k + 1) % 6, 6 + (k + 1) % 6, 6 + k] for k in range(6)]
+    ceiling = [6 + k for k in reversed(ring)]
+    faces = [("floor", ring), ("ceiling", ceiling)] + [("wall", w) for w in walls]
+    path = tmp_path / f"l.{fmt}"
+    if fmt == "obj":
+        text = "".join(f"v {x} {y} {z}\n" for x, y, z in vertices)
+        text += "".join(f"o {name}_{k}\nf {' '.join(str(i + 1) for i in f)}\n" for k, (name, f) in enumerate(faces))
+    else:
+        label = {"floor": 0, "ceiling": 1, "wall": 2}
+        text = (
+            f"ply\nformat ascii 1.0\nelement vertex {len(vertices)}\nproperty float x\nproperty float y\n"
+            f"property float z\nelement face {len(faces)}\nproperty list uchar int vertex_indices\n"
+            "property uchar label\nend_header\n"
+        )
+        text += "".join(f"{x} {y} {z}\n" for x, y, z in vertices)
+        text += "".join(f"{len(f)} {' '.join(map(str, f))} {label[name]}\n" for name, f in faces)
+    path.write_text(text)
+    scene = load_scene(str(path))
+    for cls in (SurfaceClass.FLOOR, SurfaceClass.CEILING):
+        mask = scene.face_labels == cls.value
+        assert scene.mesh.area_faces[mask].sum() == pytest.approx(48.0)
+        normals = scene.mesh.face_normals[mask][:, 2]
+        assert np.all(normals > 0.99) if cls is SurfaceClass.FLOOR else np.all(normals < -0.99)
+
+
+def test_a_polygon_face_that_crosses_itself_is_named(tmp_path):
+    path = tmp_path / "bow.obj"
+    path.write_text(
+        "v 0 0 0\nv 8 0 0\nv 8 4 0\nv 0 8 0\nv 0 0 2.5\nv 8 0 2.5\nv 8 8 2.5\n"
+        "o floor\nf 1 2 3\no wall\nf 1 3 2 4\no ceiling\nf 5 6 7\n"
+    )
+    with pytest.raises(InvalidMeshError, match=r"line 11: the face.s outline crosses itself"):
+        load_scene(str(path))
+
+
+@pytest.mark.parametrize(
+    "value, shown",
+    [("IFCLABEL('6.0')", r"'6\.0' \(str\)"), ("IFCBOOLEAN(.T.)", r"True \(bool\)"), (None, "missing")],
+)
+def test_an_ifc_start_that_is_no_pair_of_lengths_is_refused_naming_the_property(value, shown, tmp_path):
+    """A label '6.0' was dropped for the automatic start without a word, a boolean taken as 1 m."""
+    pytest.importorskip("ifcopenshell")
+    from pathlib import Path
+
+    from scenes import IfcError
+
+    text = (Path(__file__).parent / "data" / "two_rooms.ifc").read_text()
+    x = f"#5000=IFCPROPERTYSINGLEVALUE('StartX',$,{value},$);\n" if value else ""
+    props = "(#5000,#5001)" if value else "(#5001)"
+    added = (
+        f"{x}#5001=IFCPROPERTYSINGLEVALUE('StartY',$,IFCLENGTHMEASURE(2.),$);\n"
+        f"#5002=IFCPROPERTYSET('0aaaaaaaaaaaaaaaaaaaa1',$,'Pset_NbsStart',$,{props});\n"
+        "#5003=IFCRELDEFINESBYPROPERTIES('0aaaaaaaaaaaaaaaaaaaa2',$,$,$,(#14),#5002);\n"
+    )
+    at = text.rindex("ENDSEC;")
+    path = tmp_path / "start.ifc"
+    path.write_text(text[:at] + added + text[at:])
+    with pytest.raises(IfcError, match=rf"storey 'EG': Pset_NbsStart\.StartX is {shown}; the start is two lengths"):
+        load_scene(str(path), storey="EG")
+    path.write_text(text[:at] + added.replace(str(value), "IFCLENGTHMEASURE(6.)") + text[at:])
+    if value:
+        assert load_scene(str(path), storey="EG").start[:2].tolist() == [6.0, 2.0]
+
+
+def test_no_two_runs_of_a_comparison_share_a_folder(tmp_path, monkeypatch):
+    """`:` became `_`: `ppo:ck_x:y` and `ppo:ck_x_y` wrote one folder, each run over the other's records."""
+    import train.compare as compare
+    from train.compare import CompareError, RunSpec, check_out_dir, folder_name
+
+    assert folder_name("ppo:ck_x:y") != folder_name("ppo:ck_x_y") == "ppo_ck_x_y"
+    assert [folder_name(n) for n in ("ppo:reference", "generated:7", "greedy")] == [
+        "ppo_reference",
+        "generated_7",
+        "greedy",
+    ]
+    monkeypatch.setattr(compare, "folder_name", lambda name: "same")
+    specs = [RunSpec("l_room", "greedy", 0), RunSpec("l_room", "random", 0)]
+    with pytest.raises(CompareError, match=r"policy 'greedy' and of scene 'l_room', policy 'random' would keep"):
+        check_out_dir(tmp_path / "out", specs=specs)
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["scan", "--scene", "l_room", "--max-scans", "\u0661"], "argument --max-scans: expected an integer, got"),
+        (["scan", "--scene", "l_room", "--seed", "1_0"], "argument --seed: expected an integer, got"),
+        (["scan", "--scene", "l_room", "--start", "\u0663,3"], "argument --start: expected X,Y in metres"),
+        (["scenes", "generate", "--seed", "3", "--rooms", "\uff12", "--out", "g.json"], "argument --rooms"),
+        (["compare", "--scenes", "l_room", "--policies", "random", "--seeds", "1_0", "--out", "c"], "seeds must be"),
+        (["scan", "--scene", "l_room", "--policy", "greedy:0.9+stop=\u0660.1"], "greedy takes NEAR"),
+        (["scan", "--scene", "l_room", "--resolution", "0_5"], "argument --resolution: expected a number"),
+    ],
+)
+def test_command_line_numbers_are_ascii_as_in_every_file_nbs_env_reads(argv, message, tmp_path, monkeypatch, capsys):
+    """Python's int and float took Arabic-Indic and full-width digits and `_` separators."""
+    from train.cli import main as nbs
+
+    monkeypatch.chdir(tmp_path)
+    try:
+        code = nbs(argv)
+    except SystemExit as exc:
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == EXIT_USAGE and message in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "section, key, value, message",
+    [
+        ("image", "pixel", 1e-9, r"'image\.pixel': expected within \[0\.005, 1\] metres, got 1e-09"),
+        ("image", "band", 1e9, r"'image\.band': expected within \[0, 1\] metres, got 1e\+09"),
+        ("svm", "gamma", 1e308, r"'svm\.gamma': expected within \(0, 1e\+06\], got 1e\+308"),
+    ],
+)
+def test_a_classifier_file_whose_image_or_kernel_no_face_could_use_is_refused_at_load(section, key, value, message):
+    """A pixel of 1e-9 m (its checksum recomputed) loaded, then a face's image was a bare numpy
+    ValueError ("array is too big"); a gamma of 1e308 overflowed and every face was clutter."""
+    from importlib import resources
+
+    from nbs_env.errors import ModelFileError
+    from nbs_env.perception.structure import SEClassifier, _checksum
+
+    document = json.loads(resources.files("nbs_env.perception").joinpath("data/se_svm.json").read_text())
+    document[section][key] = value
+    del document["sha256"]
+    document["sha256"] = _checksum(document)
+    with pytest.raises(ModelFileError, match=message):
+        SEClassifier.from_text(json.dumps(document), source="edited.json")
+
+
+def test_the_preset_may_be_named_by_keyword_where_the_configuration_is_made():
+    """`NBSEnv(scene="office", preset="fast")` ended in a bare TypeError (make_config got the preset twice)."""
+    from nbs_env import NBSEnv
+    from nbs_env.config import make_config
+    from nbs_env.errors import ConfigError
+
+    assert make_config(preset="fast", scene="l_room") == make_config("fast", scene="l_room")
+    assert NBSEnv(scene="l_room", preset="fast").config == make_config("fast", scene="l_room")
+    with pytest.raises(ConfigError, match=r"preset 'paper' given as a field, but the configuration starts from 'fast'"):
+        NBSEnv("fast", preset="paper")
+    with pytest.raises(ConfigError, match=r"starts from a configuration of preset 'fast'"):
+        make_config(make_config("fast"), preset="paper")

@@ -49,10 +49,12 @@ def parse_range(text: str, most: int = MAX_RUNS) -> tuple[int, int]:
     ValueError
         Anything else, or a range of more than ``most`` values, with a message that quotes ``text``.
     """
+    from nbs_env.config.checks import parse_int
+
     lo, sep, hi = str(text).strip().partition("-")
     try:
-        a = int(lo)
-        b = int(hi) if sep else a
+        a = parse_int(lo)
+        b = parse_int(hi) if sep else a
     except ValueError:
         raise ValueError(f"expected N or A-B with integers 0 <= A <= B, got {text!r}") from None
     if a < 0 or b < a:
@@ -97,19 +99,38 @@ FLAGS = {
 
 
 def _number(text: str) -> float:
+    from nbs_env.config.checks import parse_float
+
     try:
-        value = float(text)
+        value = parse_float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
     return value  # its range, finiteness included, is the configuration's to check, by the field's name
+
+
+def whole(text: str) -> int:
+    """An argparse type: an integer in ASCII digits (its range is the configuration's to check)."""
+    from nbs_env.config.checks import parse_int
+
+    try:
+        return parse_int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+
+
+def number(text: str) -> float:
+    """An argparse type: a decimal number in ASCII (its range is the configuration's to check)."""
+    return _number(text)
 
 
 def integer_from(least: int, what: str = "expected an integer"):
     """An argparse type: an integer of at least ``least``; ``what`` begins the message."""
 
     def parse(text: str) -> int:
+        from nbs_env.config.checks import parse_int
+
         try:
-            value = int(text)
+            value = parse_int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
         if value < least:

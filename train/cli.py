@@ -54,10 +54,11 @@ def _rooms(text: str) -> int | tuple[int, int]:
 
 
 def _clutter_density(text: str) -> float:
+    from nbs_env.config.checks import parse_float
     from scenes.generator import MAX_CLUTTER_DENSITY
 
     try:
-        value = float(text)
+        value = parse_float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
     if not 0 <= value <= MAX_CLUTTER_DENSITY:
@@ -82,11 +83,13 @@ def _picture(text: str) -> Path:
 
 
 def _start(text: str) -> tuple[float, float]:
+    from nbs_env.config.checks import parse_float
+
     parts = text.split(",")
     try:
         if len(parts) != 2:
             raise ValueError
-        x, y = (float(v) for v in parts)
+        x, y = (parse_float(v) for v in parts)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected X,Y in metres (e.g. 3.0,4.5), got {text!r}") from None
     if not (math.isfinite(x) and math.isfinite(y)):

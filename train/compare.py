@@ -57,6 +57,7 @@ import numpy as np
 from nbs_env.atomic import replacing
 from nbs_env.atomic import write_text as _write_text
 from nbs_env.config import json_form
+from nbs_env.config.checks import parse_int
 from scenes.jsonio import read_json_file
 from train.arguments import MAX_RUNS, parse_range
 
@@ -1003,6 +1004,13 @@ def check_out_dir(out: str | Path, *, keep: bool = False, specs: Sequence[RunSpe
             if runs.is_dir()
             else None
         )
+    shared = _shared_folder(out, specs)
+    if shared is not None:
+        a, b = shared
+        raise CompareError(
+            f"the runs of scene {a.scene!r}, policy {a.policy!r} and of scene {b.scene!r}, policy {b.policy!r} "
+            f"would keep their records in one folder ({_run_folder(out, asdict(a)).parent}); rename one of them"
+        )
     if odd is None:
         in_the_way = _file_in_the_way(out, specs)
         if in_the_way is not None:
@@ -1018,6 +1026,17 @@ def check_out_dir(out: str | Path, *, keep: bool = False, specs: Sequence[RunSpe
             "replace it by the file or remove it, or choose another --out"
         )
     return out
+
+
+def _shared_folder(out: Path, specs: Sequence[RunSpec]) -> tuple[RunSpec, RunSpec] | None:
+    """Two runs of the grid whose records would share a folder (each would overwrite the other's)."""
+    seen: dict[Path, RunSpec] = {}
+    for spec in specs:
+        folder = _run_folder(out, asdict(spec))
+        other = seen.setdefault(folder, spec)
+        if other is not spec and (other.scene, other.policy) != (spec.scene, spec.policy):
+            return other, spec
+    return None
 
 
 def _file_in_the_way(out: Path, specs: Sequence[RunSpec]) -> tuple[Path, RunSpec] | None:
@@ -1074,11 +1093,12 @@ def folder_name(name: str) -> str:
     a run's files would land in nested folders or outside ``OUT``. Characters other than letters,
     digits, ``.``, ``_`` and ``-`` become ``_``, and a name so changed gets a short hash of itself,
     so that two names never share a folder (``ppo:a/b`` and ``ppo:a_b``). Plain names keep their
-    folders (``greedy``, ``ppo_reference``, ``generated_7``).
+    folders (``greedy``, ``ppo_reference``, ``generated_7``); a name with a second ``:`` is changed
+    (``ppo:ck_x:y`` and ``ppo:ck_x_y`` shared a folder, and each run overwrote the other's records).
     """
     plain = name.replace(":", "_")
     safe = re.sub(r"[^A-Za-z0-9._-]", "_", plain)
-    if safe == plain and safe not in (".", ".."):
+    if safe == plain and safe not in (".", "..") and name.count(":") <= 1:
         return safe
     return f"{safe.strip('.')}-{hashlib.sha256(name.encode()).hexdigest()[:8]}"
 
@@ -1452,7 +1472,7 @@ def grid(
     overrides = adopt_requirements(dict(overrides or {}), agreed_requirements(made))
     seed_items = _items("--seeds", seeds)
     try:
-        seed_list = [int(s) for s in seed_items]
+        seed_list = [parse_int(s) for s in seed_items]
     except ValueError:
         raise CompareError(f"seeds must be comma-separated integers, got {seeds!r}") from None
     if not seed_list:

@@ -31,13 +31,20 @@ import numpy as np
 from nbs_env import threads
 from nbs_env.atomic import replacing, write_text
 from nbs_env.config import Config, EnvConfig, _integer, _require
-from nbs_env.config.checks import _within
+from nbs_env.config.checks import _within, parse_float
 from nbs_env.config.rooms import MAX_SCANS
 from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES
 from policies.learned import NetworkConfig, build_network, save_checkpoint
 from scenes.jsonio import MAX_JSON_BYTES, read_json, read_json_file
-from train.arguments import add_robot_arguments, config_from_arguments, parse_range, scene_option_error
+from train.arguments import (
+    add_robot_arguments,
+    config_from_arguments,
+    number,
+    parse_range,
+    scene_option_error,
+    whole,
+)
 
 __all__ = ["TrainConfig", "check_memory", "main", "memory_claim", "train"]
 
@@ -1206,31 +1213,31 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = argparse.ArgumentParser(prog="nbs train", description="Train a masked PPO agent on generated storeys.")
     p.add_argument("--algo", choices=("maskable_ppo",), default="maskable_ppo")
-    p.add_argument("--timesteps", type=int, default=None, help="PPO timesteps in all (default 2048)")
-    p.add_argument("--envs", type=int, default=2)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--timesteps", type=whole, default=None, help="PPO timesteps in all (default 2048)")
+    p.add_argument("--envs", type=whole, default=2)
+    p.add_argument("--seed", type=whole, default=0)
     p.add_argument("--rooms", default="1-5", help="room range of the training storeys, e.g. 1-5")
-    p.add_argument("--eval-every", type=int, default=0, help="timesteps between evaluations (0: none)")
-    p.add_argument("--checkpoint-every", type=int, default=0, help="timesteps between checkpoints (0: none)")
-    p.add_argument("--bc-steps", type=int, default=0, help="vector steps of greedy play to warm-start from (0: none)")
+    p.add_argument("--eval-every", type=whole, default=0, help="timesteps between evaluations (0: none)")
+    p.add_argument("--checkpoint-every", type=whole, default=0, help="timesteps between checkpoints (0: none)")
+    p.add_argument("--bc-steps", type=whole, default=0, help="vector steps of greedy play to warm-start from (0: none)")
     p.add_argument(
         "--bc-teacher",
         default="greedy",
         help="the greedy behaviour cloning copies, e.g. greedy:stop=0.05 or greedy:0.8+stop=0.05 (default greedy)",
     )
-    p.add_argument("--eval-storeys", type=int, default=4, help="validation storeys per evaluation")
-    p.add_argument("--learning-rate", type=float, default=3e-4)
-    p.add_argument("--n-steps", type=int, default=64, help="steps per worker between PPO updates")
-    p.add_argument("--metre-cost", type=float, default=0.05, help="reward per metre driven, subtracted")
-    p.add_argument("--scan-cost", type=float, default=0.5, help="reward per scan, subtracted")
-    p.add_argument("--ent-coef", type=float, default=0.0, help="PPO's entropy bonus")
+    p.add_argument("--eval-storeys", type=whole, default=4, help="validation storeys per evaluation")
+    p.add_argument("--learning-rate", type=number, default=3e-4)
+    p.add_argument("--n-steps", type=whole, default=64, help="steps per worker between PPO updates")
+    p.add_argument("--metre-cost", type=number, default=0.05, help="reward per metre driven, subtracted")
+    p.add_argument("--scan-cost", type=number, default=0.5, help="reward per scan, subtracted")
+    p.add_argument("--ent-coef", type=number, default=0.0, help="PPO's entropy bonus")
     p.add_argument(
         "--completion",
         choices=("policy", "gain"),
         default="gain",
         help="who ends a room: the agent's 'room done' action (policy) or the robot's gain rule (gain, the default)",
     )
-    p.add_argument("--max-episode-steps", type=int, default=40, help="decisions per episode at the most")
+    p.add_argument("--max-episode-steps", type=whole, default=40, help="decisions per episode at the most")
     p.add_argument("--cell-size", default="2.0-3.6", help="range of the generator's cell edge in metres, e.g. 2.0-6.0")
     p.add_argument("--init", default="", help="checkpoint to start the network from (default: random weights)")
     p.add_argument("--out", type=output_path, help="the run folder (required unless --resume)")
@@ -1273,7 +1280,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         lo, _, hi = args.cell_size.partition("-")
-        cell_size = (float(lo), float(hi or lo))
+        cell_size = (parse_float(lo), parse_float(hi or lo))
     except ValueError:
         print(f"nbs train: error: --cell-size: expected A-B in metres, got {args.cell_size!r}", file=sys.stderr)
         return 2

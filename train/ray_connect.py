@@ -24,6 +24,7 @@ import os
 import socket
 from dataclasses import dataclass
 
+from nbs_env.config.checks import parse_int
 from nbs_env.errors import ConfigError
 
 __all__ = [
@@ -93,7 +94,7 @@ def _probe(address: str, source: str, timeout: float) -> None:
     host, colon, port_text = hostport.rpartition(":")
     host = host.strip("[]")  # an IPv6 literal, [::1]:6379
     try:
-        port = int(port_text)
+        port = parse_int(port_text)
     except ValueError:
         port = 0
     if not colon or not host or not 1 <= port <= 65535:

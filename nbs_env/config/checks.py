@@ -21,9 +21,43 @@ from typing import Any, TypeVar
 
 from nbs_env.errors import ConfigError
 
-__all__ = ["Config", "json_form"]
+__all__ = ["Config", "json_form", "parse_float", "parse_int"]
 
 C = TypeVar("C", bound="Config")
+
+
+# Numbers as a user types them: ASCII digits (Python's int and float also read "1_0" as 10 and
+# Arabic-Indic or full-width digits as digits, which nothing else a user runs does).
+_INT = re.compile(r"[+-]?[0-9]+", re.ASCII)
+_FLOAT = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?(?:nan|inf|infinity)", re.I)
+
+
+def parse_int(text: str) -> int:
+    """``int(text)`` for ASCII digits with an optional sign (blanks around allowed).
+
+    Raises
+    ------
+    ValueError
+        Anything else: ``"1_0"``, ``"\u0661"``, ``"1.0"``.
+    """
+    stripped = text.strip(" \t")
+    if not _INT.fullmatch(stripped):
+        raise ValueError(f"not an integer: {text!r}")
+    return int(stripped)
+
+
+def parse_float(text: str) -> float:
+    """``float(text)`` for a decimal number in ASCII (or ``nan``, ``inf``: ranges are the caller's).
+
+    Raises
+    ------
+    ValueError
+        Anything else: ``"1_0"``, ``"\u0663.5"``, ``"0x10"``.
+    """
+    stripped = text.strip(" \t")
+    if not _FLOAT.fullmatch(stripped):
+        raise ValueError(f"not a number: {text!r}")
+    return float(stripped)
 
 
 def _require(condition: bool, message: str) -> None:

@@ -88,13 +88,15 @@ def _resolve(key: str, paths: list[str]) -> str:
     return matches[0]
 
 
-def make_config(preset: str | EnvConfig = "default", **overrides: Any) -> EnvConfig:
+def make_config(preset: str | EnvConfig | None = None, /, **overrides: Any) -> EnvConfig:
     """A preset's configuration with fields replaced: the one override path.
 
     Parameters
     ----------
-    preset : str or EnvConfig
-        A name of :data:`PRESETS`, or a configuration to start from (its ``preset`` is kept).
+    preset : str or EnvConfig, optional
+        A name of :data:`PRESETS`, or a configuration to start from (its ``preset`` is kept);
+        ``"default"`` when omitted. It may be given by keyword too (``make_config(preset="fast",
+        scene="office")``, as ``NBSEnv(scene="office", preset="fast")`` passes it).
     **overrides
         Field names to values. A name is a top-level field (``scene="five_rooms"``), a dotted path
         (``**{"robot.scanner.angular_step": 1.0}``) or a field's own name where only one field of
@@ -113,6 +115,13 @@ def make_config(preset: str | EnvConfig = "default", **overrides: Any) -> EnvCon
         An unknown preset or field name, an ambiguous name (the message lists the candidates), or a
         value a configuration refuses.
     """
+    named = overrides.pop("preset", None)
+    if named is not None:
+        if preset is not None and preset != named:
+            shown = f"a configuration of preset {preset.preset!r}" if isinstance(preset, EnvConfig) else repr(preset)
+            raise ConfigError(f"preset {named!r} given as a field, but the configuration starts from {shown}: pass one")
+        preset = named
+    preset = "default" if preset is None else preset
     if isinstance(preset, EnvConfig):
         base, name, preset_overrides = preset.to_dict(), preset.preset, {}
     elif isinstance(preset, str) and preset in PRESETS:

@@ -60,6 +60,13 @@ MODEL_VERSION = 1
 FEATURE_NAMES = ("alpha", "delta", "epsilon")
 #: Packaged model, relative to the ``nbs_env.perception`` package (written by the training script).
 DEFAULT_MODEL_RESOURCE = "data/se_svm.json"
+#: Metres a face image's pixel may take in a stored model (the shipped one's is 0.05): as the voxels'
+#: sizes are bounded, and for the same reason (1e-9 m asked numpy for an image it cannot index).
+PIXEL_RANGE = (0.005, 1.0)
+#: Metres of the band about a face plane whose points make its image (the shipped one's is 0.10).
+BAND_RANGE = (0.0, 1.0)
+#: The largest RBF gamma a stored model may hold (the shipped one's is 0.33, on standardised features).
+MAX_GAMMA = 1e6
 
 _TOP_KEYS = frozenset({"format", "version", "features", "image", "scaler", "svm", "training", "sha256"})
 
@@ -304,13 +311,16 @@ class SEClassifier:
                 f"shape ({len(self.support_vectors)},), one per support vector",
             ),
             ("svm.intercept", np.array(self.intercept), True, "a number"),
-            ("svm.gamma", np.array(self.gamma), self.gamma > 0, "> 0"),
-            ("image.pixel", np.array(self.pixel), self.pixel > 0, "> 0 metres"),
-            ("image.band", np.array(self.band), self.band >= 0, ">= 0 metres"),
+            # The features are standardised, so gamma is about 1 / features; far beyond, exp overflows.
+            ("svm.gamma", np.array(self.gamma), 0 < self.gamma <= MAX_GAMMA, f"within (0, {MAX_GAMMA:g}]"),
+            # Bounded as the voxels are: an image of 1e-9 m pixels asked numpy for more than it can index.
+            ("image.pixel", np.array(self.pixel), PIXEL_RANGE[0] <= self.pixel <= PIXEL_RANGE[1], _metres(PIXEL_RANGE)),
+            ("image.band", np.array(self.band), BAND_RANGE[0] <= self.band <= BAND_RANGE[1], _metres(BAND_RANGE)),
         ]
         for name, array, ok, expected in checks:
             if not ok:
-                return name, f"expected {expected}, got shape {array.shape}"
+                got = f"{float(array):g}" if array.shape == () else f"shape {array.shape}"
+                return name, f"expected {expected}, got {got}"
             if not np.all(np.isfinite(array)):
                 return name, "values must be finite"
         return None
@@ -627,6 +637,10 @@ class SEClassifier:
         if problem is not None:
             raise fail(*problem)
         return model
+
+
+def _metres(bounds: tuple[float, float]) -> str:
+    return f"within [{bounds[0]:g}, {bounds[1]:g}] metres"
 
 
 @functools.cache
