@@ -355,6 +355,9 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
         raise InvalidMeshError(source, f"invalid glTF JSON: {exc}") from None
     if not isinstance(doc, dict):
         raise InvalidMeshError(source, "the glTF JSON is not an object")
+    version = doc.get("asset", {}).get("version") if isinstance(doc.get("asset"), dict) else None
+    if isinstance(version, str) and not version.startswith("2."):
+        raise InvalidMeshError(source, f"asset.version is {version[:20]!r}: nbs-env reads glTF 2.0, export it so")
     # Before anything is read: trimesh skips what it cannot decode (printing a line of its own) and
     # would load the file's fallback or placeholder data as the geometry.
     _check_extensions(source, doc)
@@ -522,10 +525,18 @@ def _glb_chunks(source: str, data: bytes) -> tuple[bytes, int]:
         raise InvalidMeshError(
             source, f"the GLB file is {len(data)} bytes: a header with no JSON chunk after it (it is truncated)"
         )
-    (length,) = struct.unpack_from("<I", data, 8)
+    version, length = struct.unpack_from("<II", data, 4)
+    if version != 2:
+        raise InvalidMeshError(source, f"a GLB of version {version} (glTF 2.0 is version 2): export it as glTF 2.0")
     if length > len(data):
         raise InvalidMeshError(
             source, f"the GLB header declares {length:,} bytes, but the file has {len(data):,}: it is truncated"
+        )
+    if length < len(data):
+        raise InvalidMeshError(
+            source,
+            f"the GLB header declares {length:,} bytes, but the file has {len(data):,}: bytes follow its end "
+            "(two files joined, or a header written before the file grew)",
         )
     chunks = []
     offset = 12
@@ -540,6 +551,9 @@ def _glb_chunks(source: str, data: bytes) -> tuple[bytes, int]:
         offset += 8 + chunk_length
     if not chunks or chunks[0][0] != _CHUNK_JSON:
         raise InvalidMeshError(source, "the GLB file's first chunk is not its JSON")
+    if any(kind == _CHUNK_JSON for kind, _ in chunks[1:]):
+        # The specification allows exactly one: readers differ in which they would take.
+        raise InvalidMeshError(source, "the GLB file holds a second JSON chunk (a GLB holds one)")
     # The specification has readers skip chunks of types they do not know, wherever they stand, and
     # the reader takes the first BIN chunk after the JSON as buffer 0.
     return chunks[0][1], next((len(c) for t, c in chunks[1:] if t == _CHUNK_BIN), 0)

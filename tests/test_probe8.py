@@ -611,3 +611,33 @@ def test_the_preset_may_be_named_by_keyword_where_the_configuration_is_made():
         NBSEnv("fast", preset="paper")
     with pytest.raises(ConfigError, match=r"starts from a configuration of preset 'fast'"):
         make_config(make_config("fast"), preset="paper")
+
+
+@pytest.mark.parametrize(
+    "damage, message",
+    [
+        (lambda b: b + b"GARBAGE!", r"but the file has [\d,]+: bytes follow its end"),
+        (lambda b: b[:4] + struct.pack("<I", 1) + b[8:], r"a GLB of version 1 \(glTF 2\.0 is version 2\)"),
+    ],
+)
+def test_a_glb_framed_otherwise_than_its_header_says_is_named(damage, message, glb_parts, tmp_path):
+    """Bytes after the declared end gave trimesh's "chunk was not expected length!", a version-1
+    header its NotImplementedError."""
+    json_chunk, binary, _ = glb_parts
+    path = tmp_path / "x.glb"
+    path.write_bytes(damage(_glb(json_chunk, [(b"BIN\0", binary)])))
+    with pytest.raises(InvalidMeshError, match=message):
+        load_scene(str(path))
+
+
+def test_a_glb_with_two_json_chunks_or_a_gltf_1_header_is_refused(glb_parts, tmp_path):
+    json_chunk, binary, _ = glb_parts
+    path = tmp_path / "x.glb"
+    path.write_bytes(_glb(json_chunk, [(b"BIN\0", binary), (b"JSON", json_chunk)]))
+    with pytest.raises(InvalidMeshError, match=r"holds a second JSON chunk"):
+        load_scene(str(path))
+    doc = json.loads(json_chunk)
+    doc["asset"]["version"] = "1.0"
+    path.write_bytes(_glb(json.dumps(doc).encode(), [(b"BIN\0", binary)]))
+    with pytest.raises(InvalidMeshError, match=r"asset\.version is '1\.0': nbs-env reads glTF 2\.0"):
+        load_scene(str(path))
