@@ -143,9 +143,7 @@ class NBSEnv(gym.Env):
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 2}
 
     def __init__(self, config: EnvConfig | str | None = None, render_mode: str | None = None, **overrides: Any) -> None:
-        if config is None or isinstance(config, str):
-            config = make_config(config, **overrides)
-        elif isinstance(config, EnvConfig) and overrides:
+        if config is None or isinstance(config, str) or (isinstance(config, EnvConfig) and overrides):
             config = make_config(config, **overrides)
         if not isinstance(config, EnvConfig):
             raise ConfigError(f"config must be an EnvConfig or a preset name, got {type(config).__name__}")

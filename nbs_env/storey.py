@@ -50,7 +50,17 @@ from scenes.geometry import point_is_free
 from scenes.labels import STRUCTURAL_CLASSES
 from scenes.limits import MAX_ORIGIN_DISTANCE
 
-__all__ = ["STAGES", "ScanPoints", "ScanRecord", "StageTimes", "StepOutcome", "Storey", "join_paths", "resolve_scene"]
+__all__ = [
+    "STAGES",
+    "ScanPoints",
+    "ScanRecord",
+    "StageTimes",
+    "StepOutcome",
+    "Storey",
+    "join_paths",
+    "resolve_scene",
+    "start_problem",
+]
 
 #: Stage names of a scan's ``times``, in the order a step runs them.
 STAGES = ("scan", "registration", "roi", "classification", "voxels", "planning")
@@ -279,13 +289,23 @@ def resolve_scene(
                 f"{scene.name}: start {np.round(start, 3).tolist()} is {float(start[2]) - floor:+.2f} m from the "
                 f"floor under it (at z = {floor:.3f} m); give (x, y) and the floor's height is taken"
             )
-    inside = not scene.rooms or any(shapely.contains_xy(Polygon(r.polygon), *xy) for r in scene.rooms)
-    if not inside or not point_is_free(scene, xy, float(scene.start[2]), config.robot.navigation.robot_radius):
-        raise InvalidPoseError(
-            f"{scene.name}: start {np.round(scene.start[:2], 3).tolist()} is not free floor "
-            f"(inside a wall or an object, or outside the building)"
-        )
+    problem = start_problem(scene, config.robot.navigation.robot_radius)
+    if problem is not None:
+        raise InvalidPoseError(f"{scene.name}: {problem}")
     return scene
+
+
+def start_problem(scene: Scene, radius: float) -> str | None:
+    """Why a robot of ``radius`` metres cannot stand at the scene's start, or None: the start must
+    be free floor of a room (``nbs scenes info`` says so as :func:`resolve_scene` refuses it)."""
+    xy = scene.start[:2]
+    inside = not scene.rooms or any(shapely.contains_xy(Polygon(r.polygon), *xy) for r in scene.rooms)
+    if not inside or not point_is_free(scene, xy, float(scene.start[2]), radius):
+        return (
+            f"start {np.round(scene.start[:2], 3).tolist()} is not free floor "
+            "(inside a wall or an object, or outside the building)"
+        )
+    return None
 
 
 class Storey:

@@ -641,3 +641,13 @@ def test_a_glb_with_two_json_chunks_or_a_gltf_1_header_is_refused(glb_parts, tmp
     path.write_bytes(_glb(json.dumps(doc).encode(), [(b"BIN\0", binary)]))
     with pytest.raises(InvalidMeshError, match=r"asset\.version is '1\.0': nbs-env reads glTF 2\.0"):
         load_scene(str(path))
+
+
+def test_scenes_info_says_when_nbs_scan_would_refuse_the_start():
+    """A file's start 60 m away was printed by `nbs scenes info` as any other, and refused by `nbs scan`."""
+    from train.cli import _scene_summary
+
+    scene = load_scene("l_room")
+    assert _scene_summary(scene)["start_problem"] is None
+    scene.start = (60.0, 2.0)
+    assert "start [60.0, 2.0] is not free floor" in _scene_summary(scene)["start_problem"]

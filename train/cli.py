@@ -360,9 +360,13 @@ def _load(args: argparse.Namespace):
 
 
 def _scene_summary(scene) -> dict:
+    from nbs_env.config import EnvConfig
+    from nbs_env.storey import start_problem
     from scenes import SurfaceClass
 
     areas = scene.class_areas()
+    # As nbs scan checks it, with the default robot: a start it refuses is said here too.
+    refused = start_problem(scene, EnvConfig().robot.navigation.robot_radius)
     return {
         "name": scene.name,
         "faces": len(scene.mesh.faces),
@@ -374,6 +378,7 @@ def _scene_summary(scene) -> dict:
             for d in scene.doors
         ],
         "start": [round(float(v), 3) for v in scene.start],
+        "start_problem": refused,
     }
 
 
