@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -188,10 +189,12 @@ def check_source(text: str) -> None:
     """
     if text.startswith(_GENERATED):
         seed_text = text[len(_GENERATED) :]
-        try:
-            int(seed_text)
-        except ValueError:
-            raise UnknownSceneError(text, f"the seed {seed_text!r} is not an integer (use generated:SEED)") from None
+        # ASCII digits: Python's int also reads " 1", "+1", "1_0" and Arabic-Indic digits, so one
+        # storey had several names (a comparison ran it twice).
+        if not re.fullmatch(r"[0-9]+", seed_text):
+            raise UnknownSceneError(
+                text, f"the seed {seed_text!r} is not an integer >= 0 in digits (use generated:SEED)"
+            )
         return
     path = Path(text)
     suffix = path.suffix.lower()

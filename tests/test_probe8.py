@@ -651,3 +651,24 @@ def test_scenes_info_says_when_nbs_scan_would_refuse_the_start():
     assert _scene_summary(scene)["start_problem"] is None
     scene.start = (60.0, 2.0)
     assert "start [60.0, 2.0] is not free floor" in _scene_summary(scene)["start_problem"]
+
+
+def test_two_spellings_of_one_scene_or_checkpoint_are_one_run(monkeypatch):
+    """`generated:1,generated:01` ran and tabled one storey twice; `ppo:tr,ppo:./tr` one checkpoint."""
+    from policies.learned import BUNDLED
+    from train.compare import CompareError, grid
+
+    with pytest.raises(CompareError, match=r"--scenes names generated:1 and generated:01: one run each"):
+        grid("generated:1,generated:01", "random", "0")
+    folder = BUNDLED["reference"]
+    monkeypatch.chdir(folder.parent)
+    with pytest.raises(CompareError, match=r"--policies names ppo:reference and ppo:\./ppo_reference: one run"):
+        grid("l_room", f"ppo:reference,ppo:./{folder.name}", "0")
+    with pytest.raises(CompareError, match=r"--policies names ppo:reference and ppo:[^ ]*policy\.json"):
+        grid("l_room", f"ppo:reference,ppo:{folder / 'policy.json'}", "0")
+    assert len(grid("generated:1,generated:2", "random", "0")) == 2
+    from scenes import UnknownSceneError, load_scene
+
+    for name in ("generated:+1", "generated: 1", "generated:\u0661", "generated:-1"):
+        with pytest.raises(UnknownSceneError, match=r"is not an integer >= 0 in digits"):
+            load_scene(name)

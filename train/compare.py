@@ -1402,14 +1402,44 @@ def _finite_leaves(node: Any) -> bool:
     return True
 
 
-def _refuse_repeats(flag: str, values: Sequence[Any]) -> None:
-    """A scene, policy or seed given twice would count one run twice in the table's means."""
-    counts: dict[Any, int] = {}
-    for value in values:
-        counts[value] = counts.get(value, 0) + 1
-    repeated = [f"{value} ({n} times)" for value, n in counts.items() if n > 1]
+def _refuse_repeats(flag: str, values: Sequence[Any], identities: Sequence[Any] | None = None) -> None:
+    """A scene, policy or seed given twice would count one run twice in the table's means.
+    ``identities`` tell what each value is, where two spellings name one (``generated:1`` and
+    ``generated:01``, ``ppo:run`` and ``ppo:./run``)."""
+    named: dict[Any, list[Any]] = {}
+    for value, identity in zip(values, identities if identities is not None else values, strict=True):
+        named.setdefault(identity, []).append(value)
+    repeated = [
+        f"{spellings[0]} ({len(spellings)} times)" if len(set(spellings)) == 1 else " and ".join(map(str, spellings))
+        for spellings in named.values()
+        if len(spellings) > 1
+    ]
     if repeated:
-        raise CompareError(f"{flag} names {', '.join(repeated)}; each run is counted once: give each once")
+        raise CompareError(f"{flag} names {'; '.join(repeated)}: one run each; give each once")
+
+
+def _scene_identity(scene: str) -> Any:
+    """What a scene spec names: a generated seed as its number, a file as its real path."""
+    if scene.startswith("generated:") and scene[len("generated:") :].isdigit():
+        return ("generated", int(scene[len("generated:") :]))
+    path = Path(scene)
+    if path.suffix and path.exists():
+        return ("file", path.resolve())
+    return ("name", scene)
+
+
+def _policy_identity(policy: str) -> Any:
+    """What a policy spec names: a ``ppo:`` checkpoint as its real folder (``ppo:run``, ``ppo:./run``
+    and ``ppo:run/policy.json`` are one)."""
+    if policy.startswith("ppo:"):
+        try:
+            from policies.learned import resolve_checkpoint
+
+            path = resolve_checkpoint(policy[len("ppo:") :]).resolve()
+        except Exception:  # no such checkpoint: make_policy says so next
+            return ("name", policy)
+        return ("ppo", path.parent if path.name == "policy.json" else path)
+    return ("name", policy)
 
 
 def _items(flag: str, text: str) -> list[str]:
@@ -1460,8 +1490,8 @@ def grid(
     policy_list = _items("--policies", policies)
     if not policy_list:
         raise CompareError("no policies given")
-    _refuse_repeats("--scenes", scene_list)
-    _refuse_repeats("--policies", policy_list)
+    _refuse_repeats("--scenes", scene_list, [_scene_identity(x) for x in scene_list])
+    _refuse_repeats("--policies", policy_list, [_policy_identity(p) for p in policy_list])
     from nbs_env.errors import ModelFileError
     from train.arguments import adopt_requirements, scene_option_error
 
