@@ -311,11 +311,14 @@ def _concave(vertices: np.ndarray, corners: np.ndarray) -> np.ndarray:
     """(m,) bool: which polygons of ``corners`` (m, n) turn against their own normal at a corner."""
     inside = (corners >= 0).all(axis=1) & (corners < len(vertices)).all(axis=1)
     p = vertices[np.where(inside[:, None], corners, 0)]
-    edges = np.roll(p, -1, axis=1) - p
-    normal = np.cross(p, np.roll(p, -1, axis=1)).sum(axis=1)  # Newell's: twice the vector area
-    turns = np.einsum("mij,mj->mi", np.cross(np.roll(edges, 1, axis=1), edges), normal)
-    scale = np.einsum("mij,mij->mi", edges, edges).max(axis=1) * np.linalg.norm(normal, axis=1)
-    return inside & (turns < -1e-9 * scale[:, None]).any(axis=1)
+    # Coordinates no storey has (1e300, inf) overflow here: such a polygon is fanned, and the
+    # storey's size check names the coordinates.
+    with np.errstate(over="ignore", invalid="ignore"):
+        edges = np.roll(p, -1, axis=1) - p
+        normal = np.cross(p, np.roll(p, -1, axis=1)).sum(axis=1)  # Newell's: twice the vector area
+        turns = np.einsum("mij,mj->mi", np.cross(np.roll(edges, 1, axis=1), edges), normal)
+        scale = np.einsum("mij,mij->mi", edges, edges).max(axis=1) * np.linalg.norm(normal, axis=1)
+        return inside & (turns < -1e-9 * scale[:, None]).any(axis=1)
 
 
 def _ear_clipped(points: np.ndarray, index: int) -> np.ndarray:

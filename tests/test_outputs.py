@@ -254,7 +254,7 @@ needs_proc = pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="r
 def test_a_signal_during_nbs_scan_writes_the_report_of_the_scans_taken(tmp_path, sig):
     out = tmp_path / "report"
     args = ["scan", "--scene", "l_room", "--preset", "fast", "--max-scans", "30", "--quiet", "--out", str(out)]
-    proc = _start(args, out, "steps/step_000.png")
+    proc = _start(args, out, ".steps-*/step_000.png")  # the pictures wait there until the report is written
     proc.send_signal(sig)
     stdout, stderr = proc.communicate(timeout=120)
     assert proc.returncode == 128 + sig, stderr
@@ -266,6 +266,7 @@ def test_a_signal_during_nbs_scan_writes_the_report_of_the_scans_taken(tmp_path,
     for file in ("scans.e57", "cloud.laz", "cloud.ply", "samples.npz", "topdown.png"):
         assert (out / file).stat().st_size > 0, file
     assert len(list((out / "steps").glob("step_*.png"))) == metrics["scans"] and leftovers(out) == []
+    assert not list(out.glob(".steps-*"))
 
 
 def test_a_second_signal_waits_while_the_work_writes_what_it_keeps():
