@@ -4,7 +4,8 @@ Prints, per file, the time of the checks (``scenes.stepgraph.check_references`` 
 reference graph, its cycles and depth; ``scenes.headers.check_ply_header`` for PLY) and of the
 reader they guard (``ifcopenshell.open``; trimesh's PLY load) in the same process, and their ratio;
 for IFC also the whole load of a storey (``load_scene``, with its geometry), which is what a user waits
-for.
+for. Last, nbs-env's own OBJ reader (``scenes.importers._read_obj``: the format's grammar, polygon faces
+ear-clipped where concave) against trimesh's OBJ load of the same text.
 
 Usage: python benchmarks/file_checks.py [--repeat 5]
 """
@@ -68,6 +69,41 @@ def main() -> None:
                 args.repeat,
             )
             print(f"{ply.name:32s} {len(data):10,d} {checks * 1e3:10.2f} {reader * 1e3:10.1f} {checks / reader:6.3f}")
+    import numpy as np
+
+    from scenes.importers import _read_obj
+
+    rng = np.random.default_rng(0)
+    grid = 300  # a 300 x 300 lattice of quads, and 200,000 scattered triangles
+    xs, ys = np.meshgrid(np.arange(grid), np.arange(grid))
+    quads = (
+        "".join(f"v {x} {y} 0\n" for x, y in zip(xs.ravel(), ys.ravel(), strict=True))
+        + "o floor\n"
+        + "".join(
+            f"f {i * grid + j + 1} {i * grid + j + 2} {(i + 1) * grid + j + 2} {(i + 1) * grid + j + 1}\n"
+            for i in range(grid - 1)
+            for j in range(grid - 1)
+        )
+    )
+    points = rng.random((200_000, 3)) * 10
+    triangles = (
+        "o wall\n"
+        + "".join(f"v {a:.6f} {b:.6f} {c:.6f}\n" for a, b, c in points)
+        + "".join(f"f {i + 1} {i + 2} {i + 3}\n" for i in range(len(points) - 2))
+    )
+    print(f"\n{'OBJ':32s} {'bytes':>10s} {'nbs ms':>10s} {'trimesh ms':>10s} {'ratio':>6s}")
+    for name, text in (("office.obj", None), ("quads_300x300.obj", quads), ("triangles_200k.obj", triangles)):
+        if text is None:
+            with tempfile.TemporaryDirectory() as folder:
+                export_scene(load_scene("office"), Path(folder) / name)
+                text = (Path(folder) / name).read_text()
+        data = text.encode()
+        ours = best(lambda data=data: _read_obj("x.obj", data), args.repeat)
+        theirs = best(
+            lambda data=data: trimesh.load(io.BytesIO(data), file_type="obj", force="mesh", process=False),
+            args.repeat,
+        )
+        print(f"{name:32s} {len(data):10,d} {ours * 1e3:10.1f} {theirs * 1e3:10.1f} {ours / theirs:6.2f}")
     sys.stdout.flush()
 
 
