@@ -260,7 +260,8 @@ def triangulate_polygons(vertices: np.ndarray, polygons: Sequence[Sequence[int]]
     A convex polygon is fanned from its first corner, as every reader does. A concave one (an
     L-shaped slab written as one face) is triangulated by ear clipping in its plane
     (``mapbox_earcut``), as Blender and Assimp do: the fan covered what lies outside it, and an L
-    floor read so was a third larger, silently.
+    floor read so was a third larger, silently. A corner repeated next to itself (a collapsed edge)
+    is one corner; a polygon left with fewer than 3 has no surface and no triangle.
 
     Parameters
     ----------
@@ -279,9 +280,8 @@ def triangulate_polygons(vertices: np.ndarray, polygons: Sequence[Sequence[int]]
     Raises
     ------
     CrossingPolygonError
-        A concave polygon whose outline crosses itself.
+        A polygon whose outline crosses or overlaps itself (a bow-tie, a star, a ring written twice).
     """
-
     vertices = np.asarray(vertices, dtype=float)
     lengths = np.fromiter((len(p) for p in polygons), dtype=np.int64, count=len(polygons))
     parts_tris, parts_src = [], []
@@ -289,15 +289,17 @@ def triangulate_polygons(vertices: np.ndarray, polygons: Sequence[Sequence[int]]
         rows = np.flatnonzero(lengths == n)
         same = len(rows) == len(polygons)  # one size (triangles, or quads), the common file: no gather
         corners = np.array(polygons if same else [polygons[i] for i in rows], dtype=np.int64).reshape(len(rows), n)
+        if n > 3:
+            special = _not_simply_convex(vertices, corners)
+            for r in np.flatnonzero(special):
+                tris = corners[r][_one_polygon(vertices, corners[r], int(rows[r]))]
+                parts_tris.append(tris)
+                parts_src.append(np.full(len(tris), rows[r]))
+            corners, rows = corners[~special], rows[~special]
         fan = np.arange(1, n - 1)
         tris = np.stack([np.repeat(corners[:, :1], n - 2, axis=1), corners[:, fan], corners[:, fan + 1]], axis=2)
-        src = np.repeat(rows, n - 2)
-        if n > 3:
-            concave = _concave(vertices, corners)
-            for r in np.flatnonzero(concave):
-                tris[r] = corners[r][_ear_clipped(vertices[corners[r]], int(rows[r]))]
         parts_tris.append(tris.reshape(-1, 3))
-        parts_src.append(src)
+        parts_src.append(np.repeat(rows, n - 2))
     if not parts_tris:
         return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
     if len(parts_tris) == 1:
@@ -307,18 +309,44 @@ def triangulate_polygons(vertices: np.ndarray, polygons: Sequence[Sequence[int]]
     return tris[order], src[order]
 
 
-def _concave(vertices: np.ndarray, corners: np.ndarray) -> np.ndarray:
-    """(m,) bool: which polygons of ``corners`` (m, n) turn against their own normal at a corner."""
+def _not_simply_convex(vertices: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """(m,) bool: which polygons of ``corners`` (m, n) a fan would not cover exactly: a corner
+    repeated next to itself, a turn against the polygon's own normal (concave), or turns that add up
+    to more than one round (a star, a ring written twice), or none (a bow-tie's lobes cancel)."""
     inside = (corners >= 0).all(axis=1) & (corners < len(vertices)).all(axis=1)
+    repeated = (corners == np.roll(corners, -1, axis=1)).any(axis=1)
     p = vertices[np.where(inside[:, None], corners, 0)]
     # Coordinates no storey has (1e300, inf) overflow here: such a polygon is fanned, and the
     # storey's size check names the coordinates.
-    with np.errstate(over="ignore", invalid="ignore"):
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         edges = np.roll(p, -1, axis=1) - p
         normal = np.cross(p, np.roll(p, -1, axis=1)).sum(axis=1)  # Newell's: twice the vector area
-        turns = np.einsum("mij,mj->mi", np.cross(np.roll(edges, 1, axis=1), edges), normal)
-        scale = np.einsum("mij,mij->mi", edges, edges).max(axis=1) * np.linalg.norm(normal, axis=1)
-        return inside & (turns < -1e-9 * scale[:, None]).any(axis=1)
+        length = np.linalg.norm(normal, axis=1)
+        bends = np.cross(np.roll(edges, 1, axis=1), edges)
+        turns = np.einsum("mij,mj->mi", bends, normal)
+        scale = np.einsum("mij,mij->mi", edges, edges).max(axis=1) * length
+        concave = (turns < -1e-9 * scale[:, None]).any(axis=1)
+        angles = np.arctan2(turns / length[:, None], np.einsum("mij,mij->mi", np.roll(edges, 1, axis=1), edges))
+        rounds = np.abs(angles.sum(axis=1)) / (2 * np.pi)
+        bent = np.linalg.norm(bends, axis=2).max(axis=1) > 1e-12 * np.einsum("mij,mij->mi", edges, edges).max(axis=1)
+        # A flat polygon with corners that bend (its lobes cancel) or one that goes round twice.
+        overturned = (length <= 1e-12 * scale + 1e-300) & bent | (rounds > 1.5)
+    return inside & (repeated | concave | overturned)
+
+
+def _one_polygon(vertices: np.ndarray, corners: np.ndarray, index: int) -> np.ndarray:
+    """(k, 3) local corner indices of one polygon that is no plain convex one (:func:`_not_simply_convex`)."""
+    keep = corners != np.roll(corners, -1)
+    local = np.flatnonzero(keep) if not keep.all() else np.arange(len(corners))
+    if len(local) < 3:  # collapsed to an edge or a point: no surface
+        return np.zeros((0, 3), np.int64)
+    if len(local) == 3:
+        return local[None, :]
+    points = vertices[corners[local]]
+    if not _not_simply_convex(vertices, corners[local][None, :])[0]:
+        fan = np.arange(1, len(local) - 1)
+        return np.column_stack([np.full(len(fan), local[0]), local[fan], local[fan + 1]])
+    return local[_ear_clipped(points, index)]
 
 
 def _ear_clipped(points: np.ndarray, index: int) -> np.ndarray:
@@ -326,6 +354,8 @@ def _ear_clipped(points: np.ndarray, index: int) -> np.ndarray:
     import mapbox_earcut
 
     normal = np.cross(points, np.roll(points, -1, axis=0)).sum(axis=0)
+    if not np.linalg.norm(normal) > 0:  # its lobes cancel: a bow-tie
+        raise CrossingPolygonError(index)
     normal /= np.linalg.norm(normal)
     u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
     u /= np.linalg.norm(u)

@@ -347,8 +347,14 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
         text, bin_length = _glb_chunks(source, data)
     else:
         text, bin_length = data, None
+    if text.startswith(b"\xef\xbb\xbf"):
+        # glTF 2.0 requires UTF-8 without a BOM, and trimesh's reader fails on one (naming a file the
+        # input never names).
+        raise InvalidMeshError(
+            source, "the glTF JSON starts with a byte-order mark, which glTF 2.0 forbids: save it as UTF-8 without one"
+        )
     try:
-        doc = read_json(text.decode("utf-8-sig"))
+        doc = read_json(text.decode("utf-8"))
     except UnicodeDecodeError:
         raise InvalidMeshError(source, "the glTF JSON is not UTF-8 text") from None
     except json.JSONDecodeError as exc:
@@ -366,7 +372,7 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
     views = _items(source, doc, "bufferViews")
     for i, image in enumerate(_items(source, doc, "images")):
         if isinstance(image.get("uri"), str) and not image["uri"].startswith("data:"):
-            _side_file(source, path, image["uri"], f"images[{i}]")
+            _side_file(source, path, image["uri"], f"images[{i}]", required=False)
     nodes = _items(source, doc, "nodes")
     _check_node_tree(source, nodes)
     drawn = _check_scenes_and_modes(source, doc, nodes)
@@ -393,6 +399,8 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
                 f"buffers[{i}].byteLength brings the buffers to {sum(buffer_length) + declared:,} bytes; at most "
                 f"{MAX_BUFFER_BYTES:,} are read (five million faces need a tenth of it)",
             )
+        if have is None:  # a side file that is not there, named after the sizes are
+            _side_file(source, path, buffer["uri"], f"buffers[{i}]")
         buffer_length.append(declared)
     view_length = []
     for i, view in enumerate(views):
@@ -570,7 +578,7 @@ def _buffer_bytes(source: str, path: Path, buffer: dict, index: int, bin_length:
     if not isinstance(uri, str):
         raise InvalidMeshError(source, f"buffers[{index}].uri is not a string")
     if uri.startswith("data:"):
-        if not uri.partition(",")[0].endswith(";base64"):
+        if not uri.partition(",")[0].lower().endswith(";base64"):
             raise InvalidMeshError(
                 source, f"buffers[{index}].uri is a data: URI that is not base64 (glTF's buffers are)"
             )
@@ -578,7 +586,7 @@ def _buffer_bytes(source: str, path: Path, buffer: dict, index: int, bin_length:
             return len(base64.b64decode(uri.partition(",")[2], validate=False))
         except (binascii.Error, ValueError):
             raise InvalidMeshError(source, f"buffers[{index}].uri is not base64 data") from None
-    side = _side_file(source, path, uri, f"buffers[{index}]")
+    side = _side_file(source, path, uri, f"buffers[{index}]", required=False)
     return side.stat().st_size if side is not None else None
 
 
@@ -596,22 +604,28 @@ def side_file_path(source: str, path: Path, uri: str, where: str = "a uri") -> P
     """
     parts = urlsplit(uri)
     scheme = parts.scheme.lower()
+    name = unquote(parts.path)  # a query or a fragment names no part of a file
+    if "\0" in name:
+        raise InvalidMeshError(source, f"{where}.uri {uri[:80]!r} holds a NUL character, which no file name has")
     if scheme == "file":
-        return Path(unquote(parts.path))
+        return path.parent / name  # an absolute path stays one
     if scheme and len(scheme) > 1:  # one letter: a Windows drive, as some exporters write
         raise InvalidMeshError(
             source,
             f"{where}.uri {uri[:80]!r} is a {scheme}: URI; nbs-env reads local files only (save it beside the glTF)",
         )
-    return path.parent / unquote(uri)
+    return path.parent / (uri if len(scheme) == 1 else name)
 
 
-def _side_file(source: str, path: Path, uri: str, where: str) -> Path | None:
-    """The file a ``uri`` names (:func:`side_file_path`); None when it is not there (the parser says
-    so). A fifo or a device would hang the parser or feed it without end: refused."""
+def _side_file(source: str, path: Path, uri: str, where: str, required: bool = True) -> Path | None:
+    """The file a ``uri`` names (:func:`side_file_path`); a missing one is refused where ``required``
+    (a buffer), else None (an image, which is not read). A fifo or a device would hang the parser or
+    feed it without end: refused."""
     side = side_file_path(source, path, uri, where)
     try:
         if not side.exists():
+            if required:
+                raise InvalidMeshError(source, f"{where}.uri {uri[:80]!r} names {side}, which does not exist")
             return None
         regular = side.is_file()
     except OSError as exc:

@@ -802,10 +802,12 @@ def _file_start(source: str, chosen: _Storey, elements: Iterable[Any], scale: fl
     storey = chosen.entity
     props = ifcopenshell.util.element.get_psets(storey).get("Pset_NbsStart")
     if props is not None:
+        measures = _start_measures(storey)
         for key in ("StartX", "StartY"):
             value = props.get(key)
-            if type(value) not in (int, float) or not math.isfinite(value):
-                shown = "missing" if value is None else f"{value!r} ({type(value).__name__})"
+            kind = measures.get(key)
+            if type(value) not in (int, float) or not math.isfinite(value) or kind not in _START_MEASURES:
+                shown = "missing" if value is None else f"{value!r} ({kind or type(value).__name__})"
                 raise IfcError(
                     source,
                     f"storey {chosen.name!r}: Pset_NbsStart.{key} is {shown}; the start is two lengths, "
@@ -817,6 +819,32 @@ def _file_start(source: str, chosen: _Storey, elements: Iterable[Any], scale: fl
         if element.is_a("IfcAnnotation") and "Pset_NbsStart" in ifcopenshell.util.element.get_psets(element):
             return placement(element)[:2, 3] * scale
     return None
+
+
+#: The IFC types a start coordinate may be written in: lengths, and a plain real (read in the file's length unit).
+_START_MEASURES = (
+    "IfcLengthMeasure",
+    "IfcPositiveLengthMeasure",
+    "IfcNonNegativeLengthMeasure",
+    "IfcReal",
+)
+
+
+def _start_measures(storey: Any) -> dict[str, str]:
+    """The IFC type of each value of the storey's ``Pset_NbsStart`` (``{"StartX": "IfcLengthMeasure"}``):
+    an angle, an area or a time comes back from the property reader a float like a length."""
+    kinds: dict[str, str] = {}
+    for rel in getattr(storey, "IsDefinedBy", None) or ():
+        if not rel.is_a("IfcRelDefinesByProperties"):
+            continue
+        pset = rel.RelatingPropertyDefinition
+        if not pset.is_a("IfcPropertySet") or pset.Name != "Pset_NbsStart":
+            continue
+        for prop in pset.HasProperties or ():
+            value = getattr(prop, "NominalValue", None)
+            if value is not None:
+                kinds[prop.Name] = value.is_a()
+    return kinds
 
 
 def _rooms(spaces: list[Any], shapes: Mapping[int, tuple[np.ndarray, np.ndarray]]) -> list[Room]:

@@ -65,6 +65,7 @@ fall back to room -1 with a warning. Meshes carry no door ground truth.
 
 from __future__ import annotations
 
+import base64
 import re
 import warnings
 from collections.abc import Sequence
@@ -487,6 +488,8 @@ class _SideFiles(trimesh.resolvers.Resolver):
         self.source, self.path = source, path
 
     def get(self, key: str) -> bytes:
+        if key[:5].lower() == "data:":  # trimesh decodes "base64," itself, not the marker in capitals
+            return base64.b64decode(key.partition(",")[2])
         return side_file_path(self.source, self.path, key).read_bytes()
 
     def write(self, name: str, data: Any) -> None:
@@ -559,42 +562,35 @@ def _read_ply(
     source: str, data: bytes, header: PlyHeader
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]:
     """Read a PLY mesh with per-face ``label`` (and optional ``room``) properties, its header read."""
-    try:
-        # From the bytes already read and checked, with no resolver and no materials: a header's
-        # "comment TextureFile NAME" made trimesh open NAME, and a fifo there hung the load.
-        mesh = trimesh.load(
-            trimesh.util.wrap_as_stream(_integers_widened(header, data) if header.encoding == "ascii" else data),
-            file_type="ply",
-            force="mesh",
-            process=False,
-            skip_materials=True,
-        )
-    except Exception as exc:
-        if header.encoding != "ascii":
+    if header.encoding == "ascii":
+        # Read here, every value against its declared type: trimesh reads ASCII values as float64
+        # and casts them, so a uchar label of 256 became 0 (a wall read as floor) and a uchar x of
+        # 300 was 44, and it fails on lists of several lengths read wide.
+        vertices, columns, props, n_raw = _read_ascii_ply(source, data, header)
+    else:
+        try:
+            # From the bytes already read and checked, with no resolver and no materials: a header's
+            # "comment TextureFile NAME" made trimesh open NAME, and a fifo there hung the load.
+            mesh = trimesh.load(
+                trimesh.util.wrap_as_stream(data), file_type="ply", force="mesh", process=False, skip_materials=True
+            )
+        except Exception:
             # trimesh reads binary lists of one length only: a file mixing triangles and quads, as
             # most exporters write, is read record by record here (and its damage named).
             vertices, columns, props, n_raw = _read_binary_ply(source, data, header)
         else:
-            # numpy's reason ("setting an array element with a sequence") names no record: find it.
-            row = ascii_ply_row_error(data, header)
-            if row is not None:
-                raise InvalidMeshError(source, row) from exc
-            # Every row holds what its header says: trimesh failed on something else (lists of
-            # several lengths read as doubles, a 6-corner face beside quads), so read it here.
-            vertices, columns, props, n_raw = _read_ascii_ply(data, header)
-    else:
-        if not isinstance(mesh, trimesh.Trimesh):
-            return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), []
-        vertices = np.asarray(mesh.vertices, dtype=float)
-        raw = mesh.metadata.get("_ply_raw", {}).get("face", {})
-        columns = raw.get("data")
-        props = list(raw.get("properties", {}))
-        n_raw = int(raw.get("length", 0) or 0)
-        if columns is None or "label" not in props:
-            faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
-            # Without labels every face is clutter, which the structure check then reports with a hint.
-            n = len(faces)
-            return vertices, faces, np.full(n, SurfaceClass.CLUTTER.value), np.full(n, -1), []
+            if not isinstance(mesh, trimesh.Trimesh):
+                return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), []
+            vertices = np.asarray(mesh.vertices, dtype=float)
+            raw = mesh.metadata.get("_ply_raw", {}).get("face", {})
+            columns = raw.get("data")
+            props = list(raw.get("properties", {}))
+            n_raw = int(raw.get("length", 0) or 0)
+            if columns is None or "label" not in props:
+                faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
+                # Without labels every face is clutter, which the structure check then reports with a hint.
+                n = len(faces)
+                return vertices, faces, np.full(n, SurfaceClass.CLUTTER.value), np.full(n, -1), []
     # trimesh reorders mixed triangles and polygons, so triangulate the raw polygons here to keep
     # each face next to its own label.
     index_prop = next((p for p in props if p in ("vertex_indices", "vertex_index")), None)
@@ -746,103 +742,186 @@ class _PlyValueError(ValueError):
     """A PLY face element's values that are not what its header says they mean."""
 
 
-def _read_ascii_ply(data: bytes, header: PlyHeader) -> tuple[np.ndarray, dict[str, Any], list[str], int]:
-    """An ASCII PLY read record by record, as :func:`_read_binary_ply` reads a binary one, from a body
-    whose every row :func:`~scenes.headers.ascii_ply_row_error` found to hold its record. Values are
-    read as float64 and floats rounded to their declared type (a ``float`` coordinate is float32)."""
+def _read_ascii_ply(source: str, data: bytes, header: PlyHeader) -> tuple[np.ndarray, dict[str, Any], list[str], int]:
+    """An ASCII PLY read element by element, as :func:`_read_binary_ply` reads a binary one: one
+    record a line, ASCII numbers, every integer value (a scalar, a list's count) whole and within its
+    declared type, every ``float`` rounded to float32 as other readers make it.
+
+    Returns
+    -------
+    As :func:`_read_binary_ply`; the face element's values as float64 (checked against their types
+    by :func:`_ply_integers` and :func:`_ply_polygons`).
+
+    Raises
+    ------
+    InvalidMeshError
+        Naming the element, the record and its line (:func:`~scenes.headers.ascii_ply_row_error`), or
+        the value its type cannot hold.
+    """
     rows = data[header.body :].decode("ascii", errors="replace").splitlines()
+    first_line = data[: header.body].count(b"\n") + 1
     read: dict[str, dict[str, Any]] = {}
     at = 0
     for element in header.elements:
         block = rows[at : at + element.count]
+        try:
+            columns = _ascii_records(block, element)
+        except (ValueError, IndexError):
+            raise InvalidMeshError(
+                source, ascii_ply_row_error(data, header) or f"the PLY {element.name} records do not fit its header"
+            ) from None
+        for prop in element.properties:
+            values = columns[prop.name]
+            if prop.count_type is not None:
+                lengths = [len(v) for v in values] if isinstance(values, list) else [values.shape[1]] * element.count
+                checked, kind = (np.asarray(lengths, dtype=float), prop.count_type), "count"
+            else:
+                checked, kind = (values, prop.type), "value"
+            odd = _outside(np.asarray(checked[0], dtype=float), checked[1], whole=True)
+            if odd.any():
+                k = int(np.flatnonzero(odd)[0])
+                value = float(np.asarray(checked[0])[k])
+                shown = f"{value:.0f}" if value.is_integer() and abs(value) < 1e18 else f"{value:g}"
+                raise InvalidMeshError(
+                    source,
+                    f"element '{element.name}' record {k:,} (line {first_line + at + k:,}): its '{prop.name}' {kind} "
+                    f"{shown} is no {checked[1]!r}, its header's type",
+                )
+            if prop.count_type is None and _PLY_NUMPY[prop.type] == "f4":
+                columns[prop.name] = values.astype(np.float32).astype(float)  # as every reader of a float
         at += element.count
-        props = element.properties
-        if not any(p.count_type for p in props):  # fixed-size records: one parse
-            values = np.array(" ".join(block).split(), dtype=float).reshape(element.count, len(props))
-            read[element.name] = {p.name: values[:, k] for k, p in enumerate(props)}
-            continue
-        columns: dict[str, list] = {p.name: [] for p in props}
-        for line in block:
-            words, k = line.split(), 0
-            for p in props:
-                if p.count_type is None:
-                    columns[p.name].append(float(words[k]))
-                    k += 1
-                    continue
-                n = int(float(words[k]))
-                columns[p.name].append(np.array(words[k + 1 : k + 1 + n], dtype=float))
-                k += 1 + n
         read[element.name] = columns
-    kinds = {p.name: _PLY_NUMPY[p.type] for p in header.element("vertex").properties}
     vertex, face = read["vertex"], read["face"]
-    vertices = np.column_stack(
-        [np.asarray(vertex[a], dtype=float).astype(kinds[a] if kinds[a][0] == "f" else "f8") for a in "xyz"]
-    ).astype(float)
+    vertices = np.column_stack([np.asarray(vertex[a], dtype=float) for a in "xyz"]).reshape(-1, 3)
     out: dict[str, Any] = {}
     for prop, values in face.items():
-        if values and isinstance(values[0], np.ndarray):
+        if isinstance(values, list):
             column = np.empty(len(values), dtype=object)
             column[:] = values
             out[prop] = column
         else:
-            out[prop] = np.asarray(values, dtype=float)
-    return vertices.reshape(-1, 3), out, list(face), header.element("face").count
+            out[prop] = values
+    return vertices, out, list(face), header.element("face").count
 
 
-def _integers_widened(header: PlyHeader, data: bytes) -> bytes:
-    """An ASCII PLY whose integer properties are declared ``double``, for trimesh: it reads ASCII
-    values as float64 and casts them to the declared type, so a ``uchar`` label of 256 became 0 (a
-    wall read as floor) and an ``int`` index of 2^32 another vertex. Read wide, each value is checked
-    against its declared type (:func:`_ply_integers`, :func:`_ply_polygons`). Floats keep their type:
-    a ``float`` coordinate is the float32 every reader makes of it."""
+def _ascii_records(block: list[str], element: PlyElement) -> dict[str, Any]:
+    """The values of one element's rows: a scalar as an (n,) array, a list as an (n, k) array where
+    every record's list is k long, else as a list of arrays.
 
-    def wide(kind: str) -> str:
-        return kind if kind in ("float", "float32", "double", "float64") else "double"
+    Raises
+    ------
+    ValueError, IndexError
+        A row that is short, long, or holds what is no ASCII number.
+    """
+    props = element.properties
+    n = element.count
+    if n == 0:
+        return {p.name: np.zeros(0) if p.count_type is None else np.zeros((0, 0)) for p in props}
+    text = " ".join(block)
+    if len(block) != n or _PLY_NOT_NUMBER.search(text):
+        raise ValueError("rows")
+    lists = [k for k, p in enumerate(props) if p.count_type is not None]
+    first = block[0].split() if block else []
+    width = len(first)
+    if len(lists) <= 1:  # one parse when every record has the same length (all triangles, say)
+        values = np.array(text.split(), dtype=float)
+        if n and values.size == n * width:
+            table = values.reshape(n, width)
+            scalars_before = lists[0] if lists else len(props)
+            length = width - len(props)
+            if not lists or (length >= 0 and (table[:, scalars_before] == length).all()):
+                out: dict[str, Any] = {}
+                k = 0
+                for p in props:
+                    if p.count_type is None:
+                        out[p.name] = table[:, k]
+                        k += 1
+                    else:
+                        out[p.name] = table[:, k + 1 : k + 1 + length]
+                        k += 1 + length
+                return out
+        elif not lists:
+            raise ValueError("rows")
+    columns: dict[str, list] = {p.name: [] for p in props}
+    for line in block:
+        words, k = line.split(), 0
+        for p in props:
+            if p.count_type is None:
+                columns[p.name].append(float(words[k]))
+                k += 1
+                continue
+            count = float(words[k])
+            if not (count.is_integer() and 0 <= count <= len(words)):
+                raise ValueError("count")
+            end = k + 1 + int(count)
+            if end > len(words):
+                raise IndexError("list")
+            columns[p.name].append(np.array(words[k + 1 : end], dtype=float))
+            k = end
+        if k != len(words):
+            raise ValueError("row")
+    return {
+        p.name: np.asarray(v, dtype=float) if p.count_type is None else v
+        for p, v in zip(props, columns.values(), strict=True)
+    }
 
-    lines = ["ply", "format ascii 1.0"]
-    for element in header.elements:
-        lines.append(f"element {element.name} {element.count}")
-        for p in element.properties:
-            listed = f"list {p.count_type} " if p.count_type else ""
-            lines.append(f"property {listed}{wide(p.type)} {p.name}")
-    lines.append("end_header\n")
-    return "\n".join(lines).encode() + data[header.body :]
+
+#: What no ASCII number of a PLY body holds (nan and inf pass, to the finite checks).
+_PLY_NOT_NUMBER = re.compile(r"[^0-9+\-.eEnaiftyNAIFTY \t]")
 
 
-def _outside(values: np.ndarray, kind: str) -> np.ndarray:
-    """Which whole ``values`` do not fit the PLY integer type ``kind`` (none for a float type)."""
+def _outside(values: np.ndarray, kind: str, whole: bool = False) -> np.ndarray:
+    """Which ``values`` do not fit the PLY integer type ``kind`` (none for a float type); with
+    ``whole``, a fraction does not fit either."""
     code = _PLY_NUMPY[kind]
     if code[0] == "f":
         return np.zeros(values.shape, bool)
     info = np.iinfo(code)
-    return (values < info.min) | (values > info.max)
+    with np.errstate(invalid="ignore"):
+        odd = ~((values >= info.min) & (values <= info.max))  # NaN fits no integer type
+        return odd | (values != np.round(values)) if whole else odd
 
 
 def _ply_polygons(column: np.ndarray, n: int, kind: str = "int") -> list[np.ndarray]:
     """The vertex lists of the raw PLY face element, whatever layout trimesh left them in; their
     indices must be whole numbers (a list of floats is allowed by the format, 15.5 names no vertex)
-    within their declared type ``kind``."""
+    within their declared type ``kind``. Checked in one pass over all the indices."""
+    if n == 0:
+        return []
     col = np.asarray(column)
     if col.dtype.names and "f1" in col.dtype.names:  # binary: (count, indices) records
-        polys = list(np.asarray(col["f1"]).reshape(n, -1))
-    elif col.dtype == object:
-        polys = [np.asarray(p) for p in col]
+        col = np.asarray(col["f1"]).reshape(n, -1)
+    if col.dtype == object:
+        lists = [np.asarray(p).reshape(-1) for p in col]
+        lengths = np.fromiter((len(p) for p in lists), np.int64, len(lists))
+        flat = np.concatenate(lists) if lists else np.zeros(0)
     else:
-        polys = list(col.reshape(n, -1))
-    out = []
-    for i, poly in enumerate(polys):
-        poly = np.asarray(poly)
-        if poly.dtype.kind == "f" and not (np.isfinite(poly).all() and (poly == np.round(poly)).all()):
-            raise _PlyValueError(f"PLY face {i} has a vertex index that is not a whole number: {poly.tolist()[:6]}")
-        if poly.dtype.kind not in "iuf":
-            raise _PlyValueError(f"PLY face {i}'s vertex indices are not numbers")
-        if poly.dtype.kind == "f" and _outside(poly, kind).any():
+        col = col.reshape(n, -1)
+        lengths, flat = np.full(n, col.shape[1]), col.reshape(-1)
+    ends = np.cumsum(lengths)
+
+    def face_of(position: int) -> int:
+        return int(np.searchsorted(ends, position, side="right"))
+
+    if flat.dtype.kind not in "iuf":
+        raise _PlyValueError("PLY faces' vertex indices are not numbers")
+    if flat.dtype.kind == "f":
+        with np.errstate(invalid="ignore"):
+            fraction = ~np.isfinite(flat) | (flat != np.round(flat))
+        if fraction.any():
+            i = face_of(int(np.flatnonzero(fraction)[0]))
+            shown = flat[ends[i] - lengths[i] : ends[i]].tolist()[:6]
+            raise _PlyValueError(f"PLY face {i} has a vertex index that is not a whole number: {shown}")
+        outside = _outside(flat, kind)
+        if outside.any():
+            at = int(np.flatnonzero(outside)[0])
             raise _PlyValueError(
-                f"PLY face {i} has vertex index {poly[_outside(poly, kind)][0]:.0f}, which its header's type "
-                f"{kind!r} cannot hold"
+                f"PLY face {face_of(at)} has vertex index {flat[at]:.0f}, which its header's type {kind!r} cannot hold"
             )
-        out.append(poly.astype(np.int64))
-    return out
+    indices = flat.astype(np.int64)
+    if col.dtype != object:
+        return list(indices.reshape(n, -1))
+    return np.split(indices, ends[:-1])
 
 
 def _ply_integers(column: Any, n: int, name: str, kind: str = "int") -> np.ndarray:

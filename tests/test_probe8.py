@@ -397,10 +397,12 @@ def test_a_gltf_buffer_uri_nbs_env_cannot_read_is_named(uri, message, glb_parts,
 @pytest.mark.parametrize(
     "old, new, message",
     [
-        ("4 0 4 5 1 2 0", "4 0 4 5 1 256 0", r"face 2's 'label' is 256, which its header's type 'uchar' cannot hold"),
-        ("4 0 4 5 1 2 0", "4 0 4 5 1 -1 0", r"face 2's 'label' is -1, which its header's type 'uchar' cannot hold"),
+        ("4 0 4 5 1 2 0", "4 0 4 5 1 256 0", r"record 2 \(line 22\): its 'label' value 256 is no 'uchar'"),
+        ("4 0 4 5 1 2 0", "4 0 4 5 1 -1 0", r"record 2 \(line 22\): its 'label' value -1 is no 'uchar'"),
         ("4 0 1 2 3 0 0", "4 0 4294967296 2 3 0 0", r"PLY face 0 has vertex index 4294967296, which its header's type"),
-        ("4 0 1 2 3 0 0", "4 0 1 2 3 0 2147483648", r"face 0's 'room' is 2147483648, which its header's type 'int'"),
+        ("4 0 1 2 3 0 0", "4 0 1 2 3 0 2147483648", r"record 0 \(line 20\): its 'room' value 2147483648 is no 'int'"),
+        ("4 0 0\n", "300 0 0\n", None),  # a uchar x of 300 was 44 (trimesh casts), then 300 (read wide)
+        ("4 0 0\n", "4.5 0 0\n", None),  # an int x of 4.5
     ],
 )
 def test_an_ascii_ply_value_its_declared_type_cannot_hold_is_refused(old, new, message, tmp_path):
@@ -411,6 +413,10 @@ def test_an_ascii_ply_value_its_declared_type_cannot_hold_is_refused(old, new, m
     path = tmp_path / "room.ply"
     text = _ply_text(GOOD_FACES)
     assert old in text
+    if message is None:  # a vertex coordinate of an integer type
+        kind = "uchar" if new.startswith("300") else "int"
+        text = text.replace("property float x", f"property {kind} x")
+        message = rf"element 'vertex' record 1 \(line 13\): its 'x' value {new.split()[0]} is no '{kind}'"
     path.write_text(text.replace(old, new, 1))
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # numpy's "invalid value encountered in cast" was printed too
@@ -505,7 +511,7 @@ def test_a_polygon_face_that_crosses_itself_is_named(tmp_path):
 
 @pytest.mark.parametrize(
     "value, shown",
-    [("IFCLABEL('6.0')", r"'6\.0' \(str\)"), ("IFCBOOLEAN(.T.)", r"True \(bool\)"), (None, "missing")],
+    [("IFCLABEL('6.0')", r"'6\.0' \(IfcLabel\)"), ("IFCBOOLEAN(.T.)", r"True \(IfcBoolean\)"), (None, "missing")],
 )
 def test_an_ifc_start_that_is_no_pair_of_lengths_is_refused_naming_the_property(value, shown, tmp_path):
     """A label '6.0' was dropped for the automatic start without a word, a boolean taken as 1 m."""
@@ -672,3 +678,193 @@ def test_two_spellings_of_one_scene_or_checkpoint_are_one_run(monkeypatch):
     for name in ("generated:+1", "generated: 1", "generated:\u0661", "generated:-1"):
         with pytest.raises(UnknownSceneError, match=r"is not an integer >= 0 in digits"):
             load_scene(name)
+
+
+# ---------------------------------------------------------------------- probe 11
+@pytest.mark.parametrize(
+    "polygon, area",
+    [
+        ([0, 1, 1, 2, 3, 4, 5], 48.0),  # a corner written twice: a collapsed edge, not a crossing
+        ([0, 1, 2, 3, 4, 5, 0], 48.0),  # the first corner closing the ring
+        ([0, 1, 1, 0], 0.0),  # collapsed to an edge: no surface, no triangle
+    ],
+)
+def test_a_corner_repeated_next_to_itself_is_one_corner(polygon, area):
+    import numpy as np
+
+    from scenes.geometry import triangulate_polygons
+
+    v = np.array([[0, 0, 0], [8, 0, 0], [8, 4, 0], [4, 4, 0], [4, 8, 0], [0, 8, 0]], float)
+    tris, source = triangulate_polygons(v, [polygon])
+    a, b, c = (v[tris[:, k]] for k in range(3))
+    assert 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum() == pytest.approx(area)
+    assert (source == 0).all() and all(len(set(t)) == 3 for t in tris.tolist())
+
+
+@pytest.mark.parametrize(
+    "points, polygon",
+    [
+        ("star", [0, 2, 4, 1, 3]),  # every turn the same way, twice round
+        ("square", [0, 1, 2, 3, 0, 1, 2, 3]),  # a ring written twice
+        ("square", [0, 2, 1, 3]),  # a bow-tie, its lobes cancelling
+    ],
+)
+def test_a_polygon_that_goes_round_twice_or_not_at_all_is_refused(points, polygon):
+    """A ring written twice and a pentagram turn one way at every corner: fanned, a floor counted twice."""
+    import numpy as np
+
+    from scenes.geometry import CrossingPolygonError, triangulate_polygons
+
+    if points == "star":
+        angle = np.pi / 2 + np.arange(5) * 2 * np.pi / 5
+        v = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(5)])
+    else:
+        v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    with pytest.raises(CrossingPolygonError):
+        triangulate_polygons(v, [polygon])
+    assert len(triangulate_polygons(v, [list(range(len(v)))])[0]) == len(v) - 2
+
+
+@pytest.mark.parametrize(
+    "uri, message",
+    [
+        ("missing.bin", r"buffers\[0\]\.uri 'missing\.bin' names .*missing\.bin, which does not exist"),
+        ("buf%00one.bin", r"holds a NUL character"),
+        ("plain.bin#x", None),
+        ("plain.bin?v=2", None),
+        ("file:plain.bin", None),
+        ("BASE64", None),
+    ],
+)
+def test_gltf_side_files_are_found_as_uri_references_or_named(uri, message, glb_parts, tmp_path):
+    """A missing side file was Python's FileNotFoundError, a %00 "embedded null byte"; a query or a
+    fragment was part of the name; a data: URI's marker in capitals was not base64."""
+    import base64
+
+    json_chunk, binary, faces = glb_parts
+    (tmp_path / "plain.bin").write_bytes(binary)
+    if uri == "BASE64":
+        uri = "data:application/octet-stream;BASE64," + base64.b64encode(binary).decode()
+    doc = json.loads(json_chunk)
+    doc["buffers"] = [dict(doc["buffers"][0], uri=uri)]
+    path = tmp_path / "x.gltf"
+    path.write_text(json.dumps(doc))
+    if message is None:
+        assert len(load_scene(str(path)).mesh.faces) == faces
+    else:
+        with pytest.raises(InvalidMeshError, match=message):
+            load_scene(str(path))
+
+
+def test_a_gltf_with_a_byte_order_mark_is_refused_by_name(glb_parts, tmp_path):
+    """The layout check took it, trimesh's reader did not, naming a file the input never names."""
+    json_chunk, binary, _ = glb_parts
+    (tmp_path / "plain.bin").write_bytes(binary)
+    doc = json.loads(json_chunk)
+    doc["buffers"] = [dict(doc["buffers"][0], uri="plain.bin")]
+    path = tmp_path / "x.gltf"
+    path.write_bytes(b"\xef\xbb\xbf" + json.dumps(doc).encode())
+    with pytest.raises(InvalidMeshError, match=r"starts with a byte-order mark, which glTF 2\.0 forbids"):
+        load_scene(str(path))
+
+
+@pytest.mark.parametrize(
+    "edit, field",
+    [
+        (lambda d: d["scaler"].update(scale=[1e-300, 1, 1]), "scaler.scale"),
+        (lambda d: d["scaler"].update(mean=[1e308, 0, 0]), "scaler.mean"),
+        (
+            lambda d: d["svm"].update(support_vectors=[[1e300, 0, 0]] * len(d["svm"]["support_vectors"])),
+            "svm.support_vectors",
+        ),
+    ],
+)
+def test_a_classifier_whose_scaler_or_vectors_would_overflow_is_refused_at_load(edit, field):
+    """Each loaded, and the decision overflowed at the first face: every face clutter, silently."""
+    from importlib import resources
+
+    from nbs_env.errors import ModelFileError
+    from nbs_env.perception.structure import SEClassifier, _checksum
+
+    document = json.loads(resources.files("nbs_env.perception").joinpath("data/se_svm.json").read_text())
+    edit(document)
+    del document["sha256"]
+    document["sha256"] = _checksum(document)
+    with pytest.raises(ModelFileError, match=rf"field '{field}'"):
+        SEClassifier.from_text(json.dumps(document), source="edited.json")
+
+
+@pytest.mark.parametrize("measure", ["IFCPLANEANGLEMEASURE(6.)", "IFCAREAMEASURE(6.)", "IFCINTEGER(6)"])
+def test_an_ifc_start_of_another_measure_than_a_length_is_refused(measure, tmp_path):
+    """An angle, an area or a count came back a number like a length: taken as 6 m."""
+    pytest.importorskip("ifcopenshell")
+    from pathlib import Path
+
+    from scenes import IfcError
+
+    text = (Path(__file__).parent / "data" / "two_rooms.ifc").read_text()
+    added = (
+        f"#5000=IFCPROPERTYSINGLEVALUE('StartX',$,{measure},$);\n"
+        "#5001=IFCPROPERTYSINGLEVALUE('StartY',$,IFCLENGTHMEASURE(2.),$);\n"
+        "#5002=IFCPROPERTYSET('0aaaaaaaaaaaaaaaaaaaa1',$,'Pset_NbsStart',$,(#5000,#5001));\n"
+        "#5003=IFCRELDEFINESBYPROPERTIES('0aaaaaaaaaaaaaaaaaaaa2',$,$,$,(#14),#5002);\n"
+    )
+    at = text.rindex("ENDSEC;")
+    path = tmp_path / "start.ifc"
+    path.write_text(text[:at] + added + text[at:])
+    with pytest.raises(IfcError, match=r"Pset_NbsStart\.StartX is 6(\.0)? \(Ifc\w+\)"):
+        load_scene(str(path), storey="EG")
+
+
+@pytest.mark.parametrize(
+    "policies", ["greedy:0.8,greedy:0.80", "greedy,greedy:1", "greedy:0.8+stop=0.08,greedy:stop=0.08+0.8"]
+)
+def test_two_spellings_of_one_policy_are_one_run(policies):
+    from train.compare import CompareError, grid
+
+    with pytest.raises(CompareError, match=r"--policies names .* and .*: one run each"):
+        grid("l_room", policies, "0")
+    assert len(grid("l_room", "greedy,greedy:0.8", "0")) == 2
+
+
+def test_a_resumed_run_refuses_options_it_would_not_apply_and_applies_envs(finished_run, tmp_path, capsys, monkeypatch):
+    """`--n-steps 8 --seed 5` were dropped without a word; `--envs 2` (the default) was not applied,
+    so a run recorded with 500 envs was refused for its own number after the user lowered it."""
+    import shutil
+
+    import train.ppo as ppo
+
+    run = tmp_path / "run"
+    shutil.copytree(finished_run, run)
+    before = _files(run)
+    code, err = _train(["--resume", str(run), "--timesteps", "48", "--n-steps", "8", "--seed", "5", "--quiet"], capsys)
+    assert code == EXIT_USAGE and "--n-steps, --seed apply to a new run" in err, err
+    assert _files(run) == before
+    seen = {}
+
+    def stop(config, *args, **kwargs):
+        seen["envs"] = config.envs
+        raise SystemExit(0)
+
+    monkeypatch.setattr(ppo, "_run", stop)
+    state = json.loads((run / "training_state.json").read_text())
+    state["run"]["envs"] = 500
+    (run / "training_state.json").write_text(json.dumps(state))
+    _train(["--resume", str(run), "--timesteps", "48", "--envs", "2", "--quiet"], capsys)
+    assert seen == {"envs": 2}
+
+
+def test_the_staged_step_pictures_get_the_mode_of_any_folder_made_there(tmp_path):
+    """mkdtemp's folder is its owner's alone: moved in as steps/, the pictures were unreadable to the
+    others who read the rest of the report."""
+    import os
+
+    from train.cli import main as nbs
+
+    out = tmp_path / "report"
+    umask = os.umask(0o022)
+    try:
+        assert nbs(_scan(out, "--max-scans", "1")) == 0
+    finally:
+        os.umask(umask)
+    assert (out / "steps").stat().st_mode & 0o777 == 0o755

@@ -642,6 +642,10 @@ def _scan(args: argparse.Namespace, policy, out: Path, cfg, stop: StopRequest) -
             # it: an earlier report (--force) keeps its own until then, whatever stops this run.
             out.mkdir(parents=True, exist_ok=True)
             steps_dir = Path(tempfile.mkdtemp(prefix=".steps-", dir=out))
+            # mkdtemp's folder is the owner's alone; moved in, it must be as any folder made here.
+            umask = os.umask(0)
+            os.umask(umask)
+            steps_dir.chmod(0o777 & ~umask)
         if not args.no_steps:
             with replacing(steps_dir / f"step_{k:03d}.png") as temporary:
                 plt.imsave(temporary, env.render())

@@ -1428,18 +1428,24 @@ def _scene_identity(scene: str) -> Any:
     return ("name", scene)
 
 
-def _policy_identity(policy: str) -> Any:
+def _policy_identity(spec: str, policy: Any) -> Any:
     """What a policy spec names: a ``ppo:`` checkpoint as its real folder (``ppo:run``, ``ppo:./run``
-    and ``ppo:run/policy.json`` are one)."""
-    if policy.startswith("ppo:"):
+    and ``ppo:run/policy.json`` are one), any other as its kind and settings (``greedy``, ``greedy:1``;
+    ``greedy:0.8``, ``greedy:0.80``)."""
+    if spec.startswith("ppo:"):
         try:
             from policies.learned import resolve_checkpoint
 
-            path = resolve_checkpoint(policy[len("ppo:") :]).resolve()
-        except Exception:  # no such checkpoint: make_policy says so next
-            return ("name", policy)
+            path = resolve_checkpoint(spec[len("ppo:") :]).resolve()
+        except Exception:  # made already: cannot happen, but the name is then its identity
+            return ("name", spec)
         return ("ppo", path.parent if path.name == "policy.json" else path)
-    return ("name", policy)
+    settings = sorted(
+        (key, value)
+        for key, value in vars(policy).items()
+        if not key.startswith("_") and key != "name" and isinstance(value, (int, float, str, bool, tuple, type(None)))
+    )
+    return (type(policy).__name__, tuple(settings))
 
 
 def _items(flag: str, text: str) -> list[str]:
@@ -1491,7 +1497,7 @@ def grid(
     if not policy_list:
         raise CompareError("no policies given")
     _refuse_repeats("--scenes", scene_list, [_scene_identity(x) for x in scene_list])
-    _refuse_repeats("--policies", policy_list, [_policy_identity(p) for p in policy_list])
+    _refuse_repeats("--policies", policy_list)
     from nbs_env.errors import ModelFileError
     from train.arguments import adopt_requirements, scene_option_error
 
@@ -1499,6 +1505,7 @@ def grid(
         made = [make_policy(p, 0) for p in policy_list]
     except (UnknownPolicyError, ModelFileError) as exc:
         raise CompareError(str(exc)) from None
+    _refuse_repeats("--policies", policy_list, [_policy_identity(p, m) for p, m in zip(policy_list, made, strict=True)])
     overrides = adopt_requirements(dict(overrides or {}), agreed_requirements(made))
     seed_items = _items("--seeds", seeds)
     try:

@@ -1269,7 +1269,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         return 2
     if args.resume is not None:
-        return _resume(args)
+        return _resume(args, _given(argv))
     if args.out is None:
         print("nbs train: error: --out is required (or --resume RUN)", file=sys.stderr)
         return 2
@@ -1341,9 +1341,30 @@ def _output_problem(flag: str, folder: Path) -> str | None:
     return None
 
 
-def _resume(args) -> int:
+#: What ``nbs train --resume`` takes besides the run: the rest are the run's own settings.
+RESUME_OPTIONS = ("resume", "out", "timesteps", "envs", "backend", "address", "quiet")
+
+
+def _given(argv: list[str] | None) -> set[str]:
+    """The destinations of the options typed (not those left at their defaults)."""
+    parser = build_parser()
+    for action in parser._actions:
+        action.default = argparse.SUPPRESS
+    return set(vars(parser.parse_args(argv)))
+
+
+def _resume(args, given: set[str]) -> int:
     if args.out is not None and Path(args.out) != Path(args.resume):
         print("nbs train: error: --resume continues in its own folder; leave out --out", file=sys.stderr)
+        return 2
+    ignored = sorted(f"--{name.replace('_', '-')}" for name in given - set(RESUME_OPTIONS))
+    if ignored:
+        # Dropped without a word, they would seem to have been applied (a resumed run's settings are its own).
+        print(
+            f"nbs train: error: --resume continues the run with its own settings; {', '.join(ignored)} "
+            "apply to a new run (leave them out, or start one with --init RUN)",
+            file=sys.stderr,
+        )
         return 2
     problem = checkpoint_problem(args.resume)
     if problem is not None:  # refused before any work: its checkpoints would be written inside it
@@ -1387,7 +1408,7 @@ def _resume(args) -> int:
             file=sys.stderr,
         )
         return 2
-    if args.envs != build_parser().get_default("envs"):
+    if "envs" in given:
         config = dataclasses.replace(config, envs=args.envs)
     return _run(config, args.resume, args, resume=True)
 

@@ -65,6 +65,10 @@ DEFAULT_MODEL_RESOURCE = "data/se_svm.json"
 PIXEL_RANGE = (0.005, 1.0)
 #: Metres of the band about a face plane whose points make its image (the shipped one's is 0.10).
 BAND_RANGE = (0.0, 1.0)
+#: The largest magnitude of a stored model's scaler, support vectors, coefficients and intercept
+#: (the shipped one's largest is 16), and the smallest scale: far beyond, the decision overflows.
+MAX_MODEL_VALUE = 1e6
+MIN_SCALE = 1e-6
 #: The largest RBF gamma a stored model may hold (the shipped one's is 0.33, on standardised features).
 MAX_GAMMA = 1e6
 
@@ -296,21 +300,41 @@ class SEClassifier:
     def _problem(self) -> tuple[str, str] | None:
         """(field, what is wrong) for the first invalid array, or None. Field names are the JSON ones."""
         checks: list[tuple[str, np.ndarray, bool, str]] = [
-            ("scaler.mean", self.mean, self.mean.shape == (3,), "shape (3,)"),
-            ("scaler.scale", self.scale, self.scale.shape == (3,) and bool(np.all(self.scale > 0)), "shape (3,), > 0"),
+            # The features are ratios in [0, 1]; a scaler or model far outside what fitting them gives
+            # (1e-300, 1e308) overflows at the first face and calls every face clutter, silently.
+            (
+                "scaler.mean",
+                self.mean,
+                self.mean.shape == (3,) and _within(self.mean, MAX_MODEL_VALUE),
+                f"shape (3,), each within ±{MAX_MODEL_VALUE:g}",
+            ),
+            (
+                "scaler.scale",
+                self.scale,
+                self.scale.shape == (3,) and bool(np.all((self.scale >= MIN_SCALE) & (self.scale <= MAX_MODEL_VALUE))),
+                f"shape (3,), within [{MIN_SCALE:g}, {MAX_MODEL_VALUE:g}]",
+            ),
             (
                 "svm.support_vectors",
                 self.support_vectors,
-                self.support_vectors.ndim == 2 and self.support_vectors.shape[1] == 3 and len(self.support_vectors) > 0,
-                "shape (s, 3) with s >= 1",
+                self.support_vectors.ndim == 2
+                and self.support_vectors.shape[1] == 3
+                and len(self.support_vectors) > 0
+                and _within(self.support_vectors, MAX_MODEL_VALUE),
+                f"shape (s, 3) with s >= 1, each within ±{MAX_MODEL_VALUE:g}",
             ),
             (
                 "svm.dual_coef",
                 self.dual_coef,
-                self.dual_coef.shape == (len(self.support_vectors),),
-                f"shape ({len(self.support_vectors)},), one per support vector",
+                self.dual_coef.shape == (len(self.support_vectors),) and _within(self.dual_coef, MAX_MODEL_VALUE),
+                f"shape ({len(self.support_vectors)},), one per support vector, each within ±{MAX_MODEL_VALUE:g}",
             ),
-            ("svm.intercept", np.array(self.intercept), True, "a number"),
+            (
+                "svm.intercept",
+                np.array(self.intercept),
+                _within(np.array(self.intercept), MAX_MODEL_VALUE),
+                f"within ±{MAX_MODEL_VALUE:g}",
+            ),
             # The features are standardised, so gamma is about 1 / features; far beyond, exp overflows.
             ("svm.gamma", np.array(self.gamma), 0 < self.gamma <= MAX_GAMMA, f"within (0, {MAX_GAMMA:g}]"),
             # Bounded as the voxels are: an image of 1e-9 m pixels asked numpy for more than it can index.
@@ -320,6 +344,8 @@ class SEClassifier:
         for name, array, ok, expected in checks:
             if not ok:
                 got = f"{float(array):g}" if array.shape == () else f"shape {array.shape}"
+                if array.shape != () and array.size and array.dtype.kind == "f":
+                    got += f", values {np.nanmin(array):g} to {np.nanmax(array):g}"
                 return name, f"expected {expected}, got {got}"
             if not np.all(np.isfinite(array)):
                 return name, "values must be finite"
@@ -637,6 +663,11 @@ class SEClassifier:
         if problem is not None:
             raise fail(*problem)
         return model
+
+
+def _within(values: np.ndarray, bound: float) -> bool:
+    with np.errstate(invalid="ignore"):
+        return bool(np.all(np.abs(values) <= bound))  # NaN is not
 
 
 def _metres(bounds: tuple[float, float]) -> str:
