@@ -84,6 +84,7 @@ import contextlib
 import io
 import json
 import os
+import re
 import shutil
 import tempfile
 import time
@@ -1074,6 +1075,10 @@ def _station_times(env: NBSEnv, start: float) -> list[tuple[float, float]]:
 
 
 # ---------------------------------------------------------------------- the report
+#: The name of ``nbs scan``'s picture of each step in ``steps/``.
+STEP_PICTURE = re.compile(r"step_\d{3,}\.png")
+
+
 def write_report(
     env: NBSEnv,
     out_dir: str | Path,
@@ -1107,8 +1112,9 @@ def write_report(
         docstring) instead of the rooms' 5 cm working copies. Needs the env's kept scans.
     steps : str or Path, optional
         A folder of pictures drawn during the episode (``nbs scan``'s ``step_NNN.png``), moved in as
-        ``out_dir/steps`` with the report files, replacing an earlier report's (and removing it when
-        the folder is empty): the pictures and the report are one run's, whatever stopped it.
+        ``out_dir/steps`` with the report files, in place of an earlier report's pictures
+        (:data:`STEP_PICTURE`; files of other names stay): the pictures and the report are one run's,
+        whatever stopped it.
 
     Returns
     -------
@@ -1146,12 +1152,20 @@ def write_report(
             raise
         written = {p.name for p in out.iterdir()}
         if steps is not None:
-            # The earlier pictures leave with the earlier report: renames only, which a full disk
-            # does not stop.
-            old_steps = final / "steps"
-            if old_steps.exists():
-                os.replace(old_steps, out / ".old-steps")
-            if any(Path(steps).iterdir()):
+            # The earlier pictures leave with the earlier report, and only they: a file of the user's
+            # in steps/ stays. Renames only, which a full disk does not stop.
+            old_steps, pictures = final / "steps", sorted(Path(steps).iterdir())
+            if old_steps.is_dir():
+                trash = out / ".old-steps"
+                trash.mkdir()
+                for old in old_steps.iterdir():
+                    if STEP_PICTURE.fullmatch(old.name):
+                        os.replace(old, trash / old.name)
+                for picture in pictures:
+                    os.replace(picture, old_steps / picture.name)
+                with contextlib.suppress(OSError):
+                    old_steps.rmdir()  # only when nothing is left in it
+            elif pictures:
                 os.replace(steps, old_steps)
         for name in sorted(written):
             os.replace(out / name, final / name)

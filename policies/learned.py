@@ -408,9 +408,36 @@ def _json_kind(value: Any) -> str:
     return names.get(type(value), type(value).__name__)
 
 
-def _sha256(path: Path) -> str:
+#: Bytes a tensors file may hold beyond its tensors' (torch's archive: names, offsets, padding).
+TENSOR_FILE_SLACK = 16 << 20
+
+
+def tensor_file_bound(parameters: int, copies: int = 1) -> int:
+    """The most bytes a tensors file of ``copies`` × ``parameters`` values can hold (float64 each)."""
+    return copies * parameters * 8 + TENSOR_FILE_SLACK
+
+
+def _sha256(path: Path, most: int | None = None) -> str:
+    """The file's SHA-256, read in blocks, after its size is checked against ``most`` bytes (and the
+    memory the tensors would take when read): a 40 GB sparse file was read whole to be hashed."""
+    from scenes.limits import memory_left
+
     try:
-        return hashlib.sha256(path.read_bytes()).hexdigest()
+        size = path.stat().st_size
+        if most is not None and size > most:
+            raise ModelFileError(
+                f"{path}: {size:,} bytes, more than the {most:,} its network can need: not the file that was saved"
+            )
+        left = memory_left()
+        if left is not None and size > left[0]:
+            raise ModelFileError(
+                f"{path}: {size:,} bytes, more than this process may still allocate ({left[1]}): free memory"
+            )
+        digest = hashlib.sha256()
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                digest.update(block)
+        return digest.hexdigest()
     except OSError as exc:
         raise ModelFileError(f"{path}: cannot be read ({exc.strerror or type(exc).__name__})") from None
 
@@ -587,7 +614,7 @@ def load_checkpoint(path: str | Path):
     if not weights.is_file():
         missing = not os.path.lexists(weights)
         raise ModelFileError(f"{weights}: {'weights file missing' if missing else 'not a regular file'}")
-    if _sha256(weights) != document.get("sha256"):
+    if _sha256(weights, tensor_file_bound(config.parameters)) != document.get("sha256"):
         raise ModelFileError(f"{weights}: checksum does not match {path.name} (modified or truncated)")
     state = read_tensors(weights)
     if not isinstance(state, dict) or not all(isinstance(k, str) for k in state):

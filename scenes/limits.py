@@ -159,7 +159,11 @@ def check_sample_count(source: str, area: float, spacing: float) -> None:
     metres makes more than :data:`MAX_STRUCTURE_SAMPLES` samples, or more than the memory the process
     may still allocate (:data:`BYTES_PER_SAMPLE` each); the message gives the spacing that fits."""
     n = area / spacing**2
-    fits = math.ceil(100 * math.sqrt(area / MAX_STRUCTURE_SAMPLES)) / 100
+    most = MAX_STRUCTURE_SAMPLES
+    left = memory_left()
+    if left is not None:  # the spacing advised must meet the memory bound too, not the count's alone
+        most = max(1, min(most, left[0] // BYTES_PER_SAMPLE))
+    fits = math.ceil(100 * math.sqrt(area / most)) / 100
     advice = (
         f"the storey's structural surface is {area:,.0f} m²: set a coarser coverage_spacing than {spacing:g} m "
         f"(--set coverage_spacing={max(fits, spacing * 2):g}), or split the storey"

@@ -305,15 +305,23 @@ def _hall(side: float) -> dict:
     return plan
 
 
-def test_a_storey_whose_ground_truth_samples_would_not_fit_is_refused_with_the_spacing_that_fits():
+def test_a_storey_whose_ground_truth_samples_would_not_fit_is_refused_with_the_spacing_that_fits(monkeypatch):
     """A 490 m hall is within the extent bounds, but its 1.9e8 samples asked for 1.45 GiB in one array
-    (and many times that in all); the advice was to coarsen the voxel, which changes nothing."""
+    (and many times that in all); the advice was to coarsen the voxel, which changes nothing. The
+    spacing advised meets the memory bound too (0.16 m asked for 9.1 GiB of a process with 2.9)."""
+    import scenes.limits as limits
     from scenes import StoreySizeError
     from scenes.floorplan import FloorPlan
 
     scene = load_scene(FloorPlan.from_dict(_hall(490), source="hall.json"))
+    monkeypatch.setattr(limits, "memory_left", lambda: None)
     with pytest.raises(StoreySizeError, match=r"would sample it at 194,000,194 points .* coverage_spacing=0\.16"):
         scene.structure_samples(0.05)
+    monkeypatch.setattr(limits, "memory_left", lambda: (3 << 30, "its limit"))
+    with pytest.raises(StoreySizeError, match=r"coverage_spacing=0\.28\)"):
+        scene.structure_samples(0.05)
+    with pytest.raises(StoreySizeError, match=r"takes about [\d.]+ GiB.*coverage_spacing=0\.32\)"):
+        scene.structure_samples(0.16)
     small = load_scene(FloorPlan.from_dict(_hall(12), source="hall.json"))
     assert len(small.structure_samples(0.05).points) == round(small.structural_area() / 0.05**2)
 
@@ -868,3 +876,59 @@ def test_the_staged_step_pictures_get_the_mode_of_any_folder_made_there(tmp_path
     finally:
         os.umask(umask)
     assert (out / "steps").stat().st_mode & 0o777 == 0o755
+
+
+def test_a_first_signal_mid_rollout_saves_the_last_update_s_count(tmp_path, monkeypatch):
+    """stable-baselines3 drops the rollout under way at a stop but counts its steps: the state said
+    84 steps of a 16-step rollout, and a resumed total of 160 ended at 164."""
+    pytest.importorskip("sb3_contrib")
+    import os
+    import signal
+
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from tests.test_training import _tiny
+    from train.ppo import latest_state, train
+
+    original, calls = DummyVecEnv.step_wait, []
+
+    def step_wait(self):
+        calls.append(1)
+        if len(calls) == 8 + 3:  # 3 steps into the second rollout of 8
+            os.kill(os.getpid(), signal.SIGINT)
+        return original(self)
+
+    monkeypatch.setattr(DummyVecEnv, "step_wait", step_wait)
+    _, model = train(_tiny(n_steps=8, timesteps=64, checkpoint_every=0, eval_every=0), tmp_path / "run")
+    assert model.interrupted == signal.SIGINT
+    folder, state = latest_state(tmp_path / "run")
+    assert folder == tmp_path / "run" and state["timesteps"] == 8
+
+
+def test_a_report_written_over_keeps_the_user_s_own_files_in_its_steps_folder(tmp_path):
+    """--force replaced steps/ whole: a note of the user's in it was deleted with the old pictures."""
+    from train.cli import main as nbs
+
+    out = tmp_path / "report"
+    assert nbs(_scan(out, "--max-scans", "3")) == 0
+    (out / "steps" / "notes.txt").write_text("mine")
+    assert nbs(_scan(out, "--max-scans", "2", "--force")) == 0
+    assert sorted(p.name for p in (out / "steps").iterdir()) == ["notes.txt", "step_000.png", "step_001.png"]
+    assert nbs(_scan(out, "--max-scans", "1", "--force", "--no-steps")) == 0
+    assert sorted(p.name for p in (out / "steps").iterdir()) == ["notes.txt"]
+
+
+def test_resume_refuses_to_write_over_runs_of_other_settings(compared, tmp_path, capsys):
+    """A slip in one option of `--resume` replaced every record of the earlier comparison, unasked."""
+    import shutil
+
+    from train.cli import main as nbs
+
+    out = tmp_path / "out"
+    shutil.copytree(compared, out)
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    argv = ["compare", "--scenes", "l_room", "--policies", "random", "--seeds", "0", "--preset", "fast"]
+    assert nbs([*argv, "--max-scans", "2", "--quiet", "--out", str(out), "--resume"]) == EXIT_USAGE
+    err = capsys.readouterr().err
+    assert "holds a finished run with max_scans 1, where this comparison has max_scans 2" in err, err
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before

@@ -1147,8 +1147,18 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
             other = ", ".join(f"{k} {_shown(stored.get(k))}" for k in identity)
             damaged(folder / "run.json", f"it is the record of {other}, not of the run whose folder it is in")
             continue
-        if not (record.get("ok") is True and stored == json_form(asdict(spec)) and same_file):
-            continue  # a failed run, or another grid's: run it again
+        wanted = json_form(asdict(spec))
+        if record.get("ok") is True and isinstance(stored, dict) and stored != wanted:
+            # A finished run of other settings: --resume would write over it without a word (a slip in
+            # one option of a long command replaced a whole comparison).
+            theirs, mine = _settings_apart(stored, wanted)
+            raise CompareError(
+                f"{folder}: holds a finished run with {theirs}, where this comparison has {mine}; "
+                "--resume continues a comparison with its own options: give them, or pass --force to replace "
+                "its runs, or choose another --out"
+            )
+        if not (record.get("ok") is True and stored == wanted and same_file):
+            continue  # a failed run, or a run of an edited file: run it again
         path = folder / "metrics.json"
         try:
             finished = {**record, "metrics": read_json_file(path)}
@@ -1192,6 +1202,24 @@ MAX_FIGURE = 1e15
 
 class _BadRecordError(ValueError):
     """Why a run's ``metrics.json`` cannot go into the table (:func:`record_problem`)."""
+
+
+def _settings_apart(stored: dict[str, Any], wanted: dict[str, Any]) -> tuple[str, str]:
+    """The settings two run specs differ in (preset, each override), as each has them."""
+    apart: list[tuple[str, Any, Any]] = []
+    if stored.get("preset") != wanted.get("preset"):
+        apart.append(("preset", stored.get("preset"), wanted.get("preset")))
+    old, new = stored.get("overrides"), wanted.get("overrides")
+    old, new = (old if isinstance(old, dict) else {}), (new if isinstance(new, dict) else {})
+    for key in sorted(set(old) | set(new), key=str):
+        if old.get(key, "unset") != new.get(key, "unset"):
+            apart.append((str(key), old.get(key, "unset"), new.get(key, "unset")))
+    if not apart:
+        return "other settings", "its own"
+    return (
+        ", ".join(f"{k} {_shown(a)}" for k, a, _ in apart[:4]),
+        ", ".join(f"{k} {_shown(b)}" for k, _, b in apart[:4]),
+    )
 
 
 def _shown(value: Any) -> str:

@@ -687,12 +687,14 @@ def resume_config(run_folder: str | Path, timesteps: int | None = None) -> Train
 
 
 def _load_state(model, folder: Path, document: dict) -> None:
-    from policies.learned import _one_line, _sha256, check_tensors, read_tensors
+    from policies.learned import _one_line, _sha256, check_tensors, read_tensors, tensor_file_bound
 
     tensors = folder / str(document.get("tensors", STATE_FILE))
     if not tensors.is_file():
         raise ModelFileError(f"{tensors}: missing (named by {folder / STATE_JSON})")
-    if _sha256(tensors) != document.get("sha256"):
+    # The policy's parameters (its value head's included) and Adam's two moments of each.
+    parameters = sum(p.numel() for p in model.policy.parameters())
+    if _sha256(tensors, tensor_file_bound(parameters, copies=3)) != document.get("sha256"):
         raise ModelFileError(f"{tensors}: its checksum is not the one {STATE_JSON} records (a modified file)")
     state = read_tensors(tensors)
     if not isinstance(state, dict) or not isinstance(state.get("policy"), dict) or "optimizer" not in state:
@@ -967,6 +969,11 @@ def train(
             venv.close()
         raise
     venv.close()
+    start = progress_callback.rollout_start if progress_callback is not None else None
+    if stop.signal is not None and start is not None:
+        # Stopped mid-rollout: stable-baselines3 drops the rollout under way (no update learns from
+        # it) but counted its steps; the state is the last update's, and --resume collects it again.
+        model.num_timesteps = start
     seconds = time.time() - started + (0.0 if state is None else float(_previous_seconds(out)))
     training = {
         **recorded,
