@@ -371,8 +371,11 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
     buffers = _items(source, doc, "buffers")
     views = _items(source, doc, "bufferViews")
     for i, image in enumerate(_items(source, doc, "images")):
-        if isinstance(image.get("uri"), str) and not image["uri"].startswith("data:"):
-            _side_file(source, path, image["uri"], f"images[{i}]", required=False)
+        uri = image.get("uri")
+        # Images are never read (only the geometry is): a remote one is skipped, a local one is
+        # checked to be a file (a fifo there once hung the reader), a missing one allowed.
+        if isinstance(uri, str) and (urlsplit(uri).scheme.lower() in ("", "file") or _DRIVE.match(uri)):
+            _side_file(source, path, uri, f"images[{i}]", required=False)
     nodes = _items(source, doc, "nodes")
     _check_node_tree(source, nodes)
     drawn = _check_scenes_and_modes(source, doc, nodes)
@@ -588,6 +591,9 @@ def _buffer_bytes(source: str, path: Path, buffer: dict, index: int, bin_length:
             raise InvalidMeshError(source, f"buffers[{index}].uri is not base64 data") from None
     side = _side_file(source, path, uri, f"buffers[{index}]", required=False)
     return side.stat().st_size if side is not None else None
+
+
+_DRIVE = re.compile(r"[A-Za-z]:[\\/]")
 
 
 def side_file_path(source: str, path: Path, uri: str, where: str = "a uri") -> Path:

@@ -932,3 +932,42 @@ def test_resume_refuses_to_write_over_runs_of_other_settings(compared, tmp_path,
     err = capsys.readouterr().err
     assert "holds a finished run with max_scans 1, where this comparison has max_scans 2" in err, err
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+
+
+@pytest.mark.parametrize("value, ok", [("25e-1", True), ("2.0-3.6", True), ("2.0-", False), ("2-3e0", True)])
+def test_the_cell_size_range_is_split_where_a_range_is(value, ok, tmp_path, capsys, monkeypatch):
+    """`25e-1` (2.5 m) was split at its exponent's minus and refused; `2.0-` trained as 2.0 m."""
+    import train.ppo as ppo
+
+    seen = {}
+
+    def stop(config, *args, **kwargs):
+        seen["cell"] = config.cell_size
+        return 0
+
+    monkeypatch.setattr(ppo, "_run", stop)
+    code, err = _train(["--out", str(tmp_path / "run"), "--cell-size", value, "--quiet"], capsys)
+    if ok:
+        assert code == 0 and seen["cell"][0] == pytest.approx(float(value.split("-")[0] if "e-" not in value else 2.5))
+    else:
+        assert code == EXIT_USAGE and "--cell-size: expected A-B in metres, got '2.0-'" in err, err
+
+
+def test_a_remote_texture_does_not_refuse_the_geometry(glb_parts, tmp_path):
+    """Images are never read, yet an https: image refused the file (a missing local one loaded)."""
+    json_chunk, binary, faces = glb_parts
+    (tmp_path / "plain.bin").write_bytes(binary)
+    doc = json.loads(json_chunk)
+    doc["buffers"] = [dict(doc["buffers"][0], uri="plain.bin")]
+    doc["images"] = [{"uri": "https://example.com/tex.png"}, {"uri": "textures/missing.png"}]
+    path = tmp_path / "x.gltf"
+    path.write_text(json.dumps(doc))
+    assert len(load_scene(str(path)).mesh.faces) == faces
+
+
+def test_a_configuration_and_the_same_preset_by_keyword_agree():
+    from nbs_env.config import make_config
+
+    fast = make_config("fast")
+    assert make_config(fast, preset="fast") == fast
+    assert make_config("fast", preset="fast") == fast

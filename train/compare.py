@@ -1450,9 +1450,18 @@ def _scene_identity(scene: str) -> Any:
     """What a scene spec names: a generated seed as its number, a file as its real path."""
     if scene.startswith("generated:") and scene[len("generated:") :].isdigit():
         return ("generated", int(scene[len("generated:") :]))
+    if scene.startswith("corpus:"):  # an entry is its file, read with the entry's options
+        try:
+            from scenes.corpus import corpus_entry
+
+            entry = corpus_entry(scene[len("corpus:") :])
+            path, options = entry.path(), dict(entry.options)
+        except Exception:  # no such entry: the scene check says so
+            return ("name", scene)
+        return ("file", path.resolve(), json.dumps(options, sort_keys=True, default=str) if options else None)
     path = Path(scene)
     if path.suffix and path.exists():
-        return ("file", path.resolve())
+        return ("file", path.resolve(), None)
     return ("name", scene)
 
 

@@ -1286,8 +1286,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"nbs train: error: --rooms: {exc}", file=sys.stderr)
         return 2
     try:
-        lo, _, hi = args.cell_size.partition("-")
-        cell_size = (parse_float(lo), parse_float(hi or lo))
+        # A or A-B: the range's "-" follows a digit or a point (not an exponent's "e"), and B is
+        # not left out ("2.0-" is a slip, as parse_range refuses "2-").
+        parts = re.fullmatch(r"\s*([^\s]*?[0-9.])(?:\s*-\s*(\S+))?\s*", args.cell_size)
+        if parts is None:
+            raise ValueError(args.cell_size)
+        lo, hi = parts.group(1), parts.group(2)
+        cell_size = (parse_float(lo), parse_float(hi if hi is not None else lo))
     except ValueError:
         print(f"nbs train: error: --cell-size: expected A-B in metres, got {args.cell_size!r}", file=sys.stderr)
         return 2

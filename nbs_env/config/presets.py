@@ -117,10 +117,10 @@ def make_config(preset: str | EnvConfig | None = None, /, **overrides: Any) -> E
     """
     named = overrides.pop("preset", None)
     if named is not None:
-        if preset is not None and preset != named:
+        if preset is not None and (preset.preset if isinstance(preset, EnvConfig) else preset) != named:
             shown = f"a configuration of preset {preset.preset!r}" if isinstance(preset, EnvConfig) else repr(preset)
             raise ConfigError(f"preset {named!r} given as a field, but the configuration starts from {shown}: pass one")
-        preset = named
+        preset = named if preset is None else preset
     preset = "default" if preset is None else preset
     if isinstance(preset, EnvConfig):
         base, name, preset_overrides = preset.to_dict(), preset.preset, {}
