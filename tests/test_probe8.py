@@ -971,3 +971,17 @@ def test_a_configuration_and_the_same_preset_by_keyword_agree():
     fast = make_config("fast")
     assert make_config(fast, preset="fast") == fast
     assert make_config("fast", preset="fast") == fast
+
+
+@pytest.mark.parametrize("name", ["../other/training_state.pt", "/etc/passwd", ""])
+def test_a_training_state_names_its_tensors_beside_it(name, finished_run, tmp_path, capsys):
+    """`tensors` naming another run's file resumed that run's state; an absolute path was read whole."""
+    import shutil
+
+    run = tmp_path / "run"
+    shutil.copytree(finished_run, run)
+    state = json.loads((run / "training_state.json").read_text())
+    state["tensors"] = name
+    (run / "training_state.json").write_text(json.dumps(state))
+    code, err = _train(["--resume", str(run), "--timesteps", "48", "--quiet"], capsys)
+    assert code == EXIT_USAGE and "tensors must name a file beside it" in err, err

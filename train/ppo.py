@@ -637,6 +637,11 @@ def latest_state(run_folder: str | Path) -> tuple[Path, dict]:
             raise ModelFileError(f"{path}: malformed training state (timesteps, run)")
         if not 0 <= steps <= MAX_STATE_TIMESTEPS:
             raise ModelFileError(f"{path}: timesteps {steps} is not a count of steps (0..{MAX_STATE_TIMESTEPS:,})")
+        name = document.get("tensors", STATE_FILE)
+        if not isinstance(name, str) or Path(name).name != name or name in ("", ".", ".."):
+            # A name in the state's own folder: "../other/training_state.pt" resumed another run's
+            # state without a word, and "/etc/passwd" was read whole.
+            raise ModelFileError(f"{path}: tensors must name a file beside it, got {str(name)[:80]!r}")
         found.append((document["timesteps"], path.parent, document))
     if not found:
         raise ModelFileError(
