@@ -581,6 +581,11 @@ def _buffer_bytes(source: str, path: Path, buffer: dict, index: int, bin_length:
     if not isinstance(uri, str):
         raise InvalidMeshError(source, f"buffers[{index}].uri is not a string")
     if uri.startswith("data:"):
+        if "%" in uri.partition(",")[2]:
+            # trimesh decodes the base64 as written, skipping the escapes: other bytes, silently.
+            raise InvalidMeshError(
+                source, f"buffers[{index}].uri is a data: URI with percent-escapes in its base64: write it unescaped"
+            )
         if not uri.partition(",")[0].lower().endswith(";base64"):
             raise InvalidMeshError(
                 source, f"buffers[{index}].uri is a data: URI that is not base64 (glTF's buffers are)"
@@ -613,6 +618,13 @@ def side_file_path(source: str, path: Path, uri: str, where: str = "a uri") -> P
     name = unquote(parts.path)  # a query or a fragment names no part of a file
     if "\0" in name:
         raise InvalidMeshError(source, f"{where}.uri {uri[:80]!r} holds a NUL character, which no file name has")
+    if parts.netloc and parts.netloc.lower() != "localhost" and len(scheme) != 1:
+        # file://server/share/x.bin (and //server/...) names a file on another machine: without the
+        # host, a local /share/x.bin would be read in its place.
+        raise InvalidMeshError(
+            source,
+            f"{where}.uri {uri[:80]!r} names a file on host {parts.netloc[:40]!r}; nbs-env reads local files",
+        )
     if scheme == "file":
         return path.parent / name  # an absolute path stays one
     if scheme and len(scheme) > 1:  # one letter: a Windows drive, as some exporters write

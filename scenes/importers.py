@@ -821,11 +821,11 @@ def _ascii_records(block: list[str], element: PlyElement) -> dict[str, Any]:
     if len(block) != n or _PLY_NOT_NUMBER.search(text):
         raise ValueError("rows")
     lists = [k for k, p in enumerate(props) if p.count_type is not None]
-    first = block[0].split() if block else []
-    width = len(first)
+    widths = [len(line.split()) for line in block]  # one record a line: a short row beside a long one
+    width = widths[0] if widths else 0  # must not pass as two whole records read as one stream
     if len(lists) <= 1:  # one parse when every record has the same length (all triangles, say)
         values = np.array(text.split(), dtype=float)
-        if n and values.size == n * width:
+        if n and values.size == n * width and widths.count(width) == n:
             table = values.reshape(n, width)
             scalars_before = lists[0] if lists else len(props)
             length = width - len(props)

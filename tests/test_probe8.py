@@ -985,3 +985,63 @@ def test_a_training_state_names_its_tensors_beside_it(name, finished_run, tmp_pa
     (run / "training_state.json").write_text(json.dumps(state))
     code, err = _train(["--resume", str(run), "--timesteps", "48", "--quiet"], capsys)
     assert code == EXIT_USAGE and "tensors must name a file beside it" in err, err
+
+
+# ---------------------------------------------------------------------- probe 12
+def test_a_short_row_beside_a_long_one_is_no_pair_of_records(tmp_path):
+    """Read as one stream and reshaped, `x y` then `x y z w` made two whole vertices of other values."""
+    from tests.test_probe6 import GOOD_FACES, _ply_text
+
+    text = _ply_text(GOOD_FACES)
+    assert "\n4 0 0\n4 3 0\n" in text
+    path = tmp_path / "room.ply"
+    path.write_text(text.replace("\n4 0 0\n4 3 0\n", "\n4 0\n4 3 0 0\n", 1))
+    with pytest.raises(InvalidMeshError, match=r"element 'vertex' record 1 \(line 13\) holds 2 values"):
+        load_scene(str(path))
+
+
+@pytest.mark.parametrize(
+    "uri, message",
+    [
+        ("file://otherhost/PLAIN", r"names a file on host 'otherhost'"),
+        ("//otherhost/PLAIN", r"names a file on host 'otherhost'"),
+        ("file://localhost/PLAIN", None),
+        ("PERCENT", r"a data: URI with percent-escapes in its base64"),
+    ],
+)
+def test_a_buffer_on_another_host_or_escaped_base64_is_named(uri, message, glb_parts, tmp_path):
+    """The host of file://server/share/x.bin was dropped and the local /share/x.bin read; trimesh
+    decodes escaped base64 as written, skipping the escapes."""
+    import base64
+    from urllib.parse import quote
+
+    json_chunk, binary, faces = glb_parts
+    (tmp_path / "plain.bin").write_bytes(binary)
+    uri = uri.replace("/PLAIN", str(tmp_path / "plain.bin"))
+    if uri == "PERCENT":
+        uri = "data:application/octet-stream;base64," + quote(base64.b64encode(binary).decode(), safe="")
+    doc = json.loads(json_chunk)
+    doc["buffers"] = [dict(doc["buffers"][0], uri=uri)]
+    path = tmp_path / "x.gltf"
+    path.write_text(json.dumps(doc))
+    if message is None:
+        assert len(load_scene(str(path)).mesh.faces) == faces
+    else:
+        with pytest.raises(InvalidMeshError, match=message):
+            load_scene(str(path))
+
+
+def test_a_file_where_the_step_pictures_go_is_refused_before_the_scan(tmp_path, capsys, monkeypatch):
+    """Found after the scan, it cost the scan (and the message named the staging folder)."""
+    import train.cli as cli
+
+    out = tmp_path / "report"
+    out.mkdir()
+    (out / "steps").write_text("x")
+
+    def never(*args, **kwargs):
+        raise AssertionError("the scan ran")
+
+    monkeypatch.setattr(cli, "_scan", never)
+    assert cli.main(_scan(out, "--max-scans", "1", "--force")) == EXIT_USAGE
+    assert f"{out / 'steps'} is a file where the pictures go" in capsys.readouterr().err

@@ -598,6 +598,10 @@ def run_scan(args: argparse.Namespace) -> int:
         # Before the scan: a path found unwritable after it would lose it, and the scene must not be
         # one of the files the report writes (--force onto the scene's own folder overwrote it).
         check_outputs(outputs, reads=[("--scene", Path(args.scene))])
+        if not args.no_steps and os.path.lexists(out / "steps") and not (out / "steps").is_dir():
+            raise OutputError(
+                f"--out {out}: {out / 'steps'} is a file where the pictures go; move it, or pass --no-steps"
+            )
     except OutputError as exc:
         return _scan_error(exc, EXIT_USAGE)
     with StopRequest() as stop:
