@@ -420,7 +420,7 @@ def tensor_file_bound(parameters: int, copies: int = 1) -> int:
 def _sha256(path: Path, most: int | None = None) -> str:
     """The file's SHA-256, read in blocks, after its size is checked against ``most`` bytes (and the
     memory the tensors would take when read): a 40 GB sparse file was read whole to be hashed."""
-    from scenes.limits import memory_left
+    from scenes.memory import memory_left
 
     try:
         size = path.stat().st_size

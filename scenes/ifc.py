@@ -843,7 +843,10 @@ def _start_measures(storey: Any) -> dict[str, str]:
         for prop in pset.HasProperties or ():
             value = getattr(prop, "NominalValue", None)
             if value is not None:
-                kinds[prop.Name] = value.is_a()
+                # A unit of its own (feet, millimetres) is not the file's length unit the start is
+                # read in: 6 ft was taken as 6 m.
+                unit = getattr(prop, "Unit", None)
+                kinds[prop.Name] = value.is_a() if unit is None else f"{value.is_a()} in a unit of its own"
     return kinds
 
 

@@ -196,13 +196,15 @@ def test_resume_reuses_finished_runs_and_reruns_the_rest(tiny, monkeypatch):
     again, again_oracles = compare.run_grid(specs, jobs=1, progress=False, finished=finished)
     assert [(c.policy, c.seed) for c in calls] == [("random", 1)]
     assert strip_times(summarise(again, again_oracles)) == strip_times(rows)
-    # Another preset, scan budget or wall search is another spec: nothing is reused, no oracle either
-    # when the scanner differs.
-    other = grid(**{**TINY, "overrides": {"max_scans": 2}})
-    assert compare.load_finished(resumed, other)["runs"] == {}
-    searching = grid(**{**TINY, "overrides": {"max_scans": 3, "rooms.wall_search.scans": 1}})
-    assert compare.load_finished(resumed, searching)["runs"] == {}
-    assert compare.load_finished(resumed, grid(**{**TINY, "preset": "default"}))["oracles"] == {}
+    # Another preset, scan budget or wall search is another comparison: --resume refuses to write
+    # over its runs (it once replaced them, and the tables, unasked).
+    for other in (
+        grid(**{**TINY, "overrides": {"max_scans": 2}}),
+        grid(**{**TINY, "overrides": {"max_scans": 3, "rooms.wall_search.scans": 1}}),
+        grid(**{**TINY, "preset": "default"}),
+    ):
+        with pytest.raises(compare.CompareError, match=r"holds a finished run with"):
+            compare.load_finished(resumed, other)
 
 
 @pytest.mark.parametrize(

@@ -1045,3 +1045,46 @@ def test_a_file_where_the_step_pictures_go_is_refused_before_the_scan(tmp_path, 
     monkeypatch.setattr(cli, "_scan", never)
     assert cli.main(_scan(out, "--max-scans", "1", "--force")) == EXIT_USAGE
     assert f"{out / 'steps'} is a file where the pictures go" in capsys.readouterr().err
+
+
+def test_resume_continues_one_comparison_not_another(compared, tmp_path):
+    """`--resume` with other policies rewrote the earlier comparison's oracle and tables without its
+    runs; a grid that names all of them and more continues it."""
+    import shutil
+
+    from train.compare import CompareError, grid, load_finished
+
+    out = tmp_path / "out"
+    shutil.copytree(compared, out)
+    with pytest.raises(CompareError, match=r"holds runs this comparison leaves out \(scene 'l_room', policy 'random'"):
+        load_finished(out, grid("l_room", "greedy", "0", "fast", {"max_scans": 1}))
+    more = grid("l_room", "random,greedy", "0,1", "fast", {"max_scans": 1})
+    assert "l_room|random|0" in load_finished(out, more)["runs"]
+    shutil.rmtree(out / "runs")
+    with pytest.raises(CompareError, match=r"oracle\.json: holds the oracle of 'l_room' with max_scans 1"):
+        load_finished(out, grid("l_room", "random", "0", "fast", {"max_scans": 2}))
+
+
+def test_an_ifc_start_in_a_unit_of_its_own_is_refused(tmp_path):
+    """A StartX in feet was taken as metres (6 ft as 6 m)."""
+    pytest.importorskip("ifcopenshell")
+    from pathlib import Path
+
+    from scenes import IfcError
+
+    text = (Path(__file__).parent / "data" / "two_rooms.ifc").read_text()
+    added = (
+        "#4999=IFCCONVERSIONBASEDUNIT(*,.LENGTHUNIT.,'FOOT',#4998);\n"
+        "#4998=IFCMEASUREWITHUNIT(IFCLENGTHMEASURE(0.3048),#4997);\n"
+        "#4997=IFCSIUNIT(*,.LENGTHUNIT.,$,.METRE.);\n"
+        "#4996=IFCDIMENSIONALEXPONENTS(1,0,0,0,0,0,0);\n"
+        "#5000=IFCPROPERTYSINGLEVALUE('StartX',$,IFCLENGTHMEASURE(6.),#4999);\n"
+        "#5001=IFCPROPERTYSINGLEVALUE('StartY',$,IFCLENGTHMEASURE(2.),$);\n"
+        "#5002=IFCPROPERTYSET('0aaaaaaaaaaaaaaaaaaaa1',$,'Pset_NbsStart',$,(#5000,#5001));\n"
+        "#5003=IFCRELDEFINESBYPROPERTIES('0aaaaaaaaaaaaaaaaaaaa2',$,$,$,(#14),#5002);\n"
+    ).replace("IFCCONVERSIONBASEDUNIT(*,", "IFCCONVERSIONBASEDUNIT(#4996,")
+    at = text.rindex("ENDSEC;")
+    path = tmp_path / "start.ifc"
+    path.write_text(text[:at] + added + text[at:])
+    with pytest.raises(IfcError, match=r"StartX is 6\.0 \(IfcLengthMeasure in a unit of its own\)"):
+        load_scene(str(path), storey="EG")

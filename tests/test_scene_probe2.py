@@ -377,7 +377,7 @@ def test_the_memory_left_is_read_from_the_system():
 
 def test_a_containers_memory_limit_bounds_the_memory_left(monkeypatch, tmp_path):
     """cgroup v2: a container may hold far less than the machine has free."""
-    import scenes.limits as limits
+    import scenes.memory as limits
 
     (tmp_path / "memory.max").write_text(f"{3 * 2**30}\n")
     (tmp_path / "memory.current").write_text(f"{2**30}\n")

@@ -1126,6 +1126,7 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
     def damaged(path: Path, reason: str) -> None:
         print(f"nbs compare: {path}: {reason}; running it again", file=sys.stderr)
 
+    _check_same_comparison(out, specs)
     for spec in specs:
         folder = _run_folder(out, asdict(spec))
         try:
@@ -1148,15 +1149,6 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
             damaged(folder / "run.json", f"it is the record of {other}, not of the run whose folder it is in")
             continue
         wanted = json_form(asdict(spec))
-        if record.get("ok") is True and isinstance(stored, dict) and stored != wanted:
-            # A finished run of other settings: --resume would write over it without a word (a slip in
-            # one option of a long command replaced a whole comparison).
-            theirs, mine = _settings_apart(stored, wanted)
-            raise CompareError(
-                f"{folder}: holds a finished run with {theirs}, where this comparison has {mine}; "
-                "--resume continues a comparison with its own options: give them, or pass --force to replace "
-                "its runs, or choose another --out"
-            )
         if not (record.get("ok") is True and stored == wanted and same_file):
             continue  # a failed run, or a run of an edited file: run it again
         path = folder / "metrics.json"
@@ -1202,6 +1194,66 @@ MAX_FIGURE = 1e15
 
 class _BadRecordError(ValueError):
     """Why a run's ``metrics.json`` cannot go into the table (:func:`record_problem`)."""
+
+
+def _check_same_comparison(out: Path, specs: Sequence[RunSpec]) -> None:
+    """``--resume`` continues one comparison: every finished run in ``out`` must be one this grid
+    names, with its settings, and every oracle of ``oracle.json`` of its settings; else the tables,
+    the oracles and the runs of the earlier comparison would be rewritten without them, unasked.
+
+    Raises
+    ------
+    CompareError
+        Naming a run or an oracle of other settings, or runs this grid leaves out.
+    """
+    wanted = {s.key: json_form(asdict(s)) for s in specs}
+    left_out: list[str] = []
+    for path in sorted((out / "runs").glob("*/*/*/run.json")):
+        try:
+            record = read_json_file(path)
+        except (OSError, ValueError):
+            continue  # a damaged record: the run is named and run again, if this grid has it
+        stored = record.get("spec") if isinstance(record, dict) else None
+        if not (isinstance(stored, dict) and record.get("ok") is True):
+            continue
+        try:
+            key = RunSpec(stored["scene"], stored["policy"], stored["seed"]).key
+        except (KeyError, TypeError):
+            continue
+        if key not in wanted:
+            left_out.append(f"scene {stored['scene']!r}, policy {stored['policy']!r}, seed {stored['seed']}")
+        elif stored != wanted[key]:
+            theirs, mine = _settings_apart(stored, wanted[key])
+            raise CompareError(
+                f"{path.parent}: holds a finished run with {theirs}, where this comparison has {mine}; "
+                "--resume continues a comparison with its own options: give them, or pass --force to replace "
+                "its runs, or choose another --out"
+            )
+    if left_out:
+        more = f" and {len(left_out) - 1} more" if len(left_out) > 1 else ""
+        raise CompareError(
+            f"--out {out} holds runs this comparison leaves out ({left_out[0]}{more}): --resume continues a "
+            "comparison, and its tables would drop them; name them too, pass --force to start over, or choose "
+            "another --out"
+        )
+    settings = {json.dumps([s.preset, json_form(s.overrides)], sort_keys=True) for s in specs}
+    try:
+        stored_oracles = read_json_file(out / "oracle.json")
+    except (OSError, ValueError):
+        return
+    for scene, plan in stored_oracles.items() if isinstance(stored_oracles, dict) else ():
+        if not (isinstance(plan, dict) and plan.get("ok")):
+            continue
+        mine = json.dumps([plan.get("preset"), plan.get("overrides")], sort_keys=True)
+        if mine not in settings:
+            theirs, ours = _settings_apart(
+                {"preset": plan.get("preset"), "overrides": plan.get("overrides")},
+                {"preset": specs[0].preset, "overrides": json_form(specs[0].overrides)},
+            )
+            raise CompareError(
+                f"{out / 'oracle.json'}: holds the oracle of {scene!r} with {theirs}, where this comparison has "
+                f"{ours}; give the comparison's own options, pass --force, or choose another --out"
+            )
 
 
 def _settings_apart(stored: dict[str, Any], wanted: dict[str, Any]) -> tuple[str, str]:
