@@ -618,6 +618,11 @@ def side_file_path(source: str, path: Path, uri: str, where: str = "a uri") -> P
     name = unquote(parts.path)  # a query or a fragment names no part of a file
     if "\0" in name:
         raise InvalidMeshError(source, f"{where}.uri {uri[:80]!r} holds a NUL character, which no file name has")
+    if scheme and scheme != "file" and len(scheme) > 1:  # one letter: a Windows drive, as some exporters write
+        raise InvalidMeshError(
+            source,
+            f"{where}.uri {uri[:80]!r} is a {scheme}: URI; nbs-env reads local files only (save it beside the glTF)",
+        )
     if parts.netloc and parts.netloc.lower() != "localhost" and len(scheme) != 1:
         # file://server/share/x.bin (and //server/...) names a file on another machine: without the
         # host, a local /share/x.bin would be read in its place.
@@ -627,11 +632,6 @@ def side_file_path(source: str, path: Path, uri: str, where: str = "a uri") -> P
         )
     if scheme == "file":
         return path.parent / name  # an absolute path stays one
-    if scheme and len(scheme) > 1:  # one letter: a Windows drive, as some exporters write
-        raise InvalidMeshError(
-            source,
-            f"{where}.uri {uri[:80]!r} is a {scheme}: URI; nbs-env reads local files only (save it beside the glTF)",
-        )
     return path.parent / (uri if len(scheme) == 1 else name)
 
 

@@ -68,7 +68,7 @@ from __future__ import annotations
 import base64
 import re
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -434,12 +434,7 @@ def _read_obj(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
             source,
             f"line {coord_lines[k]}: a vertex has a coordinate that is no ASCII number: {('v ' + coords[k])[:80]!r}",
         ) from None
-    try:
-        faces, polygon_of = triangulate_polygons(vertices, polygons)
-    except CrossingPolygonError as exc:
-        raise InvalidMeshError(
-            source, f"line {polygon_lines[exc.index]}: the face's outline crosses itself; split it into simple faces"
-        ) from None
+    faces, polygon_of = _triangulated(source, vertices, polygons, lambda k: f"line {polygon_lines[k]}: the face's")
     part_of = np.asarray(polygon_part, dtype=np.int64)[polygon_of]
 
     n_parts = len(parts)
@@ -454,6 +449,16 @@ def _read_obj(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
             part_cls[i] = cls.value
         part_room[i] = room
     return vertices, faces, part_cls[part_of], part_room[part_of], unlabelled
+
+
+def _triangulated(
+    source: str, vertices: np.ndarray, polygons: Sequence[Sequence[int]], face: Callable[[int], str]
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`~scenes.geometry.triangulate_polygons`, a crossing polygon named as ``face(index)`` names it."""
+    try:
+        return triangulate_polygons(vertices, polygons)
+    except CrossingPolygonError as exc:
+        raise InvalidMeshError(source, f"{face(exc.index)} outline crosses itself; split it into simple faces") from exc
 
 
 def _floats_ok(text: str) -> bool:
@@ -634,12 +639,7 @@ def _read_ply(
     for i, poly in enumerate(polys):
         if len(poly) < 3:
             raise InvalidMeshError(source, f"PLY face {i} has {len(poly)} vertices; a face needs 3 or more")
-    try:
-        triangles, src_arr = triangulate_polygons(vertices, polys)
-    except CrossingPolygonError as exc:
-        raise InvalidMeshError(
-            source, f"PLY face {exc.index}'s outline crosses itself; split it into simple faces"
-        ) from None
+    triangles, src_arr = _triangulated(source, vertices, polys, lambda k: f"PLY face {k}'s")
     room_arr = room_raw.astype(np.int64)[src_arr] if len(src_arr) else np.zeros(0, np.int64)
     return (
         vertices,

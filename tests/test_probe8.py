@@ -689,6 +689,19 @@ def test_two_spellings_of_one_scene_or_checkpoint_are_one_run(monkeypatch):
 
 
 # ---------------------------------------------------------------------- probe 11
+def _load_with_buffer_uri(json_chunk: bytes, uri: str, faces: int, message: str | None, folder) -> None:
+    """A glTF of the GLB's JSON with its buffer at ``uri``: it loads its ``faces``, or is refused with ``message``."""
+    doc = json.loads(json_chunk)
+    doc["buffers"] = [dict(doc["buffers"][0], uri=uri)]
+    path = folder / "x.gltf"
+    path.write_text(json.dumps(doc))
+    if message is None:
+        assert len(load_scene(str(path)).mesh.faces) == faces
+    else:
+        with pytest.raises(InvalidMeshError, match=message):
+            load_scene(str(path))
+
+
 @pytest.mark.parametrize(
     "polygon, area",
     [
@@ -753,15 +766,7 @@ def test_gltf_side_files_are_found_as_uri_references_or_named(uri, message, glb_
     (tmp_path / "plain.bin").write_bytes(binary)
     if uri == "BASE64":
         uri = "data:application/octet-stream;BASE64," + base64.b64encode(binary).decode()
-    doc = json.loads(json_chunk)
-    doc["buffers"] = [dict(doc["buffers"][0], uri=uri)]
-    path = tmp_path / "x.gltf"
-    path.write_text(json.dumps(doc))
-    if message is None:
-        assert len(load_scene(str(path)).mesh.faces) == faces
-    else:
-        with pytest.raises(InvalidMeshError, match=message):
-            load_scene(str(path))
+    _load_with_buffer_uri(json_chunk, uri, faces, message, tmp_path)
 
 
 def test_a_gltf_with_a_byte_order_mark_is_refused_by_name(glb_parts, tmp_path):
@@ -1020,15 +1025,7 @@ def test_a_buffer_on_another_host_or_escaped_base64_is_named(uri, message, glb_p
     uri = uri.replace("/PLAIN", str(tmp_path / "plain.bin"))
     if uri == "PERCENT":
         uri = "data:application/octet-stream;base64," + quote(base64.b64encode(binary).decode(), safe="")
-    doc = json.loads(json_chunk)
-    doc["buffers"] = [dict(doc["buffers"][0], uri=uri)]
-    path = tmp_path / "x.gltf"
-    path.write_text(json.dumps(doc))
-    if message is None:
-        assert len(load_scene(str(path)).mesh.faces) == faces
-    else:
-        with pytest.raises(InvalidMeshError, match=message):
-            load_scene(str(path))
+    _load_with_buffer_uri(json_chunk, uri, faces, message, tmp_path)
 
 
 def test_a_file_where_the_step_pictures_go_is_refused_before_the_scan(tmp_path, capsys, monkeypatch):
