@@ -324,11 +324,12 @@ def _not_simply_convex(vertices: np.ndarray, corners: np.ndarray) -> np.ndarray:
         length = np.linalg.norm(normal, axis=1)
         bends = np.cross(np.roll(edges, 1, axis=1), edges)
         turns = np.einsum("mij,mj->mi", bends, normal)
-        scale = np.einsum("mij,mij->mi", edges, edges).max(axis=1) * length
+        longest = np.einsum("mij,mij->mi", edges, edges).max(axis=1)
+        scale = longest * length
         concave = (turns < -1e-9 * scale[:, None]).any(axis=1)
         angles = np.arctan2(turns / length[:, None], np.einsum("mij,mij->mi", np.roll(edges, 1, axis=1), edges))
         rounds = np.abs(angles.sum(axis=1)) / (2 * np.pi)
-        bent = np.linalg.norm(bends, axis=2).max(axis=1) > 1e-12 * np.einsum("mij,mij->mi", edges, edges).max(axis=1)
+        bent = np.linalg.norm(bends, axis=2).max(axis=1) > 1e-12 * longest
         # A flat polygon with corners that bend (its lobes cancel) or one that goes round twice.
         overturned = (length <= 1e-12 * scale + 1e-300) & bent | (rounds > 1.5)
     return inside & (repeated | concave | overturned)

@@ -70,6 +70,9 @@ class PlyElement:
     count: int
     properties: tuple[PlyProperty, ...]
 
+    def named(self, name: str) -> PlyProperty:
+        return next(p for p in self.properties if p.name == name)
+
     @property
     def least_binary_bytes(self) -> int:
         """The fewest bytes a binary record takes: its scalars', and each list's count (it may be empty)."""

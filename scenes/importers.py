@@ -419,7 +419,7 @@ def _read_obj(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
         # Everything else (vt, vn, usemtl, mtllib, s, l, ...) does not matter for labelled geometry.
 
     joined = "\n".join(coords)
-    odd = _OBJ_NOT_NUMBER.search(joined)
+    odd = _NOT_A_NUMBER.search(joined)
     try:
         if odd is not None:
             raise ValueError(odd.group())
@@ -469,7 +469,7 @@ def _floats_ok(text: str) -> bool:
     return True
 
 
-# The OBJ grammar's blanks and numbers (ASCII; nan and inf are left to the finite check).
+# The OBJ grammar's blanks (ASCII: not a no-break space).
 _OBJ_BLANKS = " \t\v\f"
 _OBJ_SPLIT = re.compile(r"[ \t\v\f]+")
 _PYTHON_ONLY_BLANKS = re.compile(r"[\x1c-\x1f]")
@@ -481,7 +481,8 @@ def _obj_split(text: str, sep: None = None, maxsplit: int = -1) -> list[str]:
     return [w for w in words if w]
 
 
-_OBJ_NOT_NUMBER = re.compile(r"[^0-9+\-.eEnaiftyNAIFTY \n]")
+#: What no ASCII number of a text mesh (OBJ, ASCII PLY) holds: nan and inf pass, to the finite checks.
+_NOT_A_NUMBER = re.compile(r"[^0-9+\-.eEnaiftyNAIFTY \t\n]")
 
 
 # ------------------------------------------------------------------------------------- glTF/GLB
@@ -601,17 +602,14 @@ def _read_ply(
     index_prop = next((p for p in props if p in ("vertex_indices", "vertex_index")), None)
     if index_prop is None:
         raise InvalidMeshError(source, "the PLY face element has no vertex_indices list")
-    declared = {p.name: p.type for p in header.element("face").properties}
     try:
-        polys = _ply_polygons(columns[index_prop], n_raw, declared[index_prop])
+        polys = _ply_polygons(columns[index_prop], n_raw, header.element("face").named(index_prop).type)
         label_raw = (
-            _ply_integers(columns["label"], n_raw, "label", declared["label"])
+            _ply_integers(columns["label"], n_raw, "label")
             if "label" in props
             else np.full(n_raw, SurfaceClass.CLUTTER.value)  # unlabelled: the structure check says so
         )
-        room_raw = (
-            _ply_integers(columns["room"], n_raw, "room", declared["room"]) if "room" in props else np.full(n_raw, -1)
-        )
+        room_raw = _ply_integers(columns["room"], n_raw, "room") if "room" in props else np.full(n_raw, -1)
     except (KeyError, IndexError, ValueError, TypeError) as exc:
         # The header declares the property, the body does not hold it where it should (an ASCII face
         # line with fewer or more values than the header lists): name the record where one is to blame.
@@ -750,7 +748,7 @@ def _read_ascii_ply(source: str, data: bytes, header: PlyHeader) -> tuple[np.nda
     Returns
     -------
     As :func:`_read_binary_ply`; the face element's values as float64 (checked against their types
-    by :func:`_ply_integers` and :func:`_ply_polygons`).
+    by :func:`_ply_polygons` for the vertex indices).
 
     Raises
     ------
@@ -818,7 +816,7 @@ def _ascii_records(block: list[str], element: PlyElement) -> dict[str, Any]:
     if n == 0:
         return {p.name: np.zeros(0) if p.count_type is None else np.zeros((0, 0)) for p in props}
     text = " ".join(block)
-    if len(block) != n or _PLY_NOT_NUMBER.search(text):
+    if len(block) != n or _NOT_A_NUMBER.search(text):
         raise ValueError("rows")
     lists = [k for k, p in enumerate(props) if p.count_type is not None]
     widths = [len(line.split()) for line in block]  # one record a line: a short row beside a long one
@@ -864,10 +862,6 @@ def _ascii_records(block: list[str], element: PlyElement) -> dict[str, Any]:
         p.name: np.asarray(v, dtype=float) if p.count_type is None else v
         for p, v in zip(props, columns.values(), strict=True)
     }
-
-
-#: What no ASCII number of a PLY body holds (nan and inf pass, to the finite checks).
-_PLY_NOT_NUMBER = re.compile(r"[^0-9+\-.eEnaiftyNAIFTY \t]")
 
 
 def _outside(values: np.ndarray, kind: str, whole: bool = False) -> np.ndarray:
@@ -924,9 +918,9 @@ def _ply_polygons(column: np.ndarray, n: int, kind: str = "int") -> list[np.ndar
     return np.split(indices, ends[:-1])
 
 
-def _ply_integers(column: Any, n: int, name: str, kind: str = "int") -> np.ndarray:
-    """A per-face scalar property as (n,) int64; one value a face, whole numbers within their
-    declared type ``kind``."""
+def _ply_integers(column: Any, n: int, name: str) -> np.ndarray:
+    """A per-face scalar property as (n,) int64; one value a face, whole numbers (an ASCII value's
+    declared type is checked as it is read, a binary one's holds it)."""
     values = np.asarray(column)
     if values.dtype == object or values.size != n:  # a face line short of its values, or with more
         raise _PlyValueError(f"the face element's '{name}' values do not match its header (one a face, {n:,} faces)")
@@ -935,10 +929,6 @@ def _ply_integers(column: Any, n: int, name: str, kind: str = "int") -> np.ndarr
         raise _PlyValueError(f"face '{name}' values must be whole numbers")
     if values.dtype.kind not in "iuf":
         raise _PlyValueError(f"face '{name}' values are not numbers")
-    odd = _outside(values, kind) if values.dtype.kind == "f" else np.zeros(values.shape, bool)
-    if odd.any():
-        i = int(np.flatnonzero(odd)[0])
-        raise _PlyValueError(f"face {i}'s '{name}' is {values[i]:.0f}, which its header's type {kind!r} cannot hold")
     return values.astype(np.int64)
 
 

@@ -96,20 +96,6 @@ def test_a_json_object_naming_a_key_twice_is_refused_wherever_json_is_read(glb_p
 
 
 # ---------------------------------------------------------------------- a damaged learning curve
-@pytest.fixture(scope="module")
-def finished_run(tmp_path_factory):
-    """A finished run of 16 steps with a checkpoint at 8 (as test_train_probe3's)."""
-    pytest.importorskip("sb3_contrib")
-    from train.ppo import TrainConfig, train
-
-    out = tmp_path_factory.mktemp("curve") / "run"
-    config = TrainConfig(
-        timesteps=16, envs=1, seed=0, rooms=(1, 1), n_steps=8, batch_size=8, completion="policy", checkpoint_every=8
-    )
-    train(config, out, progress=False)
-    return out
-
-
 @pytest.mark.parametrize(
     "line, message",
     [
@@ -123,12 +109,12 @@ def finished_run(tmp_path_factory):
         ('{"timesteps": 8, "timesteps": 9}', r"line 2 is not JSON \(the key 'timesteps' appears twice"),
     ],
 )
-def test_a_damaged_learning_curve_is_refused_before_a_resumed_run_trains(line, message, finished_run, tmp_path, capsys):
+def test_a_damaged_learning_curve_is_refused_before_a_resumed_run_trains(line, message, tiny_run, tmp_path, capsys):
     """The curve was read whole only by the plot at the end: the run trained, then ended in a traceback."""
     import shutil
 
     run = tmp_path / "run"
-    shutil.copytree(finished_run, run)
+    shutil.copytree(tiny_run, run)
     curve = run / "learning_curve.jsonl"
     good = {"timesteps": 0, "learned": {"structure_sensed_pct": 50.0, "scans": 3, "path_length_m": 4.5}}
     curve.write_text(json.dumps(good) + "\n" + line + "\n")
@@ -517,6 +503,25 @@ def test_a_polygon_face_that_crosses_itself_is_named(tmp_path):
         load_scene(str(path))
 
 
+def _ifc_with_start(folder, start_x: str | None, unit: str = "$", extra: str = ""):
+    """tests/data/two_rooms.ifc with a Pset_NbsStart on storey EG: StartX ``start_x`` (left out when
+    None) in ``unit`` (``$``: the file's), StartY 2 m; ``extra`` lines before it."""
+    from pathlib import Path
+
+    text = (Path(__file__).parent / "data" / "two_rooms.ifc").read_text()
+    x = f"#5000=IFCPROPERTYSINGLEVALUE('StartX',$,{start_x},{unit});\n" if start_x else ""
+    props = "(#5000,#5001)" if start_x else "(#5001)"
+    added = (
+        f"{extra}{x}#5001=IFCPROPERTYSINGLEVALUE('StartY',$,IFCLENGTHMEASURE(2.),$);\n"
+        f"#5002=IFCPROPERTYSET('0aaaaaaaaaaaaaaaaaaaa1',$,'Pset_NbsStart',$,{props});\n"
+        "#5003=IFCRELDEFINESBYPROPERTIES('0aaaaaaaaaaaaaaaaaaaa2',$,$,$,(#14),#5002);\n"
+    )
+    at = text.rindex("ENDSEC;")
+    path = folder / "start.ifc"
+    path.write_text(text[:at] + added + text[at:])
+    return path
+
+
 @pytest.mark.parametrize(
     "value, shown",
     [("IFCLABEL('6.0')", r"'6\.0' \(IfcLabel\)"), ("IFCBOOLEAN(.T.)", r"True \(IfcBoolean\)"), (None, "missing")],
@@ -524,32 +529,21 @@ def test_a_polygon_face_that_crosses_itself_is_named(tmp_path):
 def test_an_ifc_start_that_is_no_pair_of_lengths_is_refused_naming_the_property(value, shown, tmp_path):
     """A label '6.0' was dropped for the automatic start without a word, a boolean taken as 1 m."""
     pytest.importorskip("ifcopenshell")
-    from pathlib import Path
 
     from scenes import IfcError
 
-    text = (Path(__file__).parent / "data" / "two_rooms.ifc").read_text()
-    x = f"#5000=IFCPROPERTYSINGLEVALUE('StartX',$,{value},$);\n" if value else ""
-    props = "(#5000,#5001)" if value else "(#5001)"
-    added = (
-        f"{x}#5001=IFCPROPERTYSINGLEVALUE('StartY',$,IFCLENGTHMEASURE(2.),$);\n"
-        f"#5002=IFCPROPERTYSET('0aaaaaaaaaaaaaaaaaaaa1',$,'Pset_NbsStart',$,{props});\n"
-        "#5003=IFCRELDEFINESBYPROPERTIES('0aaaaaaaaaaaaaaaaaaaa2',$,$,$,(#14),#5002);\n"
-    )
-    at = text.rindex("ENDSEC;")
-    path = tmp_path / "start.ifc"
-    path.write_text(text[:at] + added + text[at:])
+    path = _ifc_with_start(tmp_path, value)
     with pytest.raises(IfcError, match=rf"storey 'EG': Pset_NbsStart\.StartX is {shown}; the start is two lengths"):
         load_scene(str(path), storey="EG")
-    path.write_text(text[:at] + added.replace(str(value), "IFCLENGTHMEASURE(6.)") + text[at:])
     if value:
+        path = _ifc_with_start(tmp_path, "IFCLENGTHMEASURE(6.)")
         assert load_scene(str(path), storey="EG").start[:2].tolist() == [6.0, 2.0]
 
 
 def test_no_two_runs_of_a_comparison_share_a_folder(tmp_path, monkeypatch):
     """`:` became `_`: `ppo:ck_x:y` and `ppo:ck_x_y` wrote one folder, each run over the other's records."""
     import train.compare as compare
-    from train.compare import CompareError, RunSpec, check_out_dir, folder_name
+    from train.compare import CompareError, folder_name, grid
 
     assert folder_name("ppo:ck_x:y") != folder_name("ppo:ck_x_y") == "ppo_ck_x_y"
     assert [folder_name(n) for n in ("ppo:reference", "generated:7", "greedy")] == [
@@ -558,9 +552,8 @@ def test_no_two_runs_of_a_comparison_share_a_folder(tmp_path, monkeypatch):
         "greedy",
     ]
     monkeypatch.setattr(compare, "folder_name", lambda name: "same")
-    specs = [RunSpec("l_room", "greedy", 0), RunSpec("l_room", "random", 0)]
     with pytest.raises(CompareError, match=r"policy 'greedy' and of scene 'l_room', policy 'random' would keep"):
-        check_out_dir(tmp_path / "out", specs=specs)
+        grid("l_room", "greedy,random", "0")
 
 
 @pytest.mark.parametrize(
@@ -811,20 +804,10 @@ def test_a_classifier_whose_scaler_or_vectors_would_overflow_is_refused_at_load(
 def test_an_ifc_start_of_another_measure_than_a_length_is_refused(measure, tmp_path):
     """An angle, an area or a count came back a number like a length: taken as 6 m."""
     pytest.importorskip("ifcopenshell")
-    from pathlib import Path
 
     from scenes import IfcError
 
-    text = (Path(__file__).parent / "data" / "two_rooms.ifc").read_text()
-    added = (
-        f"#5000=IFCPROPERTYSINGLEVALUE('StartX',$,{measure},$);\n"
-        "#5001=IFCPROPERTYSINGLEVALUE('StartY',$,IFCLENGTHMEASURE(2.),$);\n"
-        "#5002=IFCPROPERTYSET('0aaaaaaaaaaaaaaaaaaaa1',$,'Pset_NbsStart',$,(#5000,#5001));\n"
-        "#5003=IFCRELDEFINESBYPROPERTIES('0aaaaaaaaaaaaaaaaaaaa2',$,$,$,(#14),#5002);\n"
-    )
-    at = text.rindex("ENDSEC;")
-    path = tmp_path / "start.ifc"
-    path.write_text(text[:at] + added + text[at:])
+    path = _ifc_with_start(tmp_path, measure)
     with pytest.raises(IfcError, match=r"Pset_NbsStart\.StartX is 6(\.0)? \(Ifc\w+\)"):
         load_scene(str(path), storey="EG")
 
@@ -840,7 +823,7 @@ def test_two_spellings_of_one_policy_are_one_run(policies):
     assert len(grid("l_room", "greedy,greedy:0.8", "0")) == 2
 
 
-def test_a_resumed_run_refuses_options_it_would_not_apply_and_applies_envs(finished_run, tmp_path, capsys, monkeypatch):
+def test_a_resumed_run_refuses_options_it_would_not_apply_and_applies_envs(tiny_run, tmp_path, capsys, monkeypatch):
     """`--n-steps 8 --seed 5` were dropped without a word; `--envs 2` (the default) was not applied,
     so a run recorded with 500 envs was refused for its own number after the user lowered it."""
     import shutil
@@ -848,7 +831,7 @@ def test_a_resumed_run_refuses_options_it_would_not_apply_and_applies_envs(finis
     import train.ppo as ppo
 
     run = tmp_path / "run"
-    shutil.copytree(finished_run, run)
+    shutil.copytree(tiny_run, run)
     before = _files(run)
     code, err = _train(["--resume", str(run), "--timesteps", "48", "--n-steps", "8", "--seed", "5", "--quiet"], capsys)
     assert code == EXIT_USAGE and "--n-steps, --seed apply to a new run" in err, err
@@ -979,12 +962,12 @@ def test_a_configuration_and_the_same_preset_by_keyword_agree():
 
 
 @pytest.mark.parametrize("name", ["../other/training_state.pt", "/etc/passwd", ""])
-def test_a_training_state_names_its_tensors_beside_it(name, finished_run, tmp_path, capsys):
+def test_a_training_state_names_its_tensors_beside_it(name, tiny_run, tmp_path, capsys):
     """`tensors` naming another run's file resumed that run's state; an absolute path was read whole."""
     import shutil
 
     run = tmp_path / "run"
-    shutil.copytree(finished_run, run)
+    shutil.copytree(tiny_run, run)
     state = json.loads((run / "training_state.json").read_text())
     state["tensors"] = name
     (run / "training_state.json").write_text(json.dumps(state))
@@ -1065,23 +1048,15 @@ def test_resume_continues_one_comparison_not_another(compared, tmp_path):
 def test_an_ifc_start_in_a_unit_of_its_own_is_refused(tmp_path):
     """A StartX in feet was taken as metres (6 ft as 6 m)."""
     pytest.importorskip("ifcopenshell")
-    from pathlib import Path
 
     from scenes import IfcError
 
-    text = (Path(__file__).parent / "data" / "two_rooms.ifc").read_text()
-    added = (
-        "#4999=IFCCONVERSIONBASEDUNIT(*,.LENGTHUNIT.,'FOOT',#4998);\n"
-        "#4998=IFCMEASUREWITHUNIT(IFCLENGTHMEASURE(0.3048),#4997);\n"
-        "#4997=IFCSIUNIT(*,.LENGTHUNIT.,$,.METRE.);\n"
+    feet = (
         "#4996=IFCDIMENSIONALEXPONENTS(1,0,0,0,0,0,0);\n"
-        "#5000=IFCPROPERTYSINGLEVALUE('StartX',$,IFCLENGTHMEASURE(6.),#4999);\n"
-        "#5001=IFCPROPERTYSINGLEVALUE('StartY',$,IFCLENGTHMEASURE(2.),$);\n"
-        "#5002=IFCPROPERTYSET('0aaaaaaaaaaaaaaaaaaaa1',$,'Pset_NbsStart',$,(#5000,#5001));\n"
-        "#5003=IFCRELDEFINESBYPROPERTIES('0aaaaaaaaaaaaaaaaaaaa2',$,$,$,(#14),#5002);\n"
-    ).replace("IFCCONVERSIONBASEDUNIT(*,", "IFCCONVERSIONBASEDUNIT(#4996,")
-    at = text.rindex("ENDSEC;")
-    path = tmp_path / "start.ifc"
-    path.write_text(text[:at] + added + text[at:])
+        "#4997=IFCSIUNIT(*,.LENGTHUNIT.,$,.METRE.);\n"
+        "#4998=IFCMEASUREWITHUNIT(IFCLENGTHMEASURE(0.3048),#4997);\n"
+        "#4999=IFCCONVERSIONBASEDUNIT(#4996,.LENGTHUNIT.,'FOOT',#4998);\n"
+    )
+    path = _ifc_with_start(tmp_path, "IFCLENGTHMEASURE(6.)", unit="#4999", extra=feet)
     with pytest.raises(IfcError, match=r"StartX is 6\.0 \(IfcLengthMeasure in a unit of its own\)"):
         load_scene(str(path), storey="EG")

@@ -17,21 +17,6 @@ def _files(folder: Path) -> dict[str, bytes]:
     return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
 
 
-@pytest.fixture(scope="module")
-def tiny_run(tmp_path_factory) -> Path:
-    """A finished run of 16 steps with checkpoints at 8 and 16 (the cheapest run with a checkpoint)."""
-    pytest.importorskip("sb3_contrib")
-    from train.ppo import TrainConfig, train
-
-    out = tmp_path_factory.mktemp("probe3") / "run"
-    config = TrainConfig(
-        timesteps=16, envs=1, seed=0, rooms=(1, 1), n_steps=8, batch_size=8, completion="policy", checkpoint_every=8
-    )
-    train(config, out, progress=False)
-    assert (out / "checkpoint_8" / "training_state.json").is_file()
-    return out
-
-
 @pytest.fixture
 def run(tiny_run, tmp_path) -> Path:
     copy = tmp_path / "run"

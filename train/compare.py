@@ -1004,39 +1004,33 @@ def check_out_dir(out: str | Path, *, keep: bool = False, specs: Sequence[RunSpe
             if runs.is_dir()
             else None
         )
-    shared = _shared_folder(out, specs)
-    if shared is not None:
-        a, b = shared
-        raise CompareError(
-            f"the runs of scene {a.scene!r}, policy {a.policy!r} and of scene {b.scene!r}, policy {b.policy!r} "
-            f"would keep their records in one folder ({_run_folder(out, asdict(a)).parent}); rename one of them"
-        )
-    if odd is None:
-        in_the_way = _file_in_the_way(out, specs)
-        if in_the_way is not None:
-            path, spec = in_the_way
-            raise CompareError(
-                f"--out {out}: {path} is a file where the folder of the run of scene {spec.scene!r}, policy "
-                f"{spec.policy!r}, seed {spec.seed} goes; move it away or choose another --out"
-            )
     if odd is not None:
         path, what = odd
         raise CompareError(
             f"--out {out}: {path} is {what}; the comparison's files must be its own: "
             "replace it by the file or remove it, or choose another --out"
         )
+    in_the_way = _file_in_the_way(out, specs)
+    if in_the_way is not None:
+        path, spec = in_the_way
+        raise CompareError(
+            f"--out {out}: {path} is a file where the folder of the run of scene {spec.scene!r}, policy "
+            f"{spec.policy!r}, seed {spec.seed} goes; move it away or choose another --out"
+        )
     return out
 
 
-def _shared_folder(out: Path, specs: Sequence[RunSpec]) -> tuple[RunSpec, RunSpec] | None:
-    """Two runs of the grid whose records would share a folder (each would overwrite the other's)."""
+def _refuse_shared_folders(specs: Sequence[RunSpec]) -> None:
+    """Two runs of a grid whose records would share a folder would overwrite each other's."""
     seen: dict[Path, RunSpec] = {}
     for spec in specs:
-        folder = _run_folder(out, asdict(spec))
+        folder = _run_folder(Path(), asdict(spec)).parent
         other = seen.setdefault(folder, spec)
-        if other is not spec and (other.scene, other.policy) != (spec.scene, spec.policy):
-            return other, spec
-    return None
+        if (other.scene, other.policy) != (spec.scene, spec.policy):
+            raise CompareError(
+                f"the runs of scene {other.scene!r}, policy {other.policy!r} and of scene {spec.scene!r}, policy "
+                f"{spec.policy!r} would keep their records in one folder ({folder}); rename one of them"
+            )
 
 
 def _file_in_the_way(out: Path, specs: Sequence[RunSpec]) -> tuple[Path, RunSpec] | None:
@@ -1625,6 +1619,7 @@ def grid(
         for policy in policy_list
         for seed in seed_list
     ]
+    _refuse_shared_folders(specs)
     from policies import config_for
 
     for policy in made:  # every run's configuration is checked here, not in a worker
