@@ -262,7 +262,8 @@ class NBSEnv(gym.Env):
         info : dict of str to Any
             ``scans``, ``room``, ``rooms_done`` (int); ``structure_sensed_pct`` (float, % of the storey's
             true structural surface: evaluation only; None with ``coverage_meter=False``);
-            ``path_length_m`` (float); ``times``
+            ``path_length_m`` (float); ``mapped_pct`` (float, the surface the robot labelled
+            Structure, % of the storey's structural surface: :attr:`Storey.mapped_pct`); ``times``
             (:class:`~nbs_env.storey.StageTimes`, this step's seconds per stage);
             ``registration_error_m``, ``registration_error_deg`` (float, the last scan's pose error);
             ``registration_refused`` (str, why ICP's pose was refused; "" when accepted);
@@ -270,7 +271,9 @@ class NBSEnv(gym.Env):
             ``candidate_gains`` ((K,) int64, :meth:`candidate_gains`); ``gain_rule_done`` (bool,
             :meth:`gain_rule_done`); ``invalid_action`` (bool); ``conversions`` (int, the realised
             Occluded-structure→Structure conversions of the last decision, counted only with
-            ``reward.kind="conversions"``); ``complete`` (bool); and with ``expose_belief=True``, ``belief``
+            ``reward.kind="conversions"``); ``complete`` (bool); ``reward_terms`` (dict: ``gain``, the
+            reward's first term, and ``cost``, what the prices or the penalty took: reward = gain - cost);
+            and with ``expose_belief=True``, ``belief``
             (:class:`~nbs_env.observation.BeliefView`).
 
         Raises
@@ -292,20 +295,25 @@ class NBSEnv(gym.Env):
             # reset cannot say so, the first step does, at no cost.
             self._ended = True
             storey.begin_step()
-            return self._observation(), 0.0, storey.complete, not storey.complete, self._info()
+            info = {**self._info(), "reward_terms": {"gain": 0.0, "cost": 0.0}}
+            return self._observation(), 0.0, storey.complete, not storey.complete, info
         storey.begin_step()
         stop = a == self.stop_action
         if not self.action_masks()[a] or (not stop and storey.plan.count == 0):
-            info = self._info(invalid_action=True)
-            return self._observation(), -self.config.reward.invalid_action_penalty, False, False, info
+            penalty = self.config.reward.invalid_action_penalty
+            info = {**self._info(invalid_action=True), "reward_terms": {"gain": 0.0, "cost": penalty}}
+            return self._observation(), -penalty, False, False, info
         self._actions.append(a)
         self._last = storey.room_done() if stop else storey.scan_at(a)
         terminated = storey.complete
         truncated = not terminated and not storey.open
         self._ended = terminated or truncated
-        return self._observation(), self._reward(self._last), terminated, truncated, self._info()
+        gain, cost = self._reward_terms(self._last)
+        info = {**self._info(), "reward_terms": {"gain": gain, "cost": cost}}
+        return self._observation(), gain - cost, terminated, truncated, info
 
-    def _reward(self, outcome: StepOutcome) -> float:
+    def _reward_terms(self, outcome: StepOutcome) -> tuple[float, float]:
+        # The reward's two terms apart, so that a learner may weigh them (train.ppo's hold_coverage).
         cfg = self.config.reward
         if cfg.kind == "coverage":
             gain = outcome.coverage_gain
@@ -313,7 +321,7 @@ class NBSEnv(gym.Env):
             gain = outcome.mapped_gain
         else:
             gain = 100.0 * outcome.conversions / max(1, outcome.structural_voxels)
-        return float(gain - cfg.scan_cost * outcome.scans - cfg.metre_cost * outcome.metres)
+        return float(gain), float(cfg.scan_cost * outcome.scans + cfg.metre_cost * outcome.metres)
 
     def _storey(self) -> Storey:
         if self.storey is None:
@@ -423,6 +431,8 @@ class NBSEnv(gym.Env):
             # None without the meter (the training fidelity): no figure, rather than a NaN.
             "structure_sensed_pct": storey.coverage_pct() if self.config.coverage_meter else None,
             "path_length_m": storey.path_length,
+            # The robot's own account (its Structure voxels), on the coverage's scale: no meter needed.
+            "mapped_pct": storey.mapped_pct,
             "times": StageTimes(dict(last.times)),
             "registration_error_m": m,
             "registration_error_deg": deg,

@@ -370,3 +370,76 @@ def test_commands_that_report_coverage_refuse_the_training_fidelity(tmp_path):
         assert p.returncode == 2, p.stderr
         assert "--preset fast" in p.stderr and "Traceback" not in p.stderr
         assert not (tmp_path / "s").exists() and not (tmp_path / "c").exists()
+
+
+# ---------------------------------------------------------------------- a coverage constraint
+def test_the_reward_is_its_two_terms():
+    """info["reward_terms"] splits each step's reward into the gain and what the prices took, so that
+    a learner may weigh them; a masked action's cost is the penalty."""
+    env = NBSEnv(make_config("train", **{"generator.rooms": (2, 2), "reward.scan_cost": 0.7}))
+    obs, info = env.reset(seed=3)
+    obs, reward, *_, info = env.step(GreedyPolicy().act(obs, info))
+    terms = info["reward_terms"]
+    assert terms["gain"] > 0 and terms["cost"] >= 0.7  # one scan at least, and the drive to it
+    assert reward == pytest.approx(terms["gain"] - terms["cost"])
+    assert info["mapped_pct"] == env.storey.mapped_pct > terms["gain"]  # the first scan's share too
+    masked = int(np.flatnonzero(~info["action_mask"])[0])
+    _, reward, *_, info = env.step(masked)
+    assert info["reward_terms"] == {"gain": 0.0, "cost": env.config.reward.invalid_action_penalty} and reward < 0
+
+
+def test_the_cost_weight_holds_the_teachers_coverage():
+    """CostWeight reweighs the rewards as gain - weight x cost, counts each env's episode, and moves
+    the weight up while the episodes map more than the teacher, down while they map less, by a
+    bounded step."""
+    from train.ppo import CostWeight
+
+    dual = CostWeight(rate=0.1, target=50.0)
+    rewards = np.array([3.0, 1.0], dtype=np.float32)
+    infos = [
+        {"reward_terms": {"gain": 4.0, "cost": 1.0}, "mapped_pct": 30.0},
+        {"reward_terms": {"gain": 1.5, "cost": 0.5}, "mapped_pct": 1.5},
+    ]
+    dual.weight = 2.0
+    dual.reweigh(rewards, infos, np.array([False, True]))
+    np.testing.assert_allclose(rewards, [4.0 - 2.0, 1.5 - 1.0])
+    assert dual.finished == [1.5]  # env 1's episode ended, env 0's goes on
+    dual.weight = 1.0
+    dual.update()
+    assert dual.weight == pytest.approx(np.exp(-0.25))  # far below the target: the largest step down
+    dual.finished = [51.0, 53.0]
+    before = dual.weight
+    dual.update()
+    assert dual.weight == pytest.approx(before * np.exp(0.1 * 2.0)) and dual.last_mean == 52.0
+    dual.update()  # no episode finished: no information, no change
+    assert dual.weight == pytest.approx(before * np.exp(0.2))
+
+
+def test_hold_coverage_needs_a_teacher_and_a_run_keeps_its_weight(tmp_path):
+    """The constraint holds the behaviour-cloning teacher's coverage: refused without cloning; a run
+    with it records the weight in its state and its curve, and a resumed run starts from that weight."""
+    pytest.importorskip("sb3_contrib")
+    from train.ppo import latest_state, resume_config, train
+
+    with pytest.raises(ConfigError, match="bc_steps"):
+        _tiny(hold_coverage=0.1)
+    with pytest.raises(ConfigError, match="hold_coverage"):
+        _tiny(hold_coverage=2.0, bc_steps=8)
+    out = tmp_path / "run"
+    train(_tiny(hold_coverage=0.5, bc_steps=24, eval_every=16, eval_storeys=1), out, progress=False)
+    teacher = json.loads((out / "behaviour_cloning.json").read_text())
+    assert teacher["episodes"] >= 1 and teacher["mapped"] > 0
+    weight = latest_state(out)[1]["cost_weight"]
+    assert weight != 1.0  # a rollout of one-room storeys never maps exactly the teacher's mean
+    curve = [json.loads(line) for line in (out / "learning_curve.jsonl").read_text().splitlines()]
+    # The curve records the weight at each evaluation (mid-rollout here: the last update's weight).
+    assert curve[-1]["cost_weight"] != 1.0 and curve[-1]["mapped"] > 0
+    _, model = train(resume_config(out, timesteps=24), out, progress=False, resume=True)
+    assert model.num_timesteps == 24 and latest_state(out)[1]["cost_weight"] != weight  # moved on from it
+    document = json.loads((out / "training_state.json").read_text())
+    document["cost_weight"] = float("nan")
+    (out / "training_state.json").write_text(json.dumps(document))
+    from policies.learned import ModelFileError
+
+    with pytest.raises(ModelFileError, match="cost_weight"):
+        latest_state(out)

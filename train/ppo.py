@@ -132,6 +132,15 @@ class TrainConfig(Config):
         Who ends a room: ``"policy"``, the agent through its "room done" action (K + 1 actions; the
         network also reads the observation's ``room`` vector); ``"gain"``, the robot's gain rule
         (the agent only chooses where to scan).
+    hold_coverage : float
+        A coverage constraint (0: none, fixed prices): between rollouts the prices are scaled by
+        ``exp(hold_coverage × (mapped - teacher))``, where ``mapped`` is the mean structure the
+        rollout's finished episodes mapped (``info["mapped_pct"]`` at their end: the robot's own
+        Structure, % of the storey's structural surface) and ``teacher`` the behaviour-cloning
+        teacher's mean on its own episodes: the prices rise while the policy maps
+        more than its teacher and fall while it maps less, so that PPO lowers scans and metres at the
+        teacher's coverage (a Lagrangian multiplier on the costs, :class:`CostWeight`). Needs
+        ``bc_steps``.
     """
 
     timesteps: int = 2048
@@ -155,6 +164,7 @@ class TrainConfig(Config):
     completion: str = "gain"
     cell_size: tuple[float, float] = (2.0, 3.6)
     init: str = ""
+    hold_coverage: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "rooms", tuple(self.rooms))
@@ -203,6 +213,11 @@ class TrainConfig(Config):
         # The env's reward bounds its prices (reward.scan_cost, reward.metre_cost): the same range.
         _within(self, "metre_cost", 0.0, 1000.0)
         _within(self, "scan_cost", 0.0, 1000.0)
+        _within(self, "hold_coverage", 0.0, 1.0)
+        _require(
+            not self.hold_coverage or self.bc_steps > 0,
+            "hold_coverage holds the behaviour-cloning teacher's coverage: it needs bc_steps > 0",
+        )
         _require(
             self.completion in ("policy", "gain"), f"completion must be 'policy' or 'gain', got {self.completion!r}"
         )
@@ -565,10 +580,57 @@ STATE_FORMAT = "nbs-env-training-state"
 MAX_STATE_TIMESTEPS = 10**12
 
 
-def save_training_state(model, folder: str | Path, run: TrainConfig) -> Path:
+class CostWeight:
+    """The multiplier of :attr:`TrainConfig.hold_coverage`: the weight of the prices in the reward
+    PPO learns from, raised while the training episodes map more structure than the teacher's and
+    lowered while they map less (dual ascent on a coverage constraint, in log space).
+
+    Parameters
+    ----------
+    rate : float
+        The step of ``log(weight)`` per percentage point between the rollout's mean and ``target``.
+    target : float
+        The teacher's mean mapped structure at the end of an episode, % of the storey's structure.
+    weight : float
+        The weight to start from (a resumed run's).
+    """
+
+    #: The weight's range: the prices at most 20 times lower or higher than the run's.
+    LOW, HIGH = 0.05, 20.0
+    MAX_STEP = 0.25
+
+    def __init__(self, rate: float, target: float, weight: float = 1.0) -> None:
+        self.rate, self.target, self.weight = float(rate), float(target), float(weight)
+        self.finished: list[float] = []
+        self.last_mean: float | None = None
+
+    def reweigh(self, rewards: np.ndarray, infos: list[dict], dones: np.ndarray) -> None:
+        """Reweigh a vector step's ``rewards`` in place (before the rollout buffer holds them):
+        gain - weight × cost from the env's ``reward_terms``; keep the mapped structure of the
+        episodes that ended."""
+        for i, info in enumerate(infos):
+            terms = info.get("reward_terms")
+            if terms is not None:
+                rewards[i] += (1.0 - self.weight) * terms["cost"]
+            if dones[i] and "mapped_pct" in info:
+                self.finished.append(float(info["mapped_pct"]))
+
+    def update(self) -> None:
+        """After a rollout: move the weight by the finished episodes' mean against the target."""
+        if not self.finished:
+            return
+        self.last_mean = float(np.mean(self.finished))
+        # At most a quarter in log space per rollout: a rollout of a few storeys is a noisy mean.
+        step = float(np.clip(self.rate * (self.last_mean - self.target), -self.MAX_STEP, self.MAX_STEP))
+        self.weight = float(np.clip(self.weight * np.exp(step), self.LOW, self.HIGH))
+        self.finished = []
+
+
+def save_training_state(model, folder: str | Path, run: TrainConfig, cost_weight: float = 1.0) -> Path:
     """Write what a run continues from into ``folder``: :data:`STATE_FILE` (the whole policy's
     tensors and the optimiser's state) and :data:`STATE_JSON` (the timesteps done and the run's
-    settings). Never a pickle of objects: tensors and numbers, and JSON.
+    settings, and :class:`CostWeight`'s weight). Never a pickle of objects: tensors and numbers,
+    and JSON.
 
     Returns
     -------
@@ -599,6 +661,7 @@ def save_training_state(model, folder: str | Path, run: TrainConfig) -> Path:
             "tensors": tensors.name,
             "sha256": _sha256(temporary),
             "run": run.to_dict(),
+            "cost_weight": float(cost_weight),
         }
         description.write_text(json.dumps(document, indent=1))
     return path
@@ -637,6 +700,11 @@ def latest_state(run_folder: str | Path) -> tuple[Path, dict]:
             raise ModelFileError(f"{path}: malformed training state (timesteps, run)")
         if not 0 <= steps <= MAX_STATE_TIMESTEPS:
             raise ModelFileError(f"{path}: timesteps {steps} is not a count of steps (0..{MAX_STATE_TIMESTEPS:,})")
+        weight = document.get("cost_weight", 1.0)
+        if type(weight) not in (int, float) or not CostWeight.LOW <= weight <= CostWeight.HIGH:
+            raise ModelFileError(
+                f"{path}: cost_weight must be a number in [{CostWeight.LOW}, {CostWeight.HIGH}], got {str(weight)[:40]}"
+            )
         name = document.get("tensors", STATE_FILE)
         if not isinstance(name, str) or Path(name).name != name or name in ("", ".", ".."):
             # A name in the state's own folder: "../other/training_state.pt" resumed another run's
@@ -869,10 +937,15 @@ def train(
                 tutor.act, held_out, config.max_episode_steps, config.evaluation_config(), room_rule=tutor.stop
             )
 
+    dual: CostWeight | None = None
+
+    def weight() -> float:
+        return 1.0 if dual is None else dual.weight
+
     def checkpoint(n: int) -> None:
         folder = out / f"checkpoint_{n}"
         save_checkpoint(folder, network, _state_dict(model), _layout(model), recorded)
-        save_training_state(model, folder, config)
+        save_training_state(model, folder, config, weight())
 
     class Progress(BaseCallback):
         def _on_training_start(self) -> None:
@@ -893,9 +966,16 @@ def train(
 
         def _on_rollout_end(self) -> None:
             self.rollout_start = None
+            if dual is not None:
+                dual.update()
+                self.logger.record("train/cost_weight", dual.weight)
+                if dual.last_mean is not None:
+                    self.logger.record("train/mapped", dual.last_mean)
 
         def _on_step(self) -> bool:
             self.bar.update(self.training_env.num_envs)
+            if dual is not None:  # before the rollout buffer holds the rewards
+                dual.reweigh(self.locals["rewards"], self.locals["infos"], self.locals["dones"])
             for info in self.locals.get("infos", []):
                 if "episode" in info:
                     self.episodes.append(float(info["episode"]["r"]))
@@ -922,6 +1002,8 @@ def train(
             if taught is not None:
                 record["teacher"] = taught
             record["train_return"] = float(np.mean(self.episodes[-20:])) if self.episodes else None
+            if dual is not None:
+                record["cost_weight"], record["mapped"] = dual.weight, dual.last_mean
             record["seconds"] = time.time() - started
             # The whole curve again rather than an appended line: a full disk leaves the previous one.
             write_text(log, (log.read_text() if log.is_file() else "") + json.dumps(record) + "\n")
@@ -950,6 +1032,16 @@ def train(
                     checkpoint(0)
             elif state is not None and (out / "behaviour_cloning.json").is_file():
                 warm = json.loads((out / "behaviour_cloning.json").read_text())
+            if config.hold_coverage:
+                target = warm.get("mapped") if isinstance(warm, dict) else None
+                if not isinstance(target, (int, float)) or isinstance(target, bool) or not math.isfinite(target):
+                    raise ConfigError(
+                        f"hold_coverage: no finished episode of the teacher to hold ({out / 'behaviour_cloning.json'}"
+                        f" has none); raise --bc-steps so that the teacher finishes storeys"
+                    )
+                dual = CostWeight(
+                    config.hold_coverage, target, 1.0 if state is None else state[1].get("cost_weight", 1.0)
+                )
             progress_callback = Progress()
             progress_callback.rollout_start = None
             model.learn(
@@ -965,7 +1057,7 @@ def train(
             start = None if progress_callback is None else progress_callback.rollout_start
             if start is not None and start > done_before:
                 model.num_timesteps = start  # the rollout under way is dropped: it would be collected again
-                save_training_state(model, out, config)
+                save_training_state(model, out, config, weight())
             with contextlib.suppress(Exception):
                 venv.close()
         raise
@@ -990,7 +1082,7 @@ def train(
         "behaviour_cloning": warm,
     }
     final = save_checkpoint(out, network, _state_dict(model), _layout(model), training=training)
-    save_training_state(model, out, config)
+    save_training_state(model, out, config, weight())
     plot_learning_curve(log, out / "learning_curve.png")
     model.interrupted = stop.signal
     return final, model
@@ -1107,9 +1199,11 @@ def behaviour_clone(
     whose ``signal`` turns non-None when the run is asked to stop; the clone then ends at once and
     returns None.
 
-    Returns ``{"samples", "loss_first", "loss_last", "agreement", "teacher", "rooms_declared"}``:
-    agreement is the share of the samples where the policy's masked argmax equals the greedy's
-    choice after fitting; rooms_declared how many of the teacher's choices were "room done".
+    Returns ``{"samples", "loss_first", "loss_last", "agreement", "teacher", "rooms_declared",
+    "episodes", "mapped"}``: agreement is the share of the samples where the policy's masked argmax
+    equals the greedy's choice after fitting; rooms_declared how many of the teacher's choices were
+    "room done"; mapped the mean structure the robot mapped (``info["mapped_pct"]`` at the end) in
+    the teacher's ``episodes`` finished episodes (None when none finished).
     """
     import torch
     from sb3_contrib.common.maskable.utils import get_action_masks
@@ -1120,6 +1214,8 @@ def behaviour_clone(
     greedy = GreedyPolicy() if teacher is None else teacher
     obs = venv.reset()
     samples: list[tuple[dict, np.ndarray, np.ndarray]] = []
+    # The structure the teacher's finished episodes mapped: what hold_coverage holds.
+    mapped: list[float] = []
     for _ in range(steps):
         if stop is not None and stop.signal is not None:
             return None
@@ -1138,7 +1234,8 @@ def behaviour_clone(
             ]
         )
         samples.append(({k: v.copy() for k, v in obs.items()}, masks.copy(), actions))
-        obs, _, _, _ = venv.step(actions)
+        obs, _, dones, infos = venv.step(actions)
+        mapped.extend(float(info["mapped_pct"]) for info, done in zip(infos, dones, strict=True) if done)
     policy = model.policy
     keys = samples[0][0].keys()
     all_obs = {k: np.concatenate([s[0][k] for s in samples]) for k in keys}
@@ -1176,6 +1273,8 @@ def behaviour_clone(
         "agreement": agreement,
         "teacher": greedy.name,
         "rooms_declared": int((all_actions == all_masks.shape[1] - 1).sum()) if room_action else 0,
+        "episodes": len(mapped),
+        "mapped": float(np.mean(mapped)) if mapped else None,
     }
 
 
@@ -1243,6 +1342,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--metre-cost", type=number, default=0.05, help="reward per metre driven, subtracted")
     p.add_argument("--scan-cost", type=number, default=0.5, help="reward per scan, subtracted")
     p.add_argument("--ent-coef", type=number, default=0.0, help="PPO's entropy bonus")
+    p.add_argument(
+        "--hold-coverage",
+        type=number,
+        default=0.0,
+        metavar="RATE",
+        help="scale the prices between rollouts by exp(RATE x (mapped - teacher's)) so that the policy keeps its "
+        "behaviour-cloning teacher's coverage (0, the default: fixed prices; needs --bc-steps)",
+    )
     p.add_argument(
         "--completion",
         choices=("policy", "gain"),
@@ -1328,6 +1435,7 @@ def main(argv: list[str] | None = None) -> int:
             max_episode_steps=args.max_episode_steps,
             cell_size=cell_size,
             init=args.init,
+            hold_coverage=args.hold_coverage,
         )
     except ConfigError as exc:
         print(f"nbs train: error: {exc}", file=sys.stderr)
