@@ -1079,6 +1079,38 @@ def _station_times(env: NBSEnv, start: float) -> list[tuple[float, float]]:
 STEP_PICTURE = re.compile(r"step_\d{3,}\.png")
 
 
+def report_path_problem(out_dir: str | Path, steps: bool = False, pictures: bool = True) -> str | None:
+    """Why the report cannot be renamed into ``out_dir`` (None when it can). Found before the work,
+    and again before the renames, so that a report is never left half renamed in, one of mixed runs.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+    steps : bool
+        The report brings a folder of step pictures (:func:`write_report`'s ``steps``), which
+        replaces an earlier report's: a ``steps`` that is a link is refused (the pictures are renamed,
+        and a rename crosses no file systems).
+    pictures : bool
+        That folder holds pictures: a file named ``steps`` is then in their way.
+
+    Returns
+    -------
+    str or None
+        A folder where one of the report's files goes (a rename does not replace a folder), or a
+        ``steps`` that is a link or, with ``pictures``, a file.
+    """
+    final = Path(out_dir)
+    for name in REPORT_FILES:
+        if (final / name).is_dir() and not (final / name).is_symlink():
+            return f"{final / name} is a folder where the report's {name} goes; move it"
+    folder = final / "steps"
+    if steps and folder.is_symlink():
+        return f"{folder} is a link where the report's folder of step pictures goes; move it"
+    if steps and pictures and os.path.lexists(folder) and not folder.is_dir():
+        return f"{folder} is a file where the folder of the step pictures goes; move it, or pass --no-steps"
+    return None
+
+
 def write_report(
     env: NBSEnv,
     out_dir: str | Path,
@@ -1125,6 +1157,9 @@ def write_report(
     ------
     ValueError
         ``full_cloud`` for an env that kept no scans (``EnvConfig.keep_scans``).
+    FileExistsError
+        A path of ``out_dir`` the report cannot be renamed onto (:func:`report_path_problem`),
+        before anything is written or moved.
 
     Notes
     -----
@@ -1139,6 +1174,8 @@ def write_report(
         raise ValueError("full_cloud needs the env's kept scans: make the env with keep_scans=True")
     run_started = time.time() if run_started is None else float(run_started)
     final = Path(out_dir)
+    pictures = steps is not None and any(Path(steps).iterdir())
+    _check_report_paths(final, steps is not None, pictures)
     final.mkdir(parents=True, exist_ok=True)
     # The files are written beside the folder's, then renamed over them together: a full disk or an
     # error part way leaves the earlier report whole, never one of mixed runs.
@@ -1151,6 +1188,7 @@ def write_report(
                 exc.filename = str(final / Path(exc.filename).name)
             raise
         written = {p.name for p in out.iterdir()}
+        _check_report_paths(final, steps is not None, pictures)  # again: nothing is renamed unless all can be
         if steps is not None:
             # The earlier pictures leave with the earlier report, and only they: a file of the user's
             # in steps/ stays. Renames only, which a full disk does not stop.
@@ -1175,6 +1213,12 @@ def write_report(
     finally:
         shutil.rmtree(out, ignore_errors=True)
     return metrics
+
+
+def _check_report_paths(final: Path, steps: bool, pictures: bool) -> None:
+    problem = report_path_problem(final, steps, pictures)
+    if problem is not None:
+        raise FileExistsError(problem)
 
 
 def _write_report_files(

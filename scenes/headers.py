@@ -377,7 +377,7 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
         uri = image.get("uri")
         # Images are never read (only the geometry is): a remote one is skipped, a local one is
         # checked to be a file (a fifo there once hung the reader), a missing one allowed.
-        if isinstance(uri, str) and (urlsplit(uri).scheme.lower() in ("", "file") or _DRIVE.match(uri)):
+        if isinstance(uri, str) and (_scheme(uri) in ("", "file") or _DRIVE.match(uri)):
             _side_file(source, path, uri, f"images[{i}]", required=False)
     nodes = _items(source, doc, "nodes")
     _check_node_tree(source, nodes)
@@ -390,7 +390,7 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
             raise InvalidMeshError(
                 source, f"buffers[{i}].byteLength declares {declared:,} bytes, but the file holds {have:,}"
             )
-        side = isinstance(buffer.get("uri"), str) and not buffer["uri"].startswith("data:")
+        side = isinstance(buffer.get("uri"), str) and not _is_data(buffer["uri"])
         if side and have is not None and have > declared + SIDE_FILE_SLACK:
             # The reader takes a side file whole, whatever its byteLength says: a 2.5 GB file behind
             # a buffer of 7 kB was read into memory before anything else was checked.
@@ -583,15 +583,17 @@ def _buffer_bytes(source: str, path: Path, buffer: dict, index: int, bin_length:
         return bin_length
     if not isinstance(uri, str):
         raise InvalidMeshError(source, f"buffers[{index}].uri is not a string")
-    if uri.startswith("data:"):
+    if _is_data(uri):
+        if not uri.partition(",")[0].lower().endswith(";base64"):
+            raise InvalidMeshError(
+                source,
+                f"buffers[{index}].uri is a data: URI without ;base64 (glTF's buffers are base64; nbs-env reads "
+                "no other encoding)",
+            )
         if "%" in uri.partition(",")[2]:
             # trimesh decodes the base64 as written, skipping the escapes: other bytes, silently.
             raise InvalidMeshError(
                 source, f"buffers[{index}].uri is a data: URI with percent-escapes in its base64: write it unescaped"
-            )
-        if not uri.partition(",")[0].lower().endswith(";base64"):
-            raise InvalidMeshError(
-                source, f"buffers[{index}].uri is a data: URI that is not base64 (glTF's buffers are)"
             )
         try:
             return len(base64.b64decode(uri.partition(",")[2], validate=False))
@@ -602,6 +604,19 @@ def _buffer_bytes(source: str, path: Path, buffer: dict, index: int, bin_length:
 
 
 _DRIVE = re.compile(r"[A-Za-z]:[\\/]")
+
+
+def _is_data(uri: str) -> bool:
+    """A ``data:`` URI, its scheme in any case (RFC 3986 §3.1: schemes are case-insensitive)."""
+    return uri[:5].lower() == "data:"
+
+
+def _scheme(uri: str) -> str:
+    """The scheme of ``uri`` in lower case; "?" for text that is no URI (an image's is never read)."""
+    try:
+        return urlsplit(uri).scheme.lower()
+    except ValueError:  # an unbalanced "[" in a host
+        return "?"
 
 
 def side_file_path(source: str, path: Path, uri: str, where: str = "a uri") -> Path:
@@ -616,7 +631,10 @@ def side_file_path(source: str, path: Path, uri: str, where: str = "a uri") -> P
     InvalidMeshError
         A URI of another scheme (``http:``): nbs-env reads local files only.
     """
-    parts = urlsplit(uri)
+    try:
+        parts = urlsplit(uri)
+    except ValueError as exc:  # "file://[::1/x.bin": an unbalanced "[" in the host
+        raise InvalidMeshError(source, f"{where}.uri {uri[:80]!r} is no valid URI ({exc})") from None
     scheme = parts.scheme.lower()
     name = unquote(parts.path)  # a query or a fragment names no part of a file
     if "\0" in name:

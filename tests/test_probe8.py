@@ -375,7 +375,7 @@ def test_a_gltf_buffer_named_by_any_uri_reference_to_a_local_file_loads(name, ur
     "uri, message",
     [
         ("http://example.com/b.bin", r"uri 'http://example\.com/b\.bin' is a http: URI; nbs-env reads local"),
-        ("data:,abc", r"buffers\[0\]\.uri is a data: URI that is not base64"),
+        ("data:,abc", r"buffers\[0\]\.uri is a data: URI without ;base64"),
     ],
 )
 def test_a_gltf_buffer_uri_nbs_env_cannot_read_is_named(uri, message, glb_parts, tmp_path):
@@ -1024,7 +1024,7 @@ def test_a_file_where_the_step_pictures_go_is_refused_before_the_scan(tmp_path, 
 
     monkeypatch.setattr(cli, "_scan", never)
     assert cli.main(_scan(out, "--max-scans", "1", "--force")) == EXIT_USAGE
-    assert f"{out / 'steps'} is a file where the pictures go" in capsys.readouterr().err
+    assert f"{out / 'steps'} is a file where the folder of the step pictures goes" in capsys.readouterr().err
 
 
 def test_resume_continues_one_comparison_not_another(compared, tmp_path):

@@ -589,7 +589,7 @@ def run_scan(args: argparse.Namespace) -> int:
             return _scan_error(f"--record {args.record}: a rerun recording ends in .rrd", EXIT_USAGE)
     out = args.out if args.out is not None else _default_out(args.scene)
     replace = None if args.force else "pass --force to overwrite it"
-    from nbs_env.export import REPORT_FILES
+    from nbs_env.export import REPORT_FILES, report_path_problem
 
     outputs = [Output("--out", out, "folder", replace=replace, files=REPORT_FILES)]
     if args.record is not None:
@@ -598,10 +598,11 @@ def run_scan(args: argparse.Namespace) -> int:
         # Before the scan: a path found unwritable after it would lose it, and the scene must not be
         # one of the files the report writes (--force onto the scene's own folder overwrote it).
         check_outputs(outputs, reads=[("--scene", Path(args.scene))])
-        if not args.no_steps and os.path.lexists(out / "steps") and not (out / "steps").is_dir():
-            raise OutputError(
-                f"--out {out}: {out / 'steps'} is a file where the pictures go; move it, or pass --no-steps"
-            )
+        # The pictures' folder comes with every report (an empty one with --no-steps: the earlier
+        # report's pictures leave with it).
+        problem = report_path_problem(out, steps=True, pictures=not args.no_steps)
+        if problem is not None:
+            raise OutputError(f"--out {out}: {problem}")
     except OutputError as exc:
         return _scan_error(exc, EXIT_USAGE)
     with StopRequest() as stop:

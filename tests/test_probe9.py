@@ -1,0 +1,94 @@
+"""Reproducers of the thirteenth bad-input probe's findings, one test per class of input."""
+
+from __future__ import annotations
+
+import base64
+import json
+
+import pytest
+
+from scenes import load_scene
+from tests.test_probe8 import _load_with_buffer_uri, _scan, glb_parts  # noqa: F401  # a fixture
+from train.cli import EXIT_USAGE
+
+
+# ---------------------------------------------------------------------- glTF URIs
+@pytest.mark.parametrize(
+    "uri, message",
+    [
+        ("file://[::1/PLAIN", r"is no valid URI"),  # urllib's ValueError came through as a traceback
+        ("http://[bad/buf.bin", r"is no valid URI"),
+        ("DATA", None),  # RFC 3986 §3.1: a scheme is case-insensitive; refused as "a data: URI, local files only"
+        ("data:application/octet-stream,%00%01%02", r"without ;base64"),  # said to be escaped base64
+    ],
+)
+def test_a_buffer_uri_is_read_as_rfc_3986_reads_it_or_named(uri, message, glb_parts, tmp_path):  # noqa: F811
+    json_chunk, binary, faces = glb_parts
+    (tmp_path / "plain.bin").write_bytes(binary)
+    uri = uri.replace("/PLAIN", str(tmp_path / "plain.bin"))
+    if uri == "DATA":
+        uri = "DATA:application/octet-stream;BASE64," + base64.b64encode(binary).decode()
+    _load_with_buffer_uri(json_chunk, uri, faces, message, tmp_path)
+
+
+def test_an_image_uri_that_is_no_uri_does_not_refuse_the_geometry(glb_parts, tmp_path):  # noqa: F811
+    """Images are never read: one whose URI urllib cannot split was a traceback for the geometry."""
+    json_chunk, binary, faces = glb_parts
+    (tmp_path / "plain.bin").write_bytes(binary)
+    doc = json.loads(json_chunk)
+    doc["buffers"] = [dict(doc["buffers"][0], uri="plain.bin")]
+    doc["images"] = [{"uri": "//[tex/a.png"}]
+    (tmp_path / "x.gltf").write_text(json.dumps(doc))
+    assert len(load_scene(str(tmp_path / "x.gltf")).mesh.faces) == faces
+
+
+# ---------------------------------------------------------------------- report folders
+@pytest.mark.parametrize("in_the_way", ["metrics.json/", "cloud.laz/", "steps->elsewhere"])
+def test_what_the_report_cannot_be_renamed_onto_is_refused_before_the_scan(in_the_way, tmp_path, capsys, monkeypatch):
+    """A folder where metrics.json goes failed after the scan and left a report of two runs (the new
+    run's cloud files beside the old run's model and pictures); a steps folder that is a link to
+    another file system failed after the scan (a rename crosses no file systems), losing the report."""
+    import train.cli as cli
+
+    out = tmp_path / "report"
+    out.mkdir()
+    name = in_the_way.split("/")[0].split("->")[0]
+    if in_the_way.endswith("/"):
+        (out / name).mkdir()
+    else:
+        (tmp_path / "elsewhere").mkdir()
+        (out / name).symlink_to(tmp_path / "elsewhere")
+
+    def never(*args, **kwargs):
+        raise AssertionError("the scan ran")
+
+    monkeypatch.setattr(cli, "_scan", never)
+    assert cli.main(_scan(out, "--max-scans", "1", "--force")) == EXIT_USAGE
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(out / name) in err, err
+    if name == "steps":  # without pictures too: the earlier report's would be renamed out of it
+        assert cli.main(_scan(out, "--max-scans", "1", "--force", "--no-steps")) == EXIT_USAGE
+        (out / name).unlink()
+        (out / name).write_text("x")  # a file named steps is in no one's way without pictures
+        monkeypatch.undo()
+        assert cli.main(_scan(out, "--max-scans", "1", "--force", "--no-steps")) == 0
+        assert (out / name).read_text() == "x"
+
+
+def test_write_report_renames_nothing_unless_it_can_rename_everything(tmp_path):
+    """The API's check, made again before the renames: a folder put in the way during the run."""
+    from nbs_env.env import NBSEnv
+    from nbs_env.export import write_report
+
+    env = NBSEnv("fast", scene="l_room", max_scans=1, keep_scans=True)
+    env.reset(seed=0)
+    out = tmp_path / "r"
+    write_report(env, out, "l_room", "greedy", 0)
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    (out / "metrics.json").unlink()
+    (out / "metrics.json").mkdir()
+    with pytest.raises(FileExistsError, match=r"metrics\.json is a folder"):
+        write_report(env, out, "l_room", "greedy", 1)
+    after = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    assert after == {k: v for k, v in before.items() if k != "metrics.json"}
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
