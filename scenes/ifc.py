@@ -837,17 +837,27 @@ def _start_measures(storey: Any) -> dict[str, str]:
     for rel in getattr(storey, "IsDefinedBy", None) or ():
         if not rel.is_a("IfcRelDefinesByProperties"):
             continue
-        pset = rel.RelatingPropertyDefinition
-        if not pset.is_a("IfcPropertySet") or pset.Name != "Pset_NbsStart":
-            continue
-        for prop in pset.HasProperties or ():
-            value = getattr(prop, "NominalValue", None)
-            if value is not None:
-                # A unit of its own (feet, millimetres) is not the file's length unit the start is
-                # read in: 6 ft was taken as 6 m.
-                unit = getattr(prop, "Unit", None)
-                kinds[prop.Name] = value.is_a() if unit is None else f"{value.is_a()} in a unit of its own"
+        for pset in _property_sets(rel.RelatingPropertyDefinition):
+            if not pset.is_a("IfcPropertySet") or pset.Name != "Pset_NbsStart":
+                continue
+            for prop in pset.HasProperties or ():
+                value = getattr(prop, "NominalValue", None)
+                if value is not None:
+                    # A unit of its own (feet, millimetres) is not the file's length unit the start is
+                    # read in: 6 ft was taken as 6 m.
+                    unit = getattr(prop, "Unit", None)
+                    kinds[prop.Name] = value.is_a() if unit is None else f"{value.is_a()} in a unit of its own"
     return kinds
+
+
+def _property_sets(definition: Any) -> list[Any]:
+    """The property sets a relation's ``RelatingPropertyDefinition`` holds: one, or, in IFC4, an
+    ``IfcPropertySetDefinitionSet`` of several (as the property reader finds them)."""
+    if isinstance(definition, (tuple, list)):
+        return list(definition)
+    if definition is not None and definition.is_a("IfcPropertySetDefinitionSet"):
+        return list(definition.wrappedValue)
+    return [] if definition is None else [definition]
 
 
 def _rooms(spaces: list[Any], shapes: Mapping[int, tuple[np.ndarray, np.ndarray]]) -> list[Room]:

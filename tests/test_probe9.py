@@ -92,3 +92,46 @@ def test_write_report_renames_nothing_unless_it_can_rename_everything(tmp_path):
     after = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
     assert after == {k: v for k, v in before.items() if k != "metrics.json"}
     assert not [p for p in out.iterdir() if p.name.startswith(".")]
+
+
+# ---------------------------------------------------------------------- IFC start
+def test_an_ifc_start_in_a_property_set_definition_set_is_read(tmp_path):
+    """IFC4 lets IfcRelDefinesByProperties relate an IfcPropertySetDefinitionSet of several sets: the
+    property reader found the start there, the check of its measures did not, and refused it as
+    "6.0 (float)", no IfcLengthMeasure, which it is."""
+    pytest.importorskip("ifcopenshell")
+    from tests.test_probe8 import _ifc_with_start
+
+    path = _ifc_with_start(tmp_path, "IFCLENGTHMEASURE(6.)")
+    text = path.read_text().replace("(#14),#5002);", "(#14),IFCPROPERTYSETDEFINITIONSET((#5002)));")
+    assert "IFCPROPERTYSETDEFINITIONSET" in text
+    path.write_text(text)
+    assert load_scene(str(path), storey="EG").start[:2].tolist() == [6.0, 2.0]
+
+
+# ---------------------------------------------------------------------- training run folders
+@pytest.mark.parametrize("content", ["checkpoint", "policy.json", "checkpoint_3/"])
+def test_a_new_run_writes_over_no_checkpoint_and_no_run_s_file(content, tiny_run, tmp_path, capsys):
+    """`--init t4 --out t4` (a checkpoint folder) wrote the new run's policy over the checkpoint it
+    started from, beside the old run's files: only a training_state.json counted as a run."""
+    import shutil
+
+    from tests.test_train_probe3 import _files, _train
+    from train.ppo import TrainConfig, train
+
+    out = tmp_path / "t4"
+    if content == "checkpoint":
+        shutil.copytree(tiny_run / "checkpoint_8", out)
+        (out / "training_state.json").unlink()  # a checkpoint as shipped: policy.json and policy.pt
+    elif content.endswith("/"):
+        (out / content).mkdir(parents=True)
+    else:
+        out.mkdir()
+        (out / content).write_text("{}")
+    before = _files(out)
+    argv = ["--timesteps", "8", "--n-steps", "8", "--envs", "1", "--completion", "policy", "--out", str(out)]
+    code, err = _train([*argv, *(["--init", str(out)] if content == "checkpoint" else [])], capsys)
+    assert code == 2 and "which this run would write over" in err and len(err.strip().splitlines()) == 1, err
+    with pytest.raises(FileExistsError, match="which this run would write over"):
+        train(TrainConfig(timesteps=8, envs=1, n_steps=8, batch_size=8, completion="policy"), out, progress=False)
+    assert _files(out) == before

@@ -872,6 +872,9 @@ def train(
     ------
     ModelFileError
         ``config.init`` or the state to resume from cannot be read.
+    FileExistsError
+        A new run's ``out`` holds a run, a checkpoint or a file a run writes
+        (:func:`run_folder_problem`).
     """
     _require_rl()
     import torch
@@ -887,6 +890,8 @@ def train(
     out = Path(out)
     if resume and (problem := checkpoint_problem(out)) is not None:
         raise ModelFileError(problem)
+    if not resume and (problem := run_folder_problem(out)) is not None:
+        raise FileExistsError(problem)
     state = latest_state(out) if resume else None
     # Checked before anything is built or written: what the options claim, and where Ray would run.
     check_memory(config, backend, behaviour_cloning=bool(config.bc_steps) and state is None)
@@ -1444,14 +1449,43 @@ def main(argv: list[str] | None = None) -> int:
     if problem is not None:
         print(f"nbs train: error: {problem}", file=sys.stderr)
         return 2
-    if args.out.is_dir() and any(args.out.glob("**/training_state.json")):
-        print(
-            f"nbs train: error: --out {args.out} holds a run already; continue it with --resume {args.out}, "
-            "or name another folder",
-            file=sys.stderr,
-        )
+    problem = run_folder_problem(args.out)
+    if problem is not None:
+        print(f"nbs train: error: --out {problem}", file=sys.stderr)
         return 2
     return _run(config, args.out, args, resume=False)
+
+
+#: What a run writes in its folder, besides its ``checkpoint_N/`` folders.
+RUN_FILES = (
+    "policy.json",
+    "policy.pt",
+    STATE_JSON,
+    STATE_FILE,
+    CURVE,
+    "learning_curve.png",
+    "behaviour_cloning.json",
+    "tb",
+)
+
+
+def run_folder_problem(out: str | Path) -> str | None:
+    """Why a new run cannot be written into ``out`` (None when it can): it holds a run, a checkpoint
+    (a ``--init`` folder), or any file a run writes, which the run would write over."""
+    out = Path(out)
+    if not out.is_dir():
+        return None
+    if any(out.glob(f"**/{STATE_JSON}")):
+        return f"{out} holds a run already; continue it with --resume {out}, or name another folder"
+    held = sorted(name for name in RUN_FILES if os.path.lexists(out / name))
+    held += sorted(p.name for p in out.glob("checkpoint_*"))
+    if held:
+        shown = ", ".join(held[:4]) + (", ..." if len(held) > 4 else "")
+        return (
+            f"{out} holds {shown} (a checkpoint's or a run's files), which this run would write over; "
+            "name a new or empty folder"
+        )
+    return None
 
 
 def _output_problem(flag: str, folder: Path) -> str | None:
