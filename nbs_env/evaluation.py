@@ -18,6 +18,7 @@ from nbs_env import threads
 from nbs_env.config import QualityConfig
 from scenes import Scene, SurfaceClass
 from scenes.interior import interior_samples
+from scenes.limits import check_neighbourhood_memory
 
 __all__ = ["CoverageMeter", "QualityConfig", "QualityReport"]
 
@@ -160,6 +161,15 @@ class CoverageMeter:
         preset's ``(simulated step / instrument step)²``
         (:attr:`~nbs_env.config.ScannerConfig.density_weight`), so that the density is the real
         instrument's. Coverage, incidence and range do not depend on it.
+    density_radius : float, optional
+        The ``quality.density_radius`` :meth:`quality` will be asked for: its neighbourhoods' memory
+        is checked now, before any scan (:func:`scenes.limits.check_neighbourhood_memory`), rather
+        than found missing at the run's end.
+
+    Raises
+    ------
+    scenes.StoreySizeError
+        With ``density_radius``: the neighbourhoods would not fit in the memory left.
     """
 
     def __init__(
@@ -169,11 +179,14 @@ class CoverageMeter:
         radius: float = 0.05,
         interior_only: bool = True,
         density_weight: float = 1.0,
+        density_radius: float | None = None,
     ) -> None:
         if not (np.isfinite(density_weight) and density_weight > 0):
             raise ValueError(f"density_weight must be a finite number > 0, got {density_weight}")
         self.density_weight = float(density_weight)
         self.samples = interior_samples(scene, spacing) if interior_only else scene.structure_samples(spacing)
+        if density_radius is not None:  # the quality's neighbourhoods, asked for at the run's end
+            check_neighbourhood_memory(scene.name, len(self.samples), spacing, density_radius)
         self.spacing = float(spacing)
         self.radius = radius
         self.sensed = np.zeros(len(self.samples), dtype=bool)

@@ -375,6 +375,7 @@ class Storey:
                 config.coverage_spacing,
                 config.coverage_radius,
                 density_weight=config.robot.scanner.density_weight,
+                density_radius=config.quality.density_radius,
             )
             if config.coverage_meter
             else None

@@ -37,6 +37,13 @@ Limits
     extent bounds can still need more (a 490 m hall, 1.9·10^8 samples, asked for 1.45 GiB in one
     array and many times that in all): it is refused, with the spacing that fits, before the samples
     are made.
+:data:`BYTES_PER_NEIGHBOUR`, 64, the scan-quality neighbourhoods (checked by :func:`check_neighbourhood_memory`)
+    The quality's density (:meth:`nbs_env.evaluation.CoverageMeter.quality`) counts, for every
+    sample, the samples within ``quality.density_radius``: on a surface about π r² / s² of them at
+    spacing s. Building that sparse matrix peaked at 44 bytes a neighbour (200,000 samples of a plane
+    at 5 cm, radii 0.2 and 0.3 m); 64 leaves room. At the finest spacing (1 cm) or the largest radius
+    (1 m) an office storey needed 3 to 18 GB, asked for after the run, which then lost its report:
+    refused before the first scan, with the radius that fits.
 :data:`MAX_MESH_FILE_BYTES`, 1 GiB, a mesh file read whole (checked by :func:`check_file_size`)
     An OBJ of the largest storey (5 million faces) takes some 300 MB of text; a binary file less. A
     file is read into memory before it is parsed, so one of gigabytes (a point cloud, a disk image
@@ -74,6 +81,7 @@ from scenes.memory import machine_memory, memory_left
 
 __all__ = [
     "BYTES_PER_FACE",
+    "BYTES_PER_NEIGHBOUR",
     "BYTES_PER_SAMPLE",
     "MAX_FACES",
     "MAX_MESH_FILE_BYTES",
@@ -89,6 +97,7 @@ __all__ = [
     "UNITS",
     "check_face_count",
     "check_file_size",
+    "check_neighbourhood_memory",
     "check_origin_distance",
     "check_sample_count",
     "check_storey_shape",
@@ -105,6 +114,7 @@ BYTES_PER_FACE = 3072
 MIN_STOREY_WIDTH = 1.0
 MAX_STRUCTURE_SAMPLES = 20_000_000
 BYTES_PER_SAMPLE = 512
+BYTES_PER_NEIGHBOUR = 64
 MAX_MESH_FILE_BYTES = 1 << 30
 #: The memory a mesh file's bytes take while it is read and parsed, per byte of the file: its bytes,
 #: their text and the parser's lists (an OBJ's lines), before the faces are counted.
@@ -174,6 +184,28 @@ def check_sample_count(source: str, area: float, spacing: float) -> None:
             + advice,
         )
     _check_memory(source, int(n * BYTES_PER_SAMPLE), f"sampling its structural surface ({n:,.0f} points)", advice)
+
+
+def check_neighbourhood_memory(source: str, samples: int, spacing: float, radius: float) -> None:
+    """Raise :class:`StoreySizeError` when the scan-quality neighbourhoods of ``samples`` samples
+    ``spacing`` metres apart, within ``radius`` metres, need more memory than the process may still
+    allocate (:data:`BYTES_PER_NEIGHBOUR` a neighbour); the message gives the radius that fits."""
+    neighbours = samples * (math.pi * radius**2 / spacing**2 + 1)
+    left = memory_left()
+    fits = ""
+    if left is not None:
+        per_sample = left[0] / max(samples, 1) / BYTES_PER_NEIGHBOUR - 1
+        if per_sample > 0:
+            fits = (
+                f" (--set quality.density_radius={math.floor(100 * spacing * math.sqrt(per_sample / math.pi)) / 100:g})"
+            )
+    advice = f"set a smaller quality.density_radius than {radius:g} m{fits}, or a coarser coverage_spacing"
+    _check_memory(
+        source,
+        int(neighbours * BYTES_PER_NEIGHBOUR),
+        f"building the scan-quality neighbourhoods ({neighbours:,.0f} pairs of samples within {radius:g} m)",
+        advice,
+    )
 
 
 def _check_memory(source: str, need: int, what: str, advice: str) -> None:

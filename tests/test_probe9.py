@@ -135,3 +135,34 @@ def test_a_new_run_writes_over_no_checkpoint_and_no_run_s_file(content, tiny_run
     with pytest.raises(FileExistsError, match="which this run would write over"):
         train(TrainConfig(timesteps=8, envs=1, n_steps=8, batch_size=8, completion="policy"), out, progress=False)
     assert _files(out) == before
+
+
+# ---------------------------------------------------------------------- memory of the evaluation
+def test_the_quality_neighbourhoods_are_sized_before_the_first_scan(monkeypatch, tmp_path, capsys):
+    """quality.density_radius at its documented 1 m (or coverage_spacing at 1 cm) asked for gigabytes
+    at the run's end: the scan ran, then failed out of memory with advice about the voxel, and the
+    report was lost."""
+    import scenes.limits as limits
+    from nbs_env.config import make_config
+    from nbs_env.env import NBSEnv
+    from scenes import StoreySizeError
+    from train.cli import main as nbs
+
+    monkeypatch.setattr(limits, "memory_left", lambda: (2**30, "a test's limit"))
+    env = NBSEnv(make_config("fast", scene="l_room", **{"quality.density_radius": 1.0}))
+    with pytest.raises(StoreySizeError, match=r"quality\.density_radius=0\.\d+\)") as caught:
+        env.reset(seed=0)
+    fits = float(str(caught.value).split("quality.density_radius=")[1].split(")")[0])
+    env = NBSEnv(make_config("fast", scene="l_room", max_scans=1, **{"quality.density_radius": fits}))
+    env.reset(seed=0)  # the radius advised fits, and the figures are made with it
+    report = env.storey.meter.quality(env.config.quality)
+    assert len(report.quality_pct) == 1 and report.density.max() > 0
+
+    def never(*args, **kwargs):
+        raise AssertionError("a scan was taken")
+
+    monkeypatch.setattr("nbs_env.robot.Robot.scan", never)
+    out = tmp_path / "r"
+    code = nbs(_scan(out, "--max-scans", "1", "--set", "quality.density_radius=1"))
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code != 0 and "quality.density_radius" in err[-1] and not out.exists()
