@@ -120,6 +120,12 @@ def check_ply_header(source: str, data: bytes) -> PlyHeader:
         raise InvalidMeshError(
             source, f"no 'end_header' in the PLY file's first {_PLY_HEADER_MAX:,} bytes (a header is a few hundred)"
         )
+    if b"\n" not in data[:end] and b"\r" in data[:end]:
+        raise InvalidMeshError(
+            source,
+            "the PLY file's lines end in a carriage return alone (old Mac line endings), which PLY readers take "
+            "for no line end: save it with LF or CRLF line endings",
+        )
     if end > 0 and data[end - 1 : end] != b"\n":
         # Readers end the header at the first "end_header" anywhere on a line (trimesh does).
         lineno = data.count(b"\n", 0, end) + 1

@@ -68,7 +68,7 @@ from __future__ import annotations
 import base64
 import re
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -356,7 +356,6 @@ def _read_obj(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
     # where every other OBJ reader fails or reads another number). A byte-order mark is no part of the
     # first line: it hid a first "v" line's keyword, and the vertex was dropped.
     text = data.decode("utf-8-sig", errors="replace").replace("\r\n", "\n").replace("\r", "\n")
-    text = text.replace("\\\n", " ")
     coords: list[str] = []
     coord_lines: list[int] = []
     polygons: list[list[int]] = []
@@ -369,7 +368,7 @@ def _read_obj(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
     # str.split is the format's split on ASCII text without the separators only Python counts as
     # blanks (\x1c-\x1f), and three times as fast as the expression's.
     split = str.split if text.isascii() and not _PYTHON_ONLY_BLANKS.search(text) else _obj_split
-    for lineno, raw in enumerate(text.split("\n"), start=1):
+    for lineno, raw in _obj_statements(text):
         line = raw.strip(_OBJ_BLANKS)
         if not line or line[0] == "#":
             continue
@@ -459,6 +458,26 @@ def _triangulated(
         return triangulate_polygons(vertices, polygons)
     except CrossingPolygonError as exc:
         raise InvalidMeshError(source, f"{face(exc.index)} outline crosses itself; split it into simple faces") from exc
+
+
+def _obj_statements(text: str) -> Iterator[tuple[int, str]]:
+    """The OBJ text's statements with the number of the line each starts on: a line ending in ``\\``
+    continues its statement on the next line, but a comment is no statement (a Windows path at the
+    end of one, ``# from D:\\export\\``, swallowed the next line's ``o wall_room0``)."""
+    lines = text.split("\n")
+    if "\\\n" not in text:
+        yield from enumerate(lines, start=1)
+        return
+    pending: tuple[int, str] | None = None
+    for lineno, line in enumerate(lines, start=1):
+        start, line = (lineno, line) if pending is None else (pending[0], pending[1] + " " + line)
+        if line.endswith("\\") and not line.lstrip(_OBJ_BLANKS).startswith("#"):
+            pending = (start, line[:-1])
+            continue
+        pending = None
+        yield start, line
+    if pending is not None:
+        yield pending
 
 
 def _floats_ok(text: str) -> bool:

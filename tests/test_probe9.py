@@ -166,3 +166,38 @@ def test_the_quality_neighbourhoods_are_sized_before_the_first_scan(monkeypatch,
     code = nbs(_scan(out, "--max-scans", "1", "--set", "quality.density_radius=1"))
     err = capsys.readouterr().err.strip().splitlines()
     assert code != 0 and "quality.density_radius" in err[-1] and not out.exists()
+
+
+# ---------------------------------------------------------------------- OBJ statements
+def test_a_backslash_continues_a_statement_but_never_a_comment(tmp_path):
+    """A comment ending in a Windows path's backslash swallowed the next line (`g wall`): the walls
+    were labelled as the ceiling without a word. A statement continued on the next line still reads
+    as one, and a line's number in a message is the line in the file."""
+    from tests.test_probe8 import _ROOM_OBJ
+
+    def areas(text: str) -> dict[str, float]:
+        path = tmp_path / "room.obj"
+        path.write_text(text)
+        return {k.name: round(v, 6) for k, v in load_scene(str(path)).class_areas().items()}
+
+    plain = areas(_ROOM_OBJ)
+    assert areas(_ROOM_OBJ.replace("g wall\n", "# exported from D:\\export\\\ng wall\n")) == plain
+    assert areas(_ROOM_OBJ.replace("f 1 2 3 4\n", "f 1 2 \\\n3 4\n")) == plain
+    from scenes import InvalidMeshError
+
+    with pytest.raises(InvalidMeshError, match=r"line 15: bad vertex reference 'x'"):
+        areas(_ROOM_OBJ.replace("f 1 2 3 4\n", "f 1 2 \\\n3 4\n").replace("f 1 5 6 2", "f 1 5 6 x"))
+
+
+def test_a_ply_of_carriage_returns_alone_is_named_for_its_line_endings(tmp_path):
+    """Said to hold 'end_header' within its line 1: true only as the whole file was one line."""
+    from scenes import InvalidMeshError
+    from tests.test_probe6 import GOOD_FACES, _ply_text
+
+    path = tmp_path / "cr.ply"
+    text = _ply_text(GOOD_FACES)
+    path.write_bytes(text.replace("\n", "\r\n").encode())
+    assert len(load_scene(str(path)).mesh.faces) > 0  # CRLF is read
+    path.write_bytes(text.replace("\n", "\r").encode())
+    with pytest.raises(InvalidMeshError, match="carriage return alone"):
+        load_scene(str(path))
