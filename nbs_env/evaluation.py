@@ -18,7 +18,7 @@ from nbs_env import threads
 from nbs_env.config import QualityConfig
 from scenes import Scene, SurfaceClass
 from scenes.interior import interior_samples
-from scenes.limits import check_neighbourhood_memory
+from scenes.limits import check_sample_count
 
 __all__ = ["CoverageMeter", "QualityConfig", "QualityReport"]
 
@@ -163,7 +163,7 @@ class CoverageMeter:
         instrument's. Coverage, incidence and range do not depend on it.
     density_radius : float, optional
         The ``quality.density_radius`` :meth:`quality` will be asked for: its neighbourhoods' memory
-        is checked now, before any scan (:func:`scenes.limits.check_neighbourhood_memory`), rather
+        is checked now, before any scan (:func:`scenes.limits.check_sample_count`), rather
         than found missing at the run's end.
 
     Raises
@@ -184,9 +184,10 @@ class CoverageMeter:
         if not (np.isfinite(density_weight) and density_weight > 0):
             raise ValueError(f"density_weight must be a finite number > 0, got {density_weight}")
         self.density_weight = float(density_weight)
+        if density_radius is not None:  # the quality's neighbourhoods, asked for at the run's end, too
+            area = float(np.asarray(scene.face_areas)[scene.structural_mask()].sum())
+            check_sample_count(scene.name, area, spacing, density_radius)
         self.samples = interior_samples(scene, spacing) if interior_only else scene.structure_samples(spacing)
-        if density_radius is not None:  # the quality's neighbourhoods, asked for at the run's end
-            check_neighbourhood_memory(scene.name, len(self.samples), spacing, density_radius)
         self.spacing = float(spacing)
         self.radius = radius
         self.sensed = np.zeros(len(self.samples), dtype=bool)

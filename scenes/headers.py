@@ -601,6 +601,16 @@ def _buffer_bytes(source: str, path: Path, buffer: dict, index: int, bin_length:
             raise InvalidMeshError(
                 source, f"buffers[{index}].uri is a data: URI with percent-escapes in its base64: write it unescaped"
             )
+        odd = _NOT_BASE64.search(uri.partition(",")[2])
+        if odd is not None:
+            # Skipped by the decoder, they shift every byte after them (URL-safe "-" and "_" included):
+            # the faces were then said to name vertices outside the file.
+            what = "padding ('=') before its end" if odd.group()[0] == "=" else f"{odd.group()!r}, which base64 has not"
+            raise InvalidMeshError(
+                source,
+                f"buffers[{index}].uri holds {what}, at character {odd.start()} of its base64 data (URL-safe base64 "
+                "writes '-' and '_' for '+' and '/'; glTF's is the standard one)",
+            )
         try:
             return len(base64.b64decode(uri.partition(",")[2], validate=False))
         except (binascii.Error, ValueError):
@@ -610,6 +620,11 @@ def _buffer_bytes(source: str, path: Path, buffer: dict, index: int, bin_length:
 
 
 _DRIVE = re.compile(r"[A-Za-z]:[\\/]")
+
+
+#: The first character of base64 data that is no part of the standard alphabet (RFC 4648 §4), its
+#: padding at the end only.
+_NOT_BASE64 = re.compile(r"[^A-Za-z0-9+/=]|=+(?=[^=])")
 
 
 def _is_data(uri: str) -> bool:

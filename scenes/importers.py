@@ -465,7 +465,7 @@ def _obj_statements(text: str) -> Iterator[tuple[int, str]]:
     continues its statement on the next line, but a comment is no statement (a Windows path at the
     end of one, ``# from D:\\export\\``, swallowed the next line's ``o wall_room0``)."""
     lines = text.split("\n")
-    if "\\\n" not in text:
+    if "\\\n" not in text and not text.endswith("\\"):  # the last line needs no line end
         yield from enumerate(lines, start=1)
         return
     pending: tuple[int, str] | None = None

@@ -37,13 +37,14 @@ Limits
     extent bounds can still need more (a 490 m hall, 1.9·10^8 samples, asked for 1.45 GiB in one
     array and many times that in all): it is refused, with the spacing that fits, before the samples
     are made.
-:data:`BYTES_PER_NEIGHBOUR`, 64, the scan-quality neighbourhoods (checked by :func:`check_neighbourhood_memory`)
+:data:`BYTES_PER_NEIGHBOUR`, 64, the scan-quality neighbourhoods (checked by :func:`check_sample_count`)
     The quality's density (:meth:`nbs_env.evaluation.CoverageMeter.quality`) counts, for every
     sample, the samples within ``quality.density_radius``: on a surface about π r² / s² of them at
     spacing s. Building that sparse matrix peaked at 44 bytes a neighbour (200,000 samples of a plane
     at 5 cm, radii 0.2 and 0.3 m); 64 leaves room. At the finest spacing (1 cm) or the largest radius
     (1 m) an office storey needed 3 to 18 GB, asked for after the run, which then lost its report:
-    refused before the first scan, with the radius that fits.
+    refused before the first scan (:func:`check_sample_count` with ``density_radius``), with a spacing
+    and a radius that fit.
 :data:`MAX_MESH_FILE_BYTES`, 1 GiB, a mesh file read whole (checked by :func:`check_file_size`)
     An OBJ of the largest storey (5 million faces) takes some 300 MB of text; a binary file less. A
     file is read into memory before it is parsed, so one of gigabytes (a point cloud, a disk image
@@ -97,7 +98,6 @@ __all__ = [
     "UNITS",
     "check_face_count",
     "check_file_size",
-    "check_neighbourhood_memory",
     "check_origin_distance",
     "check_sample_count",
     "check_storey_shape",
@@ -163,19 +163,40 @@ def check_face_count(source: str, n_faces: int) -> None:
     )
 
 
-def check_sample_count(source: str, area: float, spacing: float) -> None:
+def check_sample_count(source: str, area: float, spacing: float, density_radius: float | None = None) -> None:
     """Raise :class:`StoreySizeError` when sampling ``area`` m² of structural surface every ``spacing``
-    metres makes more than :data:`MAX_STRUCTURE_SAMPLES` samples, or more than the memory the process
-    may still allocate (:data:`BYTES_PER_SAMPLE` each); the message gives the spacing that fits."""
+    metres makes more than :data:`MAX_STRUCTURE_SAMPLES` samples, or needs more than the memory the
+    process may still allocate: :data:`BYTES_PER_SAMPLE` a sample and, with ``density_radius``, the
+    scan-quality neighbourhoods of the samples within it (:data:`BYTES_PER_NEIGHBOUR` a neighbour,
+    about π r² / s² + 1 a sample). The message gives a spacing that meets every bound and, with
+    ``density_radius``, the radius that fits at this spacing."""
     n = area / spacing**2
-    most = MAX_STRUCTURE_SAMPLES
+    r2 = 0.0 if density_radius is None else math.pi * density_radius**2
+
+    def bytes_per_sample(s: float) -> float:
+        return BYTES_PER_SAMPLE + (0.0 if density_radius is None else BYTES_PER_NEIGHBOUR * (r2 / s**2 + 1))
+
+    fit = math.sqrt(area / MAX_STRUCTURE_SAMPLES)
+    radius_fit = ""
     left = memory_left()
     if left is not None:  # the spacing advised must meet the memory bound too, not the count's alone
-        most = max(1, min(most, left[0] // BYTES_PER_SAMPLE))
-    fits = math.ceil(100 * math.sqrt(area / most)) / 100
+        budget = max(float(left[0]), 1.0)
+        # area/s² × (B_s + B_n + B_n π r²/s²) <= budget, a quadratic in u = 1/s².
+        a, b = area * BYTES_PER_NEIGHBOUR * r2, area * bytes_per_sample(math.inf)
+        u = budget / b if a == 0 else (-b + math.sqrt(b * b + 4 * a * budget)) / (2 * a)
+        fit = max(fit, 1 / math.sqrt(u))
+        if density_radius is not None:
+            per_sample = (budget / n - BYTES_PER_SAMPLE) / BYTES_PER_NEIGHBOUR - 1
+            radius = math.floor(100 * spacing * math.sqrt(max(per_sample, 0.0) / math.pi)) / 100
+            if radius > 0:
+                radius_fit = (
+                    f", or a smaller quality.density_radius than {density_radius:g} m "
+                    f"(--set quality.density_radius={radius:g})"
+                )
+    fits = math.ceil(100 * fit) / 100
     advice = (
         f"the storey's structural surface is {area:,.0f} m²: set a coarser coverage_spacing than {spacing:g} m "
-        f"(--set coverage_spacing={max(fits, spacing * 2):g}), or split the storey"
+        f"(--set coverage_spacing={max(fits, spacing * 2):g}){radius_fit}, or split the storey"
     )
     if n > MAX_STRUCTURE_SAMPLES:
         raise StoreySizeError(
@@ -183,29 +204,10 @@ def check_sample_count(source: str, area: float, spacing: float) -> None:
             f"the evaluation would sample it at {n:,.0f} points (the most nbs-env makes is {MAX_STRUCTURE_SAMPLES:,}): "
             + advice,
         )
-    _check_memory(source, int(n * BYTES_PER_SAMPLE), f"sampling its structural surface ({n:,.0f} points)", advice)
-
-
-def check_neighbourhood_memory(source: str, samples: int, spacing: float, radius: float) -> None:
-    """Raise :class:`StoreySizeError` when the scan-quality neighbourhoods of ``samples`` samples
-    ``spacing`` metres apart, within ``radius`` metres, need more memory than the process may still
-    allocate (:data:`BYTES_PER_NEIGHBOUR` a neighbour); the message gives the radius that fits."""
-    neighbours = samples * (math.pi * radius**2 / spacing**2 + 1)
-    left = memory_left()
-    fits = ""
-    if left is not None:
-        per_sample = left[0] / max(samples, 1) / BYTES_PER_NEIGHBOUR - 1
-        if per_sample > 0:
-            fits = (
-                f" (--set quality.density_radius={math.floor(100 * spacing * math.sqrt(per_sample / math.pi)) / 100:g})"
-            )
-    advice = f"set a smaller quality.density_radius than {radius:g} m{fits}, or a coarser coverage_spacing"
-    _check_memory(
-        source,
-        int(neighbours * BYTES_PER_NEIGHBOUR),
-        f"building the scan-quality neighbourhoods ({neighbours:,.0f} pairs of samples within {radius:g} m)",
-        advice,
-    )
+    what = f"sampling its structural surface ({n:,.0f} points)"
+    if density_radius is not None:
+        what = f"{what} and their scan-quality neighbourhoods within {density_radius:g} m"
+    _check_memory(source, int(n * bytes_per_sample(spacing)), what, advice)
 
 
 def _check_memory(source: str, need: int, what: str, advice: str) -> None:

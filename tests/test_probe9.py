@@ -157,6 +157,12 @@ def test_the_quality_neighbourhoods_are_sized_before_the_first_scan(monkeypatch,
     env.reset(seed=0)  # the radius advised fits, and the figures are made with it
     report = env.storey.meter.quality(env.config.quality)
     assert len(report.quality_pct) == 1 and report.density.max() > 0
+    # The spacing advised fits the samples and their neighbourhoods both (it once sized the samples alone).
+    env = NBSEnv(make_config("fast", scene="l_room", coverage_spacing=0.01))
+    with pytest.raises(StoreySizeError, match=r"coverage_spacing=0\.\d+\)") as caught:
+        env.reset(seed=0)
+    spacing = float(str(caught.value).split("coverage_spacing=")[1].split(")")[0])
+    NBSEnv(make_config("fast", scene="l_room", max_scans=1, coverage_spacing=spacing)).reset(seed=0)
 
     def never(*args, **kwargs):
         raise AssertionError("a scan was taken")
@@ -201,3 +207,65 @@ def test_a_ply_of_carriage_returns_alone_is_named_for_its_line_endings(tmp_path)
     path.write_bytes(text.replace("\n", "\r").encode())
     with pytest.raises(InvalidMeshError, match="carriage return alone"):
         load_scene(str(path))
+
+
+# ---------------------------------------------------------------------- probe 14
+def test_a_resumed_run_s_behaviour_cloning_record_is_checked_before_it_trains(tmp_path, capsys):
+    """An edited behaviour_cloning.json was read with a bare json.loads on --resume (a traceback); with
+    --hold-coverage its teacher figure is what the run holds, and a nonsense one was taken."""
+    pytest.importorskip("sb3_contrib")
+    from tests.test_train_probe3 import _train
+    from train.ppo import TrainConfig, train
+
+    out = tmp_path / "run"
+    config = TrainConfig(
+        timesteps=8, envs=1, n_steps=8, batch_size=8, rooms=(1, 1), completion="policy", bc_steps=24, hold_coverage=0.1
+    )
+    train(config, out, progress=False)
+    record = out / "behaviour_cloning.json"
+    good = record.read_text()
+    for text, message in [
+        ('{"mapped": 5,', "behaviour_cloning.json: not JSON"),
+        ("\xff", "behaviour_cloning.json: not JSON"),
+        (good.replace('"mapped": ', '"mapped": -'), "mapped is -"),
+        ('{"mapped": null}', "mapped is None"),
+    ]:
+        record.write_bytes(text.encode("latin-1") if text == "\xff" else text.encode())
+        code, err = _train(["--resume", str(out), "--timesteps", "16"], capsys)
+        assert code != 0 and message in err and len(err.strip().splitlines()) == 1, err
+    record.unlink()
+    code, err = _train(["--resume", str(out), "--timesteps", "16"], capsys)
+    assert code != 0 and "behaviour_cloning.json: missing" in err, err
+
+
+def test_an_obj_statement_continued_at_the_end_of_the_file_reads_as_with_a_last_newline(tmp_path):
+    from tests.test_probe8 import _ROOM_OBJ
+
+    path = tmp_path / "room.obj"
+    for text in (_ROOM_OBJ + "f 1 2 3 \\", _ROOM_OBJ + "f 1 2 3 \\\n"):
+        path.write_text(text)
+        assert len(load_scene(str(path)).mesh.faces) == 13
+
+
+@pytest.mark.parametrize("swap", [("+", "-"), ("/", "_"), ("A", "=")])
+def test_base64_data_of_another_alphabet_is_named(swap, glb_parts, tmp_path):  # noqa: F811
+    """URL-safe base64's '-' and '_' were skipped by the decoder: every later byte shifted, and the
+    faces were said to name vertices outside the file."""
+    json_chunk, binary, faces = glb_parts
+    data = base64.b64encode(binary).decode()
+    assert swap[0] in data
+    uri = "data:application/octet-stream;base64," + data.replace(swap[0], swap[1], 1)
+    _load_with_buffer_uri(json_chunk, uri, faces, r"at character \d+ of its base64 data", tmp_path)
+
+
+def test_a_run_in_a_subfolder_is_named_where_it_can_be_resumed(tiny_run, tmp_path, capsys):
+    import shutil
+
+    from tests.test_train_probe3 import _train
+
+    shutil.copytree(tiny_run, tmp_path / "w" / "run1")
+    argv = ["--timesteps", "8", "--n-steps", "8", "--envs", "1", "--out", str(tmp_path / "w")]
+    code, err = _train(argv, capsys)
+    assert code == 2 and f"continue it with --resume {tmp_path / 'w' / 'run1'}," in err, err
+    code, err = _train([*argv[:-1], str(tmp_path / "w" / "run1")], capsys)
+    assert code == 2 and f"holds a run already; continue it with --resume {tmp_path / 'w' / 'run1'}," in err, err

@@ -721,6 +721,48 @@ def latest_state(run_folder: str | Path) -> tuple[Path, dict]:
 
 #: The learning curve every run folder holds from its start (a checkpoint folder holds none).
 CURVE = "learning_curve.jsonl"
+#: What behaviour cloning measured (:func:`behaviour_clone`), in a run folder that cloned.
+CLONE_RECORD = "behaviour_cloning.json"
+#: The largest structure a robot maps, % of the storey's structural surface (walls a voxel and a
+#: half thick map at 1.1-1.25 times their surface).
+MAX_MAPPED_PCT = 1000.0
+
+
+def _clone_record(out: Path, config: TrainConfig) -> dict | None:
+    """A resumed run's :data:`CLONE_RECORD` (None where it cloned nothing), checked: a JSON object,
+    and with ``hold_coverage`` the teacher's ``mapped`` figure the constraint holds.
+
+    Raises
+    ------
+    ModelFileError
+        Naming the file and what is wrong with it.
+    """
+    path = out / CLONE_RECORD
+    if not os.path.lexists(path):
+        if config.hold_coverage and config.bc_steps:
+            raise ModelFileError(f"{path}: missing; the run holds the teacher's coverage it records (hold_coverage)")
+        return None
+    try:
+        record = read_json_file(path)
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ModelFileError(f"{path}: not JSON ({_one_line_error(exc)})") from None
+    except OSError as exc:
+        raise ModelFileError(f"{path}: cannot be read ({exc.strerror or type(exc).__name__})") from None
+    if not isinstance(record, dict):
+        raise ModelFileError(f"{path}: not a behaviour-cloning record (a JSON object)")
+    mapped = record.get("mapped")
+    if config.hold_coverage and (
+        type(mapped) not in (int, float) or not 0 < mapped <= MAX_MAPPED_PCT  # NaN fails too
+    ):
+        raise ModelFileError(
+            f"{path}: mapped is {str(mapped)[:40]}, not the teacher's mapped structure in % (0..{MAX_MAPPED_PCT:g}] "
+            "that hold_coverage holds; restore the file the run wrote"
+        )
+    return record
+
+
+def _one_line_error(exc: Exception) -> str:
+    return " ".join(str(exc).split())[:200]
 
 
 def checkpoint_problem(folder: str | Path) -> str | None:
@@ -893,6 +935,8 @@ def train(
     if not resume and (problem := run_folder_problem(out)) is not None:
         raise FileExistsError(problem)
     state = latest_state(out) if resume else None
+    # Read before any worker starts: what behaviour cloning measured, which a resumed run goes on with.
+    cloned = _clone_record(out, config) if state is not None else None
     # Checked before anything is built or written: what the options claim, and where Ray would run.
     check_memory(config, backend, behaviour_cloning=bool(config.bc_steps) and state is None)
     check_workers(config, backend, address)
@@ -1032,16 +1076,16 @@ def train(
                     model.interrupted = stop.signal
                     return None, model
             if warm is not None:
-                write_text(out / "behaviour_cloning.json", json.dumps(warm, indent=1))
+                write_text(out / CLONE_RECORD, json.dumps(warm, indent=1))
                 if config.checkpoint_every:  # the behaviour-cloned start, a policy of its own to compare
                     checkpoint(0)
-            elif state is not None and (out / "behaviour_cloning.json").is_file():
-                warm = json.loads((out / "behaviour_cloning.json").read_text())
+            elif state is not None:
+                warm = cloned
             if config.hold_coverage:
                 target = warm.get("mapped") if isinstance(warm, dict) else None
-                if not isinstance(target, (int, float)) or isinstance(target, bool) or not math.isfinite(target):
+                if target is None:
                     raise ConfigError(
-                        f"hold_coverage: no finished episode of the teacher to hold ({out / 'behaviour_cloning.json'}"
+                        f"hold_coverage: no finished episode of the teacher to hold ({out / CLONE_RECORD}"
                         f" has none); raise --bc-steps so that the teacher finishes storeys"
                     )
                 dual = CostWeight(
@@ -1464,7 +1508,7 @@ RUN_FILES = (
     STATE_FILE,
     CURVE,
     "learning_curve.png",
-    "behaviour_cloning.json",
+    CLONE_RECORD,
     "tb",
 )
 
@@ -1475,8 +1519,14 @@ def run_folder_problem(out: str | Path) -> str | None:
     out = Path(out)
     if not out.is_dir():
         return None
-    if any(out.glob(f"**/{STATE_JSON}")):
-        return f"{out} holds a run already; continue it with --resume {out}, or name another folder"
+    state = next(iter(sorted(out.glob(f"**/{STATE_JSON}"))), None)
+    if state is not None:
+        # The run is the state's folder, or the run a checkpoint_N folder belongs to.
+        run = state.parent
+        if run != out and re.fullmatch(r"checkpoint_\d+", run.name):
+            run = run.parent
+        where = "a run already" if run == out else f"the run {run}"
+        return f"{out} holds {where}; continue it with --resume {run}, or name another folder"
     held = sorted(name for name in RUN_FILES if os.path.lexists(out / name))
     held += sorted(p.name for p in out.glob("checkpoint_*"))
     if held:
