@@ -269,3 +269,19 @@ def test_a_run_in_a_subfolder_is_named_where_it_can_be_resumed(tiny_run, tmp_pat
     assert code == 2 and f"continue it with --resume {tmp_path / 'w' / 'run1'}," in err, err
     code, err = _train([*argv[:-1], str(tmp_path / "w" / "run1")], capsys)
     assert code == 2 and f"holds a run already; continue it with --resume {tmp_path / 'w' / 'run1'}," in err, err
+
+
+def test_a_run_named_like_a_checkpoint_is_a_run_of_its_own_not_a_checkpoint_of_its_folder(tiny_run, tmp_path, capsys):
+    """W/checkpoint_7, a whole run (its own curve), was taken for W's newest checkpoint: `--resume W`
+    continued it as W, and `--out W` advised exactly that."""
+    import shutil
+
+    from tests.test_train_probe3 import _train
+
+    folder = tmp_path / "w"
+    shutil.copytree(tiny_run, folder / "checkpoint_7")
+    code, err = _train(["--timesteps", "8", "--n-steps", "8", "--envs", "1", "--out", str(folder)], capsys)
+    assert code == 2 and f"--resume {folder / 'checkpoint_7'}," in err, err
+    code, err = _train(["--resume", str(folder), "--timesteps", "32"], capsys)
+    assert code != 0 and "no resumable state" in err, err
+    assert not (folder / "training_state.json").exists()

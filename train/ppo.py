@@ -687,6 +687,8 @@ def latest_state(run_folder: str | Path) -> tuple[Path, dict]:
     for path in [run_folder / STATE_JSON, *run_folder.glob(f"checkpoint_*/{STATE_JSON}")]:
         if not path.is_file():
             continue
+        if path.parent != run_folder and (path.parent / CURVE).exists():
+            continue  # a run folder of its own named like a checkpoint (checkpoint_problem), not this run's
         try:
             document = read_json_file(path)
         except (UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -1523,7 +1525,7 @@ def run_folder_problem(out: str | Path) -> str | None:
     if state is not None:
         # The run is the state's folder, or the run a checkpoint_N folder belongs to.
         run = state.parent
-        if run != out and re.fullmatch(r"checkpoint_\d+", run.name):
+        if run != out and re.fullmatch(r"checkpoint_\d+", run.name) and not (run / CURVE).exists():
             run = run.parent
         where = "a run already" if run == out else f"the run {run}"
         return f"{out} holds {where}; continue it with --resume {run}, or name another folder"
