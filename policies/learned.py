@@ -24,6 +24,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -55,6 +56,7 @@ __all__ = [
     "check_tensors",
     "load_checkpoint",
     "read_tensors",
+    "recorded_digest",
     "resolve_checkpoint",
     "save_checkpoint",
     "trained_inputs",
@@ -417,6 +419,22 @@ def tensor_file_bound(parameters: int, copies: int = 1) -> int:
     return copies * parameters * 8 + TENSOR_FILE_SLACK
 
 
+def recorded_digest(document: dict, path: Path) -> str:
+    """The SHA-256 a description records for its tensors (``document["sha256"]``), in lower-case hex.
+
+    Raises
+    ------
+    ModelFileError
+        Naming the description ``path``: no digest, or one that is no SHA-256 (64 hex digits). The
+        tensors' file was blamed for it ("checksum does not match"), intact as it was.
+    """
+    digest = document.get("sha256")
+    if not isinstance(digest, str) or not re.fullmatch(r"[0-9a-fA-F]{64}", digest):
+        shown = "none" if digest is None else repr(digest)[:80]
+        raise ModelFileError(f"{path}: sha256 is {shown}, not the SHA-256 of the tensors (64 hex digits)")
+    return digest.lower()
+
+
 def _sha256(path: Path, most: int | None = None) -> str:
     """The file's SHA-256, read in blocks, after its size is checked against ``most`` bytes (and the
     memory the tensors would take when read): a 40 GB sparse file was read whole to be hashed."""
@@ -614,7 +632,7 @@ def load_checkpoint(path: str | Path):
     if not weights.is_file():
         missing = not os.path.lexists(weights)
         raise ModelFileError(f"{weights}: {'weights file missing' if missing else 'not a regular file'}")
-    if _sha256(weights, tensor_file_bound(config.parameters)) != document.get("sha256"):
+    if _sha256(weights, tensor_file_bound(config.parameters)) != recorded_digest(document, path):
         raise ModelFileError(f"{weights}: checksum does not match {path.name} (modified or truncated)")
     state = read_tensors(weights)
     if not isinstance(state, dict) or not all(isinstance(k, str) for k in state):

@@ -285,3 +285,26 @@ def test_a_run_named_like_a_checkpoint_is_a_run_of_its_own_not_a_checkpoint_of_i
     code, err = _train(["--resume", str(folder), "--timesteps", "32"], capsys)
     assert code != 0 and "no resumable state" in err, err
     assert not (folder / "training_state.json").exists()
+
+
+@pytest.mark.parametrize("edit", ["drop", "upper"])
+def test_a_checkpoint_s_recorded_digest_is_read_as_a_sha256(edit, tiny_run, tmp_path):
+    """A description without its sha256 blamed the intact weights ("checksum does not match"); the
+    same digest in upper-case hex is the same SHA-256."""
+    import shutil
+
+    from policies.learned import ModelFileError, load_checkpoint
+
+    folder = tmp_path / "ck"
+    shutil.copytree(tiny_run / "checkpoint_8", folder)
+    document = json.loads((folder / "policy.json").read_text())
+    if edit == "drop":
+        del document["sha256"]
+    else:
+        document["sha256"] = document["sha256"].upper()
+    (folder / "policy.json").write_text(json.dumps(document))
+    if edit == "drop":
+        with pytest.raises(ModelFileError, match=r"policy\.json: sha256 is none"):
+            load_checkpoint(folder)
+    else:
+        load_checkpoint(folder)

@@ -804,14 +804,14 @@ def resume_config(run_folder: str | Path, timesteps: int | None = None) -> Train
 
 
 def _load_state(model, folder: Path, document: dict) -> None:
-    from policies.learned import _one_line, _sha256, check_tensors, read_tensors, tensor_file_bound
+    from policies.learned import _one_line, _sha256, check_tensors, read_tensors, recorded_digest, tensor_file_bound
 
     tensors = folder / str(document.get("tensors", STATE_FILE))
     if not tensors.is_file():
         raise ModelFileError(f"{tensors}: missing (named by {folder / STATE_JSON})")
     # The policy's parameters (its value head's included) and Adam's two moments of each.
     parameters = sum(p.numel() for p in model.policy.parameters())
-    if _sha256(tensors, tensor_file_bound(parameters, copies=3)) != document.get("sha256"):
+    if _sha256(tensors, tensor_file_bound(parameters, copies=3)) != recorded_digest(document, folder / STATE_JSON):
         raise ModelFileError(f"{tensors}: its checksum is not the one {STATE_JSON} records (a modified file)")
     state = read_tensors(tensors)
     if not isinstance(state, dict) or not isinstance(state.get("policy"), dict) or "optimizer" not in state:
