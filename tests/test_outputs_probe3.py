@@ -155,8 +155,8 @@ def test_a_file_output_typed_as_a_folder_is_refused(tmp_path, capsys, monkeypatc
     assert err.startswith("nbs scenes generate: error: --out gdir/: ends with a separator, so it names a folder")
     assert list(tmp_path.iterdir()) == []  # no file named gdir
     # Without the separator it is a file, as before; a folder output may end with one.
-    assert main(["scenes", "generate", "--seed", "1", "--rooms", "2", "--out", "gdir"]) == 0
-    assert (tmp_path / "gdir").is_file()
+    assert main(["scenes", "generate", "--seed", "1", "--rooms", "2", "--out", "gdir.json"]) == 0
+    assert (tmp_path / "gdir.json").is_file()
     check_outputs([Output("--out", output_path("reports/"), "folder")])
     with pytest.raises(OutputError, match=r"--record r/: .* name a file in it \(e\.g\. r/run\.rrd\)"):
         check_outputs([Output("--record", output_path("r/"), "file", example="run.rrd")])

@@ -316,11 +316,14 @@ def test_two_outputs_naming_one_file_are_refused_before_the_work(tmp_path, capsy
 
     (tmp_path / "d").mkdir()
     for show in ("x.png", "d/../x.png"):
-        code = main(
-            ["scenes", "generate", "--seed", "1", "--out", str(tmp_path / "x.png"), "--show", str(tmp_path / show)]
-        )
+        with pytest.raises(SystemExit) as stopped:
+            main(
+                ["scenes", "generate", "--seed", "1", "--out", str(tmp_path / "x.png"), "--show", str(tmp_path / show)]
+            )
+        code = stopped.value.code
         err = capsys.readouterr().err
-        assert code == EXIT_USAGE and "--out and --show both name" in err, err
+        # Now refused sooner: a plan is JSON, so it never shares a picture's name.
+        assert code == EXIT_USAGE and "a floor plan is JSON" in err, err
     assert not (tmp_path / "x.png").exists()
     link = tmp_path / "link.rrd"
     link.symlink_to(tmp_path / "run")

@@ -308,3 +308,20 @@ def test_a_checkpoint_s_recorded_digest_is_read_as_a_sha256(edit, tiny_run, tmp_
             load_checkpoint(folder)
     else:
         load_checkpoint(folder)
+
+
+def test_a_floor_plan_is_written_only_under_a_json_name(tmp_path, capsys):
+    """`nbs scenes generate --out mesh.obj` replaced the mesh with JSON, without a word."""
+    from train.cli import main
+
+    mesh = tmp_path / "mesh.obj"
+    mesh.write_text("v 0 0 0\n")
+    for name in ("mesh.obj", "top.png", "plan"):
+        with pytest.raises(SystemExit) as stopped:
+            main(["scenes", "generate", "--seed", "3", "--out", str(tmp_path / name)])
+        code = stopped.value.code
+        err = capsys.readouterr().err
+        assert code == EXIT_USAGE and "a floor plan is JSON" in err.strip().splitlines()[-1], err
+    assert mesh.read_text() == "v 0 0 0\n" and sorted(p.name for p in tmp_path.iterdir()) == ["mesh.obj"]
+    assert main(["scenes", "generate", "--seed", "3", "--out", str(tmp_path / "plan.JSON")]) == 0
+    assert len(load_scene(str(tmp_path / "plan.JSON")).rooms) >= 1

@@ -82,6 +82,16 @@ def _picture(text: str) -> Path:
     return path
 
 
+def _plan_file(text: str) -> Path:
+    """argparse type of ``nbs scenes generate --out``: a floor plan is JSON, and nbs-env reads it by
+    its name (``load_scene("x.json")``); a name of another format (``mesh.obj``) was written over
+    with JSON that every reader of that format then refused."""
+    path = output_path(text)
+    if path.suffix.lower() != ".json" and not getattr(path, "given", None):
+        raise argparse.ArgumentTypeError(f"{text!r}: a floor plan is JSON; name a file ending in .json (e.g. plan.json)")
+    return path
+
+
 def _start(text: str) -> tuple[float, float]:
     from nbs_env.config.checks import parse_float
 
@@ -132,7 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
     gen.add_argument(
         "--clutter-density", type=_clutter_density, default=None, help="objects per 6 m², 0..10 (default 1)"
     )
-    gen.add_argument("--out", type=output_path, required=True, help="floor-plan JSON to write")
+    gen.add_argument("--out", type=_plan_file, required=True, help="floor-plan JSON to write (.json)")
     gen.add_argument("--show", type=_picture, default=None, help="also draw the storey to this picture (.png, ...)")
 
     scan = sub.add_parser(
