@@ -373,6 +373,14 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
     version = doc.get("asset", {}).get("version") if isinstance(doc.get("asset"), dict) else None
     if isinstance(version, str) and not version.startswith("2."):
         raise InvalidMeshError(source, f"asset.version is {version[:20]!r}: nbs-env reads glTF 2.0, export it so")
+    least = doc["asset"].get("minVersion") if isinstance(doc.get("asset"), dict) else None
+    if least is not None and least != "2.0":
+        # glTF 2.0 §3.2: a reader that does not support an asset's minVersion refuses it (Khronos's
+        # glTF-Asset-Generator: a 2.1 minVersion "should fail to load on a 2.0 client").
+        raise InvalidMeshError(
+            source,
+            f"asset.minVersion is {str(least)[:20]!r}: the file needs a reader of that version; nbs-env reads 2.0",
+        )
     # Before anything is read: trimesh skips what it cannot decode (printing a line of its own) and
     # would load the file's fallback or placeholder data as the geometry.
     _check_extensions(source, doc)
@@ -437,6 +445,8 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
     for i, accessor in enumerate(_items(source, doc, "accessors")):
         where = f"accessors[{i}]"
         count = _natural(source, accessor, "count", where)
+        if count == 0:  # an empty part was left out as "drawn as points or lines"
+            raise InvalidMeshError(source, f"{where}.count is 0; an accessor holds at least one element (glTF 2.0)")
         component, kind = accessor.get("componentType"), accessor.get("type")
         size = _COMPONENT_BYTES.get(component, 0) if isinstance(component, int) else 0
         size *= _TYPE_COMPONENTS.get(kind, 0) if isinstance(kind, str) else 0

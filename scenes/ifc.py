@@ -63,6 +63,7 @@ leaves the whole element out.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import re
@@ -166,6 +167,10 @@ MAX_EXTRUSION = 10_000.0
 #: The shallowest, metres: a hundredth of a millimetre, below any element a scan could see (a unit of
 #: 1e-300 m collapsed every wall to nothing, reported as "no wall faces").
 MIN_EXTRUSION = 1e-5
+#: The farthest a point may lie from its placement's origin, metres: georeferenced coordinates (a
+#: UTM northing is some 5,000 km) are within it; 1e300 m is not a building's, and the geometry
+#: engine dropped what was placed there without a word.
+MAX_COORDINATE = 1e7
 _INSTALL_HINT = "reading IFC needs ifcopenshell: pip install 'nbs-env[ifc]'"
 _BOUNDING_CLASSES = ("IfcSlab", "IfcCovering", "IfcRoof")
 
@@ -327,6 +332,26 @@ def _check_units(source: str, model: Any) -> None:
             node = factor.UnitComponent
 
 
+def _parse_error(ifcopenshell: Any, path: Path, exc: Exception) -> str:
+    """What ifcopenshell's parser refused, from its log (its exception says "check logs", a log the
+    user does not have): the token and its line where the log names an offset."""
+    try:
+        errors = [line for line in ifcopenshell.get_log().splitlines() if line.startswith("[error]")]
+    except Exception:  # an ifcopenshell without the log
+        errors = []
+    if not errors:
+        return f"{type(exc).__name__}: {exc}"
+    last = re.sub(r"^\[error\]\s*(\[[^\]]*\])?\s*", "", errors[-1]).strip()
+    found = re.search(r"token (\S+) at offset (\d+)", last)
+    if found is None:
+        return last[:200]
+    with contextlib.suppress(OSError):
+        data = path.read_bytes()  # sized before it was parsed
+        line = data.count(b"\n", 0, int(found.group(2))) + 1
+        return f"line {line}: {found.group(1)[:40]!r} is no valid STEP token (a number beyond the float range?)"
+    return last[:200]
+
+
 def _check_geometry_values(source: str, model: Any, scale: float) -> None:
     """Directions that point somewhere, finite points, and extrusions of a building's size: a zero
     axis divided by its length (a NaN storey and a misleading "no wall faces"), and a wall extruded
@@ -340,6 +365,14 @@ def _check_geometry_values(source: str, model: Any, scale: float) -> None:
     for point in model.by_type("IfcCartesianPoint"):
         if not all(math.isfinite(float(c)) for c in point.Coordinates or ()):
             raise IfcError(source, f"the point #{point.id()} has a coordinate that is not a finite number")
+        far = max((abs(float(c)) for c in point.Coordinates or ()), default=0.0) * scale
+        if far > MAX_COORDINATE:
+            # The geometry engine dropped what was placed there without a word (a storey's ceiling).
+            raise IfcError(
+                source,
+                f"the point #{point.id()} lies {far:g} m from its placement's origin; a building's coordinates lie "
+                f"within {MAX_COORDINATE:,.0f} m (the file's length unit is {scale:g} m: is it right?)",
+            )
         if len(point.Coordinates or ()) not in (2, 3):
             raise IfcError(
                 source, f"the point #{point.id()} has {len(point.Coordinates or ())} coordinates, not 2 or 3"
@@ -446,7 +479,7 @@ def load_ifc_scene(
     try:
         model = ifcopenshell.open(str(path))
     except Exception as exc:  # ifcopenshell raises its own error types, or OSError, for bad input
-        raise IfcError(source, f"cannot read as IFC: {type(exc).__name__}: {exc}") from exc
+        raise IfcError(source, f"cannot read as IFC: {_parse_error(ifcopenshell, path, exc)}") from exc
     _check_placements(source, model)
     _check_decomposition(source, model)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import dataclasses
 import json
 
 import pytest
@@ -325,3 +326,88 @@ def test_a_floor_plan_is_written_only_under_a_json_name(tmp_path, capsys):
     assert mesh.read_text() == "v 0 0 0\n" and sorted(p.name for p in tmp_path.iterdir()) == ["mesh.obj"]
     assert main(["scenes", "generate", "--seed", "3", "--out", str(tmp_path / "plan.JSON")]) == 0
     assert len(load_scene(str(tmp_path / "plan.JSON")).rooms) >= 1
+
+
+@pytest.mark.parametrize("how", ["failure", "stopped while cloning"])
+def test_a_run_that_ends_before_its_first_state_leaves_nothing_a_rerun_trips_on(how, tmp_path, monkeypatch):
+    """A run that failed (out of memory in its workers) or was stopped during behaviour cloning left
+    an empty learning_curve.jsonl: the same command again was refused ("holds learning_curve.jsonl"),
+    and --resume found no state. It said to run the command again."""
+    pytest.importorskip("sb3_contrib")
+    import train.ppo as ppo
+
+    config = ppo.TrainConfig(timesteps=8, envs=1, n_steps=8, batch_size=8, rooms=(1, 1), bc_steps=4)
+    (tmp_path / "kept").mkdir()
+    (tmp_path / "kept" / "notes.txt").write_text("mine")
+    for out in (tmp_path / "new", tmp_path / "kept"):
+        if how == "failure":  # in the workers while cloning: the curve is written by then
+
+            def fail(*args, folder=out, **kwargs):
+                assert (folder / "learning_curve.jsonl").is_file()
+                raise MemoryError("out of memory")
+
+            monkeypatch.setattr(ppo, "behaviour_clone", fail)
+            with pytest.raises(MemoryError):
+                ppo.train(config, out, progress=False)
+        else:
+            monkeypatch.setattr(ppo, "behaviour_clone", lambda *args, **kwargs: None)
+            assert ppo.train(config, out, progress=False)[0] is None
+        monkeypatch.undo()
+        assert ppo.run_folder_problem(out) is None
+    assert not (tmp_path / "new").exists()
+    assert [p.name for p in (tmp_path / "kept").iterdir()] == ["notes.txt"]
+    assert ppo.train(dataclasses.replace(config, bc_steps=0), tmp_path / "kept", progress=False)[0] is not None
+
+
+# ---------------------------------------------------------------------- IFC numbers, glTF versions and counts
+@pytest.mark.parametrize(
+    "point, message",
+    [
+        ("(1.E300,0.,3.)", r"the point #32 lies 1e\+300 m from its placement's origin"),  # a ceiling dropped silently
+        ("(0.,0.,1.E999)", r"line \d+: '1\.E999' is no valid STEP token"),  # "Syntax error during parse, check logs"
+    ],
+)
+def test_an_ifc_number_no_building_has_is_named(point, message, tmp_path):
+    pytest.importorskip("ifcopenshell")
+    from pathlib import Path
+
+    from scenes import IfcError
+
+    text = (Path(__file__).parent / "data" / "two_rooms.ifc").read_text()
+    assert "#32=IFCCARTESIANPOINT((0.,0.,3.));" in text
+    path = tmp_path / "far.ifc"
+    path.write_text(text.replace("#32=IFCCARTESIANPOINT((0.,0.,3.));", f"#32=IFCCARTESIANPOINT({point});"))
+    with pytest.raises(IfcError, match=message):
+        load_scene(str(path))
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        ({"asset": {"version": "2.1", "minVersion": "2.1"}}, r"asset\.minVersion is '2\.1'"),
+        ({"accessors": {0: {"count": 0}}}, r"accessors\[0\]\.count is 0"),  # said to be "points or lines"
+    ],
+)
+def test_a_gltf_a_2_0_reader_must_refuse_is_refused_by_name(edit, message, glb_parts, tmp_path):  # noqa: F811
+    json_chunk, binary, faces = glb_parts
+    doc = json.loads(json_chunk)
+    (tmp_path / "plain.bin").write_bytes(binary)
+    doc["buffers"] = [dict(doc["buffers"][0], uri="plain.bin")]
+    path = tmp_path / "x.gltf"
+    path.write_text(json.dumps(doc))
+    assert len(load_scene(str(path)).mesh.faces) == faces
+    for key, value in edit.items():
+        if isinstance(value, dict) and all(isinstance(k, int) for k in value):
+            for index, fields in value.items():
+                doc[key][index].update(fields)
+        else:
+            doc[key] = value
+    path.write_text(json.dumps(doc))
+    from scenes import InvalidMeshError
+
+    with pytest.raises(InvalidMeshError, match=message):
+        load_scene(str(path))
+    doc["asset"] = {"version": "2.0", "minVersion": "2.0"}
+    if "accessors" not in edit:
+        path.write_text(json.dumps(doc))
+        assert len(load_scene(str(path)).mesh.faces) == faces

@@ -88,7 +88,7 @@ def _plan_file(text: str) -> Path:
     with JSON that every reader of that format then refused."""
     path = output_path(text)
     if path.suffix.lower() != ".json" and not getattr(path, "given", None):
-        raise argparse.ArgumentTypeError(f"{text!r}: a floor plan is JSON; name a file ending in .json (e.g. plan.json)")
+        raise argparse.ArgumentTypeError(f"{text!r}: a floor plan is JSON; name a file ending in .json (e.g. p.json)")
     return path
 
 

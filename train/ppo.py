@@ -19,6 +19,7 @@ import json
 import math
 import os
 import re
+import shutil
 import signal
 import sys
 import time
@@ -920,6 +921,41 @@ def train(
         A new run's ``out`` holds a run, a checkpoint or a file a run writes
         (:func:`run_folder_problem`).
     """
+    out = Path(out)
+    made = not os.path.lexists(out)
+    before = set() if resume or made or not out.is_dir() else {p.name for p in out.iterdir()}
+    try:
+        final, model = _train(config, out, progress, resume, backend, address)
+    except BaseException:
+        if not resume:
+            _discard_unstarted(out, before, made)
+        raise
+    if final is None and not resume:  # stopped while cloning: no state a resume could use
+        _discard_unstarted(out, before, made)
+    return final, model
+
+
+def _discard_unstarted(out: Path, before: set[str], made: bool) -> None:
+    """Remove what a new run wrote into ``out`` when it ended before it had a state to resume from
+    (a failure or a signal before its first save): its empty curve and logs made the folder one
+    that a rerun of the same command refused, and that ``--resume`` could not continue."""
+    if any(out.glob(f"**/{STATE_JSON}")):
+        return
+    with contextlib.suppress(OSError):
+        for entry in out.iterdir():
+            if entry.name not in before:
+                if entry.is_dir() and not entry.is_symlink():
+                    shutil.rmtree(entry, ignore_errors=True)
+                else:
+                    entry.unlink()
+        if made:
+            out.rmdir()  # only when nothing is left in it
+
+
+def _train(
+    config: TrainConfig, out: Path, progress: bool, resume: bool, backend: str, address: str | None
+) -> tuple[Path | None, Any]:
+    """:func:`train`'s work, in a run folder that :func:`train` cleans up if it leaves no state."""
     _require_rl()
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
