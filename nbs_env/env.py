@@ -208,10 +208,16 @@ class NBSEnv(gym.Env):
         Raises
         ------
         ConfigError
-            An option other than ``"scene"`` and ``"start"``, or a scene of no known kind.
+            A seed other than None or an integer >= 0, an option other than ``"scene"`` and
+            ``"start"``, or a scene of no known kind.
         nbs_env.errors.InvalidPoseError
             The start is not free floor of the storey.
         """
+        if seed is not None and (
+            not isinstance(seed, (int, np.integer)) or isinstance(seed, (bool, np.bool_)) or seed < 0
+        ):
+            # gymnasium's own Error otherwise, which no caller of nbs-env expects.
+            raise ConfigError(f"seed must be None or an integer >= 0, got {seed!r}")
         super().reset(seed=seed)
         if options is not None and not isinstance(options, Mapping):
             raise ConfigError(f"reset options must be a dict (or None), got {type(options).__name__}")

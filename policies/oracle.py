@@ -34,6 +34,7 @@ from nbs_env.planning.navigation import NavigationConfig
 from scenes import Scene
 from scenes.geometry import free_region
 from scenes.interior import indoor_floor, interior_samples, separating_footprint
+from scenes.limits import MAX_ORIGIN_DISTANCE
 
 __all__ = ["DOORWAY_DEPTH", "REACH_TOLERANCE", "OraclePlan", "oracle_plan", "reach"]
 
@@ -100,6 +101,8 @@ class OraclePlan:
             raise ValueError("candidates and samples are not counts")
         if not np.isfinite(positions).all():
             raise ValueError("a position is not finite")
+        if len(positions) and np.abs(positions).max() > MAX_ORIGIN_DISTANCE:  # no storey's (scenes.limits)
+            raise ValueError(f"a position lies beyond {MAX_ORIGIN_DISTANCE:,.0f} m of the origin, where no storey does")
         if coverage.ndim != 1 or len(coverage) != len(positions) or len(positions) > max(candidates, 1):
             raise ValueError(
                 f"{len(coverage)} coverage values for {len(positions)} positions of {candidates} candidates"

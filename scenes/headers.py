@@ -370,10 +370,17 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
         raise InvalidMeshError(source, f"invalid glTF JSON: {exc}") from None
     if not isinstance(doc, dict):
         raise InvalidMeshError(source, "the glTF JSON is not an object")
-    version = doc.get("asset", {}).get("version") if isinstance(doc.get("asset"), dict) else None
-    if isinstance(version, str) and not version.startswith("2."):
+    asset = doc.get("asset")
+    if not isinstance(asset, dict) or not isinstance(asset.get("version"), str):
+        # glTF 2.0 requires asset.version, a string ("2.0"): a number 3 passed the check of strings.
+        shown = "missing" if not isinstance(asset, dict) or "version" not in asset else repr(asset["version"])[:20]
+        raise InvalidMeshError(source, f'asset.version is {shown}; a glTF 2.0 file names its version as "2.0"')
+    version = asset["version"]
+    if not re.fullmatch(r"2\.\d+", version):
         raise InvalidMeshError(source, f"asset.version is {version[:20]!r}: nbs-env reads glTF 2.0, export it so")
-    least = doc["asset"].get("minVersion") if isinstance(doc.get("asset"), dict) else None
+    least = asset.get("minVersion")
+    if least is not None and not isinstance(least, str):
+        raise InvalidMeshError(source, f'asset.minVersion is {repr(least)[:20]}, not a version string such as "2.0"')
     if least is not None and least != "2.0":
         # glTF 2.0 §3.2: a reader that does not support an asset's minVersion refuses it (Khronos's
         # glTF-Asset-Generator: a 2.1 minVersion "should fail to load on a 2.0 client").

@@ -83,6 +83,7 @@ def load_source(spec: str | os.PathLike[str] | FloorPlan, options: dict[str, Any
         As :func:`scenes.load_scene`: a source that cannot be loaded, an option it does not take.
     """
     spec = as_spec(spec)
+    units, y_up = options.get("units", "m"), options.get("y_up", False)
     scene = _load_source(spec, options)
     if isinstance(spec, FloorPlan):
         source, hint = scene.name, _PLAN_LOW_HINT
@@ -94,6 +95,11 @@ def load_source(spec: str | os.PathLike[str] | FloorPlan, options: dict[str, Any
         if suffix == ".ifc" and scene.metadata.get("storey") is not None:
             source = f"{text}#{scene.metadata['storey']}"
         hint = _MESH_LOW_HINT if suffix in MESH_EXTENSIONS else _IFC_LOW_HINT if suffix == ".ifc" else _PLAN_LOW_HINT
+        if suffix in MESH_EXTENSIONS and y_up:
+            hint = "is the model flattened, or is its up axis z (it was read with y up: --y-up, y_up=True)?"
+        if suffix in MESH_EXTENSIONS and units != "m":
+            # The option given is the likelier cause than one not given.
+            hint = f"are its coordinates in {units} (it was read with --units {units}), or {hint}"
     vertices = scene.mesh.vertices
     check_origin_distance(source, vertices)
     check_storey_shape(source, vertices, scene.mesh.faces, scene.face_labels, low_hint=hint)

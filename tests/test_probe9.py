@@ -411,3 +411,72 @@ def test_a_gltf_a_2_0_reader_must_refuse_is_refused_by_name(edit, message, glb_p
     if "accessors" not in edit:
         path.write_text(json.dumps(doc))
         assert len(load_scene(str(path)).mesh.faces) == faces
+
+
+# ---------------------------------------------------------------------- probe 16
+def test_an_output_linked_to_a_file_of_another_kind_is_refused(tmp_path, capsys):
+    """`q.json -> mesh.obj` passed the name's check and the plan replaced the mesh."""
+    from train.cli import main
+
+    (tmp_path / "mesh.obj").write_text("v 0 0 0\n")
+    (tmp_path / "q.json").symlink_to(tmp_path / "mesh.obj")
+    code = main(["scenes", "generate", "--seed", "2", "--out", str(tmp_path / "q.json")])
+    assert code == EXIT_USAGE and "a file of another kind" in capsys.readouterr().err
+    assert (tmp_path / "mesh.obj").read_text() == "v 0 0 0\n"
+    (tmp_path / "old.json").write_text("{}")
+    (tmp_path / "p.json").symlink_to(tmp_path / "old.json")
+    assert main(["scenes", "generate", "--seed", "2", "--out", str(tmp_path / "p.json")]) == 0  # a plan for a plan
+
+
+@pytest.mark.parametrize("asset", [None, {"version": 2.0}, {"version": "2.0", "minVersion": 2.0}, {"version": "20"}])
+def test_a_gltf_asset_without_its_version_string_is_refused(asset, glb_parts, tmp_path):  # noqa: F811
+    from scenes import InvalidMeshError
+
+    json_chunk, binary, _faces = glb_parts
+    doc = json.loads(json_chunk)
+    (tmp_path / "plain.bin").write_bytes(binary)
+    doc["buffers"] = [dict(doc["buffers"][0], uri="plain.bin")]
+    if asset is None:
+        del doc["asset"]
+    else:
+        doc["asset"] = asset
+    (tmp_path / "x.gltf").write_text(json.dumps(doc))
+    with pytest.raises(InvalidMeshError, match=r"asset\.(min)?[vV]ersion is"):
+        load_scene(str(tmp_path / "x.gltf"))
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, True, "3"])
+def test_a_reset_seed_that_is_no_count_is_a_config_error(seed):
+    from nbs_env.env import NBSEnv
+    from nbs_env.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="seed must be None or an integer >= 0"):
+        NBSEnv("fast", scene="l_room").reset(seed=seed)
+
+
+def test_an_oracle_record_placed_where_no_storey_is_is_not_reused():
+    from policies.oracle import OraclePlan
+
+    record = {"positions": [[1.0, 2.0, 1.2]], "coverage_pct": [50.0], "max_coverage_pct": 90.0, "candidates": 4,
+              "samples": 100}  # fmt: skip
+    assert OraclePlan.from_dict(record).positions.shape == (1, 3)
+    with pytest.raises(ValueError, match="beyond 10,000 m"):
+        OraclePlan.from_dict({**record, "positions": [[1e300, 0.0, 0.0]]})
+
+
+def test_notes_named_checkpoint_something_are_no_checkpoint(tmp_path):
+    from train.ppo import run_folder_problem
+
+    (tmp_path / "checkpoint_notes.txt").write_text("n")
+    assert run_folder_problem(tmp_path) is None
+    (tmp_path / "checkpoint_12").mkdir()
+    assert "checkpoint_12" in run_folder_problem(tmp_path)
+
+
+def test_a_unit_given_is_named_when_the_storey_comes_out_too_low(tmp_path):
+    from scenes import StoreySizeError
+    from scenes.importers import export_scene
+
+    export_scene(load_scene("l_room"), tmp_path / "l.obj")
+    with pytest.raises(StoreySizeError, match=r"are its coordinates in ft \(it was read with --units ft\)"):
+        load_scene(str(tmp_path / "l.obj"), units="ft")

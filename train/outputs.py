@@ -139,6 +139,11 @@ def _problem(output: Output) -> str | None:
     if path.exists() and not path.is_file():
         # Renamed over, a device (/dev/full), a fifo or a socket would be replaced by a plain file.
         return "is not a regular file (a device, a fifo or a socket); name a file"
+    if path.is_symlink() and path.exists():
+        target = Path(os.path.realpath(path))
+        if target.suffix.lower() != path.suffix.lower():
+            # Written at the link's target: `plan.json -> mesh.obj` replaced the mesh with JSON.
+            return f"is a link to {target}, a file of another kind, which writing here would replace; name another file"
     if path.exists() and output.replace is not None:
         return f"exists; {output.replace}, or choose another name"
     return _parent_problem(path.resolve() if path.is_symlink() else path)

@@ -1566,7 +1566,7 @@ def run_folder_problem(out: str | Path) -> str | None:
         where = "a run already" if run == out else f"the run {run}"
         return f"{out} holds {where}; continue it with --resume {run}, or name another folder"
     held = sorted(name for name in RUN_FILES if os.path.lexists(out / name))
-    held += sorted(p.name for p in out.glob("checkpoint_*"))
+    held += sorted(p.name for p in out.glob("checkpoint_*") if re.fullmatch(r"checkpoint_\d+", p.name))
     if held:
         shown = ", ".join(held[:4]) + (", ..." if len(held) > 4 else "")
         return (
