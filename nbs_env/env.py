@@ -218,7 +218,8 @@ class NBSEnv(gym.Env):
         ):
             # gymnasium's own Error otherwise, which no caller of nbs-env expects.
             raise ConfigError(f"seed must be None or an integer >= 0, got {seed!r}")
-        super().reset(seed=seed)
+        # A numpy integer (what vector envs pass) as the Python int gymnasium requires.
+        super().reset(seed=None if seed is None else int(seed))
         if options is not None and not isinstance(options, Mapping):
             raise ConfigError(f"reset options must be a dict (or None), got {type(options).__name__}")
         options = dict(options or {})

@@ -89,6 +89,18 @@ class OraclePlan:
             (m, 3) finite metres, a coverage curve of another length than the positions, falling,
             outside 0..100 or above the best coverage, more scans than candidates.
         """
+
+        def numbers(value: object) -> bool:  # JSON numbers, not strings that float() would read
+            if isinstance(value, (list, tuple)):
+                return all(numbers(v) for v in value)
+            return type(value) in (int, float)
+
+        fields = ("positions", "coverage_pct", "max_coverage_pct")
+        if not isinstance(record, dict) or not all(numbers(record.get(k)) for k in fields):
+            raise ValueError(f"not an oracle plan: {', '.join(fields)} must be JSON numbers")
+        rooms_record = record.get("room_max_pct", {})
+        if not isinstance(rooms_record, dict) or not numbers(list(rooms_record.values())):
+            raise ValueError("not an oracle plan: room_max_pct must map rooms to JSON numbers")
         try:
             positions = np.asarray(record["positions"], dtype=float).reshape(-1, 3)
             coverage = np.asarray(record["coverage_pct"], dtype=float)

@@ -376,12 +376,14 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
         shown = "missing" if not isinstance(asset, dict) or "version" not in asset else repr(asset["version"])[:20]
         raise InvalidMeshError(source, f'asset.version is {shown}; a glTF 2.0 file names its version as "2.0"')
     version = asset["version"]
-    if not re.fullmatch(r"2\.\d+", version):
+    if not re.fullmatch(r"2\.[0-9]+", version):  # ASCII digits, as the schema's pattern ("2.\u0660" passed \d)
         raise InvalidMeshError(source, f"asset.version is {version[:20]!r}: nbs-env reads glTF 2.0, export it so")
     least = asset.get("minVersion")
-    if least is not None and not isinstance(least, str):
+    if "minVersion" in asset and not (isinstance(least, str) and re.fullmatch(r"[0-9]+\.[0-9]+", least)):
         raise InvalidMeshError(source, f'asset.minVersion is {repr(least)[:20]}, not a version string such as "2.0"')
-    if least is not None and least != "2.0":
+    if least is not None and tuple(int(n) for n in least.split(".")) < (2, 0):
+        raise InvalidMeshError(source, f"asset.minVersion is {least!r}, below 2.0, which glTF 2.0 does not allow")
+    if least is not None and tuple(int(n) for n in least.split(".")) != (2, 0):
         # glTF 2.0 §3.2: a reader that does not support an asset's minVersion refuses it (Khronos's
         # glTF-Asset-Generator: a 2.1 minVersion "should fail to load on a 2.0 client").
         raise InvalidMeshError(

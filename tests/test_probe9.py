@@ -480,3 +480,106 @@ def test_a_unit_given_is_named_when_the_storey_comes_out_too_low(tmp_path):
     export_scene(load_scene("l_room"), tmp_path / "l.obj")
     with pytest.raises(StoreySizeError, match=r"are its coordinates in ft \(it was read with --units ft\)"):
         load_scene(str(tmp_path / "l.obj"), units="ft")
+
+
+# ---------------------------------------------------------------------- probe 17
+def test_a_numpy_integer_seed_is_a_seed():
+    """The seed check let numpy integers through to gymnasium, which refuses them ("a python integer")."""
+    import numpy as np
+
+    from nbs_env.env import NBSEnv
+
+    env = NBSEnv("fast", scene="l_room", max_scans=1)
+    first = env.reset(seed=np.int64(3))[0]["voxels"].copy()
+    np.testing.assert_array_equal(env.reset(seed=3)[0]["voxels"], first)
+    env.reset(seed=np.uint32(3))
+
+
+@pytest.mark.parametrize(
+    "asset, message",
+    [
+        ({"version": "2.\u0660"}, r"asset\.version is"),
+        ({"version": "2.0", "minVersion": None}, r"asset\.minVersion is None"),
+        ({"version": "2.0", "minVersion": "1.0"}, r"below 2\.0"),
+        ({"version": "2.0", "minVersion": "2.00"}, None),  # 2.0, as the schema's pattern allows it
+    ],
+)
+def test_gltf_versions_are_read_as_the_schema_writes_them(asset, message, glb_parts, tmp_path):  # noqa: F811
+    from scenes import InvalidMeshError
+
+    json_chunk, binary, faces = glb_parts
+    doc = json.loads(json_chunk)
+    (tmp_path / "plain.bin").write_bytes(binary)
+    doc["buffers"] = [dict(doc["buffers"][0], uri="plain.bin")]
+    doc["asset"] = asset
+    (tmp_path / "x.gltf").write_text(json.dumps(doc))
+    if message is None:
+        assert len(load_scene(str(tmp_path / "x.gltf")).mesh.faces) == faces
+    else:
+        with pytest.raises(InvalidMeshError, match=message):
+            load_scene(str(tmp_path / "x.gltf"))
+
+
+def test_an_output_linked_to_nothing_of_another_kind_is_refused(tmp_path, capsys):
+    """`pic.png -> gone.obj` made matplotlib pick the format by the target (a traceback), and a plan
+    was written as missing.obj."""
+    from train.cli import main
+
+    (tmp_path / "pic.png").symlink_to(tmp_path / "gone.obj")
+    (tmp_path / "p.json").symlink_to(tmp_path / "missing.obj")
+    assert main(["scenes", "show", "l_room", "--out", str(tmp_path / "pic.png")]) == EXIT_USAGE
+    assert main(["scenes", "generate", "--seed", "1", "--out", str(tmp_path / "p.json")]) == EXIT_USAGE
+    err = capsys.readouterr().err
+    assert err.count("a file of another kind") == 2 and "Traceback" not in err
+    assert not (tmp_path / "gone.obj").exists() and not (tmp_path / "missing.obj").exists()
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [("max_coverage_pct", "99.9"), ("coverage_pct", ["50.0"]), ("room_max_pct", {"0": "99.9"})],
+)
+def test_an_oracle_record_of_numbers_written_as_strings_is_not_reused(field, value):
+    """float() read "99.9", the summary then compared the string: a resume that failed every time."""
+    from policies.oracle import OraclePlan
+
+    record = {"positions": [[1.0, 2.0, 1.2]], "coverage_pct": [50.0], "max_coverage_pct": 90.0, "candidates": 4,
+              "samples": 100}  # fmt: skip
+    OraclePlan.from_dict(record)
+    with pytest.raises(ValueError, match="JSON numbers"):
+        OraclePlan.from_dict({**record, field: value})
+
+
+def test_the_trained_network_reads_the_window_and_candidates_its_envs_have():
+    """`--set observation.shape=[32,32,16]` trained on 32-cell windows and recorded 64; a
+    `max_candidates` of 32 was a traceback from torch."""
+    from train.ppo import TrainConfig
+
+    config = TrainConfig(
+        completion="policy",
+        overrides={"observation.shape": (32, 32, 16), "robot.navigation.max_candidates": 32},
+    )
+    assert config.network.voxel_shape == (32, 32, 16)
+    assert (config.network.candidates, config.network.actions) == (32, 33)
+    assert TrainConfig().network.voxel_shape == (64, 64, 16) and TrainConfig().network.actions == 64
+
+
+def test_a_scan_whose_report_fails_keeps_the_earlier_recording(tmp_path, monkeypatch, capsys):
+    """The recording was renamed into place before the report was written: a report that then failed
+    left the earlier report beside the failed run's recording."""
+    pytest.importorskip("rerun")
+    import errno
+
+    import nbs_env.export as export
+    from train.cli import main as nbs
+
+    out, record = tmp_path / "r", tmp_path / "run.rrd"
+    assert nbs(_scan(out, "--max-scans", "1", "--record", str(record))) == 0
+    before = record.read_bytes()
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device", str(out / "cloud.laz"))
+
+    monkeypatch.setattr(export, "_write_report_files", full)
+    assert nbs(_scan(out, "--max-scans", "2", "--seed", "1", "--force", "--record", str(record))) != 0
+    assert record.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r", "run.rrd"]

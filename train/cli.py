@@ -691,10 +691,9 @@ def _scan(args: argparse.Namespace, policy, out: Path, cfg, stop: StopRequest) -
                 bar.close()
                 return _scan_error(exc, EXIT_SCENE_ERROR)
             finally:
-                if recorder is not None:
-                    # Renamed into place for a run that ended or was stopped (its report says so),
-                    # removed for one that failed: no recording then passes for a run with no report.
-                    recorder.close(keep=ran)
+                if recorder is not None and not ran:
+                    # Removed for a run that failed: no recording then passes for a run with no report.
+                    recorder.close(keep=False)
         with stop.hold():  # a second Ctrl-C now would cost the report the first one asked for
             metrics = write_report(
                 env,
@@ -707,7 +706,13 @@ def _scan(args: argparse.Namespace, policy, out: Path, cfg, stop: StopRequest) -
                 full_cloud=args.full_cloud,
                 steps=steps_dir,
             )
+            if recorder is not None:
+                # Renamed into place with the report, never without it: a run whose report failed
+                # (out of memory, a full disk) replaced the earlier recording with its own.
+                recorder.close(keep=True)
     finally:
+        if recorder is not None:
+            recorder.close(keep=False)  # unless closed with the report above (idempotent)
         # A run that wrote no report leaves nothing: not its pictures, nor a folder it made (which a
         # rerun would take for an earlier report).
         if steps_dir is not None:

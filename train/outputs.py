@@ -139,7 +139,7 @@ def _problem(output: Output) -> str | None:
     if path.exists() and not path.is_file():
         # Renamed over, a device (/dev/full), a fifo or a socket would be replaced by a plain file.
         return "is not a regular file (a device, a fifo or a socket); name a file"
-    if path.is_symlink() and path.exists():
+    if path.is_symlink():  # a link to nothing yet too: the file is made at its target
         target = Path(os.path.realpath(path))
         if target.suffix.lower() != path.suffix.lower():
             # Written at the link's target: `plan.json -> mesh.obj` replaced the mesh with JSON.

@@ -254,10 +254,17 @@ class TrainConfig(Config):
 
     @property
     def network(self) -> NetworkConfig:
-        """The network this run trains: K + 1 actions and the room vector with ``completion="policy"``."""
+        """The network this run trains, for its envs' observation: their voxel window and K candidates
+        (``--set observation.shape=...`` or ``robot.navigation.max_candidates=...`` were once left at
+        the network's defaults: a traceback from torch, or a checkpoint recording a window it never
+        saw); K + 1 actions and the room vector with ``completion="policy"``."""
+        env = self.env_config()
+        shape, candidates = tuple(env.observation.shape), env.robot.navigation.max_candidates
         if self.completion == "policy":
-            return NetworkConfig(actions=NetworkConfig().candidates + 1, room_features=len(ROOM_FEATURES))
-        return NetworkConfig()
+            return NetworkConfig(
+                voxel_shape=shape, candidates=candidates, actions=candidates + 1, room_features=len(ROOM_FEATURES)
+            )
+        return NetworkConfig(voxel_shape=shape, candidates=candidates, actions=candidates)
 
 
 #: The share of this machine's memory a run's own arrays may claim (:func:`memory_claim`): the rest is
