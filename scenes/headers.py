@@ -802,6 +802,16 @@ def _check_node_tree(source: str, nodes: list[dict]) -> None:
                 raise InvalidMeshError(
                     source, f"nodes[{i}].{key} must be {length} finite numbers, got {repr(value)[:60]}"
                 )
+        trs = [key for key in ("translation", "rotation", "scale") if key in node]
+        if "matrix" in node and trs:
+            # glTF 2.0 §5.25: a matrix or translation/rotation/scale, not both; readers differ (three.js
+            # takes the matrix alone, the reader here both: walls lifted by the translation).
+            raise InvalidMeshError(
+                source, f"nodes[{i}] has both a matrix and {', '.join(trs)}; a glTF node has one or the other"
+            )
+        rotation = node.get("rotation")
+        if rotation is not None and math.isclose(sum(v * v for v in rotation), 0.0, abs_tol=1e-12):
+            raise InvalidMeshError(source, f"nodes[{i}].rotation is no rotation (a quaternion of length 0)")
         kids = node.get("children", [])
         if not isinstance(kids, list) or not all(
             isinstance(k, int) and not isinstance(k, bool) and 0 <= k < len(nodes) for k in kids

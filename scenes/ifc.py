@@ -330,6 +330,39 @@ def _check_units(source: str, model: Any) -> None:
             ):
                 raise IfcError(source, f"the unit #{node.id()} converts by {repr(value)[:40]}, not a positive number")
             node = factor.UnitComponent
+    for assignment in model.by_type("IfcUnitAssignment"):
+        lengths = [u for u in assignment.Units or () if getattr(u, "UnitType", None) == "LENGTHUNIT"]
+        if len(lengths) > 1:
+            # The last was taken without a word: which unit the coordinates are in is the file's to say.
+            raise IfcError(
+                source,
+                f"the unit assignment #{assignment.id()} names {len(lengths)} length units "
+                f"({', '.join(f'#{u.id()}' for u in lengths)}); a project has one",
+            )
+        if not lengths:
+            warnings.warn(
+                f"{source}: the unit assignment #{assignment.id()} names no length unit; read in metres",
+                stacklevel=3,
+            )
+
+
+def _check_si_prefixes(source: str, data: bytes) -> None:
+    """Every SI unit's prefix is one IFC defines: ifcopenshell reads an unknown one as none at all,
+    so a file in millimetres with a misspelt ``.MILI.`` was read in metres, without a word."""
+    for found in _SI_UNIT.finditer(data):
+        prefix = found.group(2).decode("ascii", "replace").upper()
+        if prefix not in _SI_PREFIXES:
+            unit = found.group(1).decode()
+            raise IfcError(source, f"the unit #{unit} has the prefix {prefix[:20]!r}, which IFC does not define")
+
+
+#: An SI unit's instance and its prefix, where it has one (``#2=IFCSIUNIT(*,.LENGTHUNIT.,.MILLI.,.METRE.)``).
+_SI_UNIT = re.compile(rb"#(\d+)\s*=\s*IFCSIUNIT\s*\(\s*[^,]*,\s*\.\w+\.\s*,\s*\.(\w+)\.", re.IGNORECASE)
+#: IFC's SI prefixes (IfcSIPrefix).
+_SI_PREFIXES = frozenset(
+    ("EXA", "PETA", "TERA", "GIGA", "MEGA", "KILO", "HECTO", "DECA", "DECI", "CENTI", "MILLI", "MICRO", "NANO",
+     "PICO", "FEMTO", "ATTO")
+)  # fmt: skip
 
 
 def _parse_error(ifcopenshell: Any, path: Path, exc: Exception) -> str:
@@ -473,7 +506,9 @@ def load_ifc_scene(
     try:
         check_file_size(source, path.stat().st_size)
         # Cycles and deep chains of references are refused before ifcopenshell follows them.
-        check_references(source, path.read_bytes())
+        data = path.read_bytes()
+        check_references(source, data)
+        _check_si_prefixes(source, data)
     except OSError as exc:
         raise SceneFileError(source, f"cannot read the file: {exc.strerror or exc}") from exc
     try:

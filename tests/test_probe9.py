@@ -583,3 +583,48 @@ def test_a_scan_whose_report_fails_keeps_the_earlier_recording(tmp_path, monkeyp
     assert nbs(_scan(out, "--max-scans", "2", "--seed", "1", "--force", "--record", str(record))) != 0
     assert record.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r", "run.rrd"]
+
+
+@pytest.mark.parametrize(
+    "node, message",
+    [
+        ({"matrix": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 5, 1], "translation": [0, 0, 5]}, "both a matrix"),
+        ({"rotation": [0, 0, 0, 0]}, "a quaternion of length 0"),
+    ],
+)
+def test_a_gltf_node_other_readers_read_otherwise_is_refused(node, message, glb_parts, tmp_path):  # noqa: F811
+    """A node with both a matrix and a translation had both applied (three.js applies the matrix)."""
+    from scenes import InvalidMeshError
+
+    json_chunk, binary, _faces = glb_parts
+    doc = json.loads(json_chunk)
+    (tmp_path / "plain.bin").write_bytes(binary)
+    doc["buffers"] = [dict(doc["buffers"][0], uri="plain.bin")]
+    doc["nodes"][0].update(node)
+    (tmp_path / "x.gltf").write_text(json.dumps(doc))
+    with pytest.raises(InvalidMeshError, match=message):
+        load_scene(str(tmp_path / "x.gltf"))
+
+
+@pytest.mark.parametrize(
+    "units, message",
+    [
+        ("#2=IFCSIUNIT(*,.LENGTHUNIT.,.BOGUS.,.METRE.);", "prefix 'BOGUS'"),
+        ("#2=IFCSIUNIT(*,.LENGTHUNIT.,$,.METRE.);\n#9001=IFCSIUNIT(*,.LENGTHUNIT.,.MILLI.,.METRE.);", "2 length units"),
+    ],
+)
+def test_an_ifc_length_unit_that_is_unclear_is_refused(units, message, tmp_path):
+    """An unknown prefix and a second length unit were read without a word (as metres, as the last)."""
+    pytest.importorskip("ifcopenshell")
+    from pathlib import Path
+
+    from scenes import IfcError
+
+    text = (Path(__file__).parent / "data" / "two_rooms.ifc").read_text()
+    text = text.replace("#2=IFCSIUNIT(*,.LENGTHUNIT.,$,.METRE.);", units)
+    if "#9001=" in units:
+        text = text.replace("#3=IFCUNITASSIGNMENT((#2));", "#3=IFCUNITASSIGNMENT((#2,#9001));")
+        assert "#9001=" not in (Path(__file__).parent / "data" / "two_rooms.ifc").read_text()
+    (tmp_path / "u.ifc").write_text(text)
+    with pytest.raises(IfcError, match=message):
+        load_scene(str(tmp_path / "u.ifc"))
