@@ -697,12 +697,7 @@ def latest_state(run_folder: str | Path) -> tuple[Path, dict]:
             continue
         if path.parent != run_folder and (path.parent / CURVE).exists():
             continue  # a run folder of its own named like a checkpoint (checkpoint_problem), not this run's
-        try:
-            document = read_json_file(path)
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise ModelFileError(f"{path}: not a JSON training state ({exc})") from None
-        except OSError as exc:
-            raise ModelFileError(f"{path}: cannot be read ({exc.strerror or type(exc).__name__})") from None
+        document = _json_record(path, "a JSON training state")
         if not isinstance(document, dict) or document.get("format") != STATE_FORMAT or document.get("version") != 1:
             raise ModelFileError(f"{path}: not an {STATE_FORMAT!r} file of version 1")
         steps = document.get("timesteps")
@@ -752,12 +747,7 @@ def _clone_record(out: Path, config: TrainConfig) -> dict | None:
         if config.hold_coverage and config.bc_steps:
             raise ModelFileError(f"{path}: missing; the run holds the teacher's coverage it records (hold_coverage)")
         return None
-    try:
-        record = read_json_file(path)
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ModelFileError(f"{path}: not JSON ({_one_line_error(exc)})") from None
-    except OSError as exc:
-        raise ModelFileError(f"{path}: cannot be read ({exc.strerror or type(exc).__name__})") from None
+    record = _json_record(path, "JSON")
     if not isinstance(record, dict):
         raise ModelFileError(f"{path}: not a behaviour-cloning record (a JSON object)")
     mapped = record.get("mapped")
@@ -773,6 +763,16 @@ def _clone_record(out: Path, config: TrainConfig) -> dict | None:
 
 def _one_line_error(exc: Exception) -> str:
     return " ".join(str(exc).split())[:200]
+
+
+def _json_record(path: Path, what: str) -> Any:
+    """A run's JSON file, read: a :class:`ModelFileError` naming it when it is not ``what``."""
+    try:
+        return read_json_file(path)
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ModelFileError(f"{path}: not {what} ({_one_line_error(exc)})") from None
+    except OSError as exc:
+        raise ModelFileError(f"{path}: cannot be read ({exc.strerror or type(exc).__name__})") from None
 
 
 def checkpoint_problem(folder: str | Path) -> str | None:
