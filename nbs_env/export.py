@@ -343,7 +343,15 @@ def write_model_obj(path: str | Path, rooms: list[RoomModel]) -> Path:
     -------
     Path
         ``path``.
+
+    Raises
+    ------
+    TypeError
+        ``rooms`` is no list of RoomModel (``env.storey.room_models()``).
     """
+    if not isinstance(rooms, (list, tuple)) or not all(isinstance(room, RoomModel) for room in rooms):
+        shown = type(rooms).__name__ if not isinstance(rooms, (list, tuple)) else "a list holding other things"
+        raise TypeError(f"rooms must be a list of RoomModel (env.storey.room_models()), got {shown}")
     path = Path(path)
     scene = trimesh.Scene()
     for room in rooms:

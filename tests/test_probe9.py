@@ -628,3 +628,12 @@ def test_an_ifc_length_unit_that_is_unclear_is_refused(units, message, tmp_path)
     (tmp_path / "u.ifc").write_text(text)
     with pytest.raises(IfcError, match=message):
         load_scene(str(tmp_path / "u.ifc"))
+
+
+@pytest.mark.parametrize("rooms", [None, ["room"]])
+def test_the_model_writer_names_what_it_takes(rooms, tmp_path):
+    from nbs_env.export import write_model_obj
+
+    with pytest.raises(TypeError, match="rooms must be a list of RoomModel"):
+        write_model_obj(tmp_path / "m.obj", rooms)
+    assert not (tmp_path / "m.obj").exists()
