@@ -330,7 +330,10 @@ def _check_units(source: str, model: Any) -> None:
             ):
                 raise IfcError(source, f"the unit #{node.id()} converts by {repr(value)[:40]}, not a positive number")
             node = factor.UnitComponent
-    for assignment in model.by_type("IfcUnitAssignment"):
+    # The project's own assignment: a project library (IFC4) may hold one of areas alone.
+    projects = model.by_type("IfcProject")
+    assignments = [p.UnitsInContext for p in projects if getattr(p, "UnitsInContext", None) is not None]
+    for assignment in assignments:
         lengths = [u for u in assignment.Units or () if getattr(u, "UnitType", None) == "LENGTHUNIT"]
         if len(lengths) > 1:
             # The last was taken without a word: which unit the coordinates are in is the file's to say.
@@ -349,6 +352,8 @@ def _check_units(source: str, model: Any) -> None:
 def _check_si_prefixes(source: str, data: bytes) -> None:
     """Every SI unit's prefix is one IFC defines: ifcopenshell reads an unknown one as none at all,
     so a file in millimetres with a misspelt ``.MILI.`` was read in metres, without a word."""
+    # Only the file's instances: not text inside a STEP string or a comment, which may say anything.
+    data = _STEP_TEXT.sub(b" ", data)
     for found in _SI_UNIT.finditer(data):
         prefix = found.group(2).decode("ascii", "replace").upper()
         if prefix not in _SI_PREFIXES:
@@ -358,6 +363,8 @@ def _check_si_prefixes(source: str, data: bytes) -> None:
 
 #: An SI unit's instance and its prefix, where it has one (``#2=IFCSIUNIT(*,.LENGTHUNIT.,.MILLI.,.METRE.)``).
 _SI_UNIT = re.compile(rb"#(\d+)\s*=\s*IFCSIUNIT\s*\(\s*[^,]*,\s*\.\w+\.\s*,\s*\.(\w+)\.", re.IGNORECASE)
+#: A STEP string ('...', a quote written twice) or comment (/* ... */) (ISO 10303-21).
+_STEP_TEXT = re.compile(rb"'(?:[^']|'')*'|/\*.*?\*/", re.DOTALL)
 #: IFC's SI prefixes (IfcSIPrefix).
 _SI_PREFIXES = frozenset(
     ("EXA", "PETA", "TERA", "GIGA", "MEGA", "KILO", "HECTO", "DECA", "DECI", "CENTI", "MILLI", "MICRO", "NANO",

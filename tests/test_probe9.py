@@ -637,3 +637,25 @@ def test_the_model_writer_names_what_it_takes(rooms, tmp_path):
     with pytest.raises(TypeError, match="rooms must be a list of RoomModel"):
         write_model_obj(tmp_path / "m.obj", rooms)
     assert not (tmp_path / "m.obj").exists()
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        "/* old: #99=IFCSIUNIT(*,.LENGTHUNIT.,.MILIMETER.,.METRE.); */\n",  # a comment (ISO 10303-21)
+        "#9004=IFCSIUNIT(*,.AREAUNIT.,$,.SQUARE_METRE.);\n#9002=IFCUNITASSIGNMENT((#9004));\n",  # not the project's
+    ],
+)
+def test_unit_checks_read_the_project_s_units_not_its_text(extra, tmp_path):
+    """The prefix check read a comment's text as an instance, and the length-unit check read every
+    assignment, a project library's of areas alone included."""
+    pytest.importorskip("ifcopenshell")
+    import warnings
+    from pathlib import Path
+
+    text = (Path(__file__).parent / "data" / "two_rooms.ifc").read_text()
+    at = text.rindex("ENDSEC;")
+    (tmp_path / "u.ifc").write_text(text[:at] + extra + text[at:])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert len(load_scene(str(tmp_path / "u.ifc")).mesh.faces) == 3716
