@@ -761,16 +761,14 @@ def _clone_record(out: Path, config: TrainConfig) -> dict | None:
     return record
 
 
-def _one_line_error(exc: Exception) -> str:
-    return " ".join(str(exc).split())[:200]
-
-
 def _json_record(path: Path, what: str) -> Any:
     """A run's JSON file, read: a :class:`ModelFileError` naming it when it is not ``what``."""
     try:
         return read_json_file(path)
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ModelFileError(f"{path}: not {what} ({_one_line_error(exc)})") from None
+        from policies.learned import _one_line
+
+        raise ModelFileError(f"{path}: not {what} ({_one_line(exc)})") from None
     except OSError as exc:
         raise ModelFileError(f"{path}: cannot be read ({exc.strerror or type(exc).__name__})") from None
 
