@@ -22,6 +22,7 @@ coverage through registration error and noise, and exceed it slightly only by no
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -43,6 +44,7 @@ __all__ = ["DOORWAY_DEPTH", "REACH_TOLERANCE", "OraclePlan", "oracle_plan", "rea
 DOORWAY_DEPTH = 0.5
 #: Metres taken off the robot's radius for :func:`reach` (one voxel of the default map).
 REACH_TOLERANCE = 0.05
+ROOM_KEY = re.compile(r"0|[1-9][0-9]{0,8}", re.ASCII)
 
 
 @dataclass(frozen=True)
@@ -90,32 +92,40 @@ class OraclePlan:
             outside 0..100 or above the best coverage, more scans than candidates.
         """
 
-        def numbers(value: object) -> bool:  # JSON numbers, not strings that float() would read
-            if isinstance(value, (list, tuple)):
-                return all(numbers(v) for v in value)
+        def numbers(value: object, depth: int = 0) -> bool:  # JSON numbers, not strings float() reads
+            if isinstance(value, (list, tuple)):  # a record is at most a list of triples: no deeper
+                return depth < 2 and all(numbers(v, depth + 1) for v in value)
             return type(value) in (int, float)
 
         fields = ("positions", "coverage_pct", "max_coverage_pct")
         if not isinstance(record, dict) or not all(numbers(record.get(k)) for k in fields):
-            raise ValueError(f"not an oracle plan: {', '.join(fields)} must be JSON numbers")
+            raise ValueError(f"not an oracle plan: {', '.join(fields)} must be JSON numbers, nested at most twice")
         rooms_record = record.get("room_max_pct", {})
         if not isinstance(rooms_record, dict) or not numbers(list(rooms_record.values())):
             raise ValueError("not an oracle plan: room_max_pct must map rooms to JSON numbers")
+        # to_dict writes room ids as str(int): one spelling a room, so no two keys name the same room
+        odd = [k for k in rooms_record if not (isinstance(k, str) and ROOM_KEY.fullmatch(k))]
+        if odd:
+            raise ValueError(f"not an oracle plan: room_max_pct key {odd[0]!r} is not a room id (0, 1, 2, ...)")
         try:
-            positions = np.asarray(record["positions"], dtype=float).reshape(-1, 3)
+            positions = np.asarray(record["positions"], dtype=float)
             coverage = np.asarray(record["coverage_pct"], dtype=float)
             best = float(record["max_coverage_pct"])
             candidates, samples = record["candidates"], record["samples"]
-            rooms = {int(k): float(v) for k, v in record.get("room_max_pct", {}).items()}
+            rooms = {int(k): float(v) for k, v in rooms_record.items()}
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise ValueError(f"not an oracle plan ({type(exc).__name__}: {exc})") from None
+        if positions.size == 0:  # [] reads as shape (0,): a plan of no scans
+            positions = positions.reshape(0, 3)
+        if positions.ndim != 2 or positions.shape[1] != 3:
+            raise ValueError(f"positions must be (m, 3) metres, got shape {positions.shape}")
         if type(candidates) is not int or type(samples) is not int or candidates < 0 or samples < 0:
             raise ValueError("candidates and samples are not counts")
         if not np.isfinite(positions).all():
             raise ValueError("a position is not finite")
         if len(positions) and np.abs(positions).max() > MAX_ORIGIN_DISTANCE:  # no storey's (scenes.limits)
             raise ValueError(f"a position lies beyond {MAX_ORIGIN_DISTANCE:,.0f} m of the origin, where no storey does")
-        if coverage.ndim != 1 or len(coverage) != len(positions) or len(positions) > max(candidates, 1):
+        if coverage.ndim != 1 or len(coverage) != len(positions) or len(positions) > candidates:
             raise ValueError(
                 f"{len(coverage)} coverage values for {len(positions)} positions of {candidates} candidates"
             )

@@ -733,6 +733,16 @@ def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> int:
             isinstance(n, int) and not isinstance(n, bool) and 0 <= n < len(nodes) for n in roots
         ):
             raise InvalidMeshError(source, f"scenes[{i}].nodes must name nodes 0..{len(nodes) - 1}")
+        # glTF 2.0: a scene lists root nodes, each once; a repeat or a child drew its meshes twice.
+        twice = [n for n in set(roots) if roots.count(n) > 1]
+        if twice:
+            raise InvalidMeshError(source, f"scenes[{i}].nodes lists node {twice[0]} twice")
+        children = {k for node in nodes for k in node.get("children", [])}
+        inner = [n for n in roots if n in children]
+        if inner:
+            raise InvalidMeshError(
+                source, f"scenes[{i}].nodes lists node {inner[0]}, the child of another node: a scene lists roots"
+            )
     meshes = _items(source, doc, "meshes")
     accessors = _items(source, doc, "accessors")
     for i, node in enumerate(nodes):
@@ -784,6 +794,25 @@ def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> int:
 
 #: A node's transform: its properties and their number of components (glTF 2.0).
 _TRANSFORM_LENGTHS = {"matrix": 16, "translation": 3, "rotation": 4, "scale": 3}
+#: How far from 1 a quaternion's length, and from 0 a matrix's bottom row or its columns' cosines, may
+#: lie: float32 exporters land within 1e-6; 1e-3 is a transform no exporter meant.
+UNIT_TOLERANCE = 1e-3
+
+
+def _not_trs(matrix: list[float]) -> str | None:
+    """Why a node's column-major 4x4 matrix is not decomposable to translation, rotation and scale
+    (glTF 2.0 §5.25), or None: its last row must be 0, 0, 0, 1 (readers that divide by w and those that
+    drop the row read different storeys) and its columns orthogonal (no shear)."""
+    bottom = (matrix[3], matrix[7], matrix[11], matrix[15] - 1.0)
+    if max(abs(v) for v in bottom) > UNIT_TOLERANCE:
+        return f"its last row is {matrix[3]:g}, {matrix[7]:g}, {matrix[11]:g}, {matrix[15]:g}, not 0, 0, 0, 1"
+    columns = [matrix[0:3], matrix[4:7], matrix[8:11]]
+    for a, b in ((0, 1), (0, 2), (1, 2)):
+        dot = sum(x * y for x, y in zip(columns[a], columns[b], strict=True))
+        norms = math.sqrt(sum(x * x for x in columns[a]) * sum(y * y for y in columns[b]))
+        if norms > 0 and abs(dot) > UNIT_TOLERANCE * norms:
+            return f"columns {a} and {b} are not at right angles: a shear"
+    return None
 
 
 def _check_node_tree(source: str, nodes: list[dict]) -> None:
@@ -810,8 +839,17 @@ def _check_node_tree(source: str, nodes: list[dict]) -> None:
                 source, f"nodes[{i}] has both a matrix and {', '.join(trs)}; a glTF node has one or the other"
             )
         rotation = node.get("rotation")
-        if rotation is not None and math.isclose(sum(v * v for v in rotation), 0.0, abs_tol=1e-12):
-            raise InvalidMeshError(source, f"nodes[{i}].rotation is no rotation (a quaternion of length 0)")
+        if rotation is not None and abs(math.sqrt(sum(v * v for v in rotation)) - 1.0) > UNIT_TOLERANCE:
+            # glTF 2.0 §5.25: a unit quaternion. Readers differ on others (normalised here, used as a
+            # scaled rotation by some), so the file's storey is not one thing; glTF-Validator refuses it too.
+            length = math.sqrt(sum(v * v for v in rotation))
+            raise InvalidMeshError(source, f"nodes[{i}].rotation is not a unit quaternion (length {length:.4g})")
+        if "matrix" in node:
+            problem = _not_trs(node["matrix"])
+            if problem:
+                raise InvalidMeshError(
+                    source, f"nodes[{i}].matrix is not a translation, rotation and scale ({problem}), as glTF requires"
+                )
         kids = node.get("children", [])
         if not isinstance(kids, list) or not all(
             isinstance(k, int) and not isinstance(k, bool) and 0 <= k < len(nodes) for k in kids

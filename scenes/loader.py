@@ -14,9 +14,20 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from scenes.errors import SceneError, SceneFileError, UnknownSceneError, UnsupportedFormatError
+import numpy as np
+
+from scenes.errors import (
+    MissingStructureError,
+    SceneError,
+    SceneFileError,
+    StoreySizeError,
+    StoreyValidationError,
+    UnknownSceneError,
+    UnsupportedFormatError,
+)
 from scenes.floorplan import FloorPlan, extrude, load_plan
 from scenes.generator import GeneratorConfig, generate_storey
+from scenes.labels import SurfaceClass
 from scenes.limits import check_origin_distance, check_storey_shape
 from scenes.model import Scene
 
@@ -84,7 +95,16 @@ def load_source(spec: str | os.PathLike[str] | FloorPlan, options: dict[str, Any
     """
     spec = as_spec(spec)
     units, y_up = options.get("units", "m"), options.get("y_up", False)
-    scene = _load_source(spec, options)
+    try:
+        scene = _load_source(spec, options)
+    except (StoreySizeError, StoreyValidationError, MissingStructureError) as exc:
+        # A storey too small or with no floor is as often the options as the file: name the options.
+        given = [f"--units {units}"] * (units != "m") + ["--y-up"] * bool(y_up)
+        if given and not isinstance(spec, FloorPlan) and "read with" not in exc.problem:
+            raise type(exc)(
+                exc.source, f"{exc.problem} (it was read with {' and '.join(given)}: are they right for this file?)"
+            ) from None
+        raise
     if isinstance(spec, FloorPlan):
         source, hint = scene.name, _PLAN_LOW_HINT
     else:
@@ -103,6 +123,14 @@ def load_source(spec: str | os.PathLike[str] | FloorPlan, options: dict[str, Any
     vertices = scene.mesh.vertices
     check_origin_distance(source, vertices)
     check_storey_shape(source, vertices, scene.mesh.faces, scene.face_labels, low_hint=hint)
+    if not isinstance(spec, FloorPlan) and suffix in MESH_EXTENSIONS and not scene.rooms:
+        # No room outlines, and floor faces of no plan area: the start (and the robot's floor) would
+        # be refused later with "no floor area", far from the cause, most often the up axis.
+        floor = vertices[scene.mesh.faces[scene.face_labels == SurfaceClass.FLOOR]]
+        cross = np.cross(floor[:, 1] - floor[:, 0], floor[:, 2] - floor[:, 0])[:, 2]
+        if float(np.abs(cross).sum()) / 2 < 1e-6:
+            axis = "it was read with y up (--y-up): is its up axis z?" if y_up else _MESH_LOW_HINT
+            raise StoreyValidationError(source, f"its floor faces cover no floor area: {axis}")
     return scene
 
 

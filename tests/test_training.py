@@ -443,3 +443,57 @@ def test_hold_coverage_needs_a_teacher_and_a_run_keeps_its_weight(tmp_path):
 
     with pytest.raises(ModelFileError, match="cost_weight"):
         latest_state(out)
+
+
+def test_discounted_returns_end_at_each_episode_s_end_and_mark_cut_ones():
+    from train.ppo import discounted_returns
+
+    rewards = np.array([[1.0, 10.0], [2.0, 20.0], [3.0, 30.0]])
+    ends = np.array([[False, False], [True, False], [False, False]])
+    returns, complete = discounted_returns(rewards, ends, gamma=0.5)
+    # env 0: 1 + 0.5 * 2 (its episode ends at step 1), then a new one cut at the rollout's end: 3
+    # env 1: never ends: 10 + 0.5 * (20 + 0.5 * 30), cut short
+    assert returns.tolist() == [2.0, 27.5, 2.0, 35.0, 3.0, 30.0]
+    assert complete.tolist() == [True, False, True, False, False, False]
+
+
+def test_the_critic_learns_the_teacher_s_returns_and_the_clone_stays_as_it_was():
+    """Run hold1's critic explained none of the return over 41 updates: after cloning, the value
+    branch is fitted to the teacher's returns, and the policy (shared encoder, scorer) is not touched."""
+    pytest.importorskip("sb3_contrib")
+    import torch
+    from sb3_contrib import MaskablePPO
+    from sb3_contrib.common.maskable.utils import get_action_masks
+
+    from train.ppo import TrainConfig, _policy_class, fit_value, make_training_envs
+
+    config = TrainConfig(envs=1, seed=0, rooms=(1, 2), completion="policy")
+    venv = make_training_envs(config)
+    model = MaskablePPO(
+        _policy_class(), venv, n_steps=32, batch_size=32, seed=0, policy_kwargs={"network": config.network}
+    )
+    try:
+        obs, samples = venv.reset(), []
+        for _ in range(30):
+            samples.append({k: v.copy() for k, v in obs.items()})
+            obs, *_ = venv.step(np.array([int(np.flatnonzero(get_action_masks(venv)[0])[0])]))
+    finally:
+        venv.close()
+    all_obs = {k: np.concatenate([s[k] for s in samples]) for k in samples[0]}
+    rewards, ends = np.ones((30, 1)), (np.arange(30) % 10 == 9)[:, None]  # episodes of 10 steps
+    policy = model.policy
+    kept = {k: v.clone() for k, v in policy.state_dict().items() if not k.startswith(("value_net", "mlp_extractor"))}
+
+    target = (1 - model.gamma ** (10 - np.arange(30) % 10)) / (1 - model.gamma)  # 10 steps to the end, 9, ...
+
+    def error() -> float:
+        with torch.no_grad():
+            values = policy.predict_values(policy.obs_to_tensor(all_obs)[0]).flatten().numpy()
+        return float(((values - target) ** 2).mean())
+
+    before = error()
+    fitted = fit_value(model, all_obs, rewards, ends)
+    assert fitted["value_samples"] == 30 and fitted["value_explained_variance"] is not None
+    # Better than the best constant (the mean return): the critic reads the observations.
+    assert error() < 0.8 * target.var() < 0.2 * before
+    assert all(torch.equal(v, policy.state_dict()[k]) for k, v in kept.items())

@@ -260,11 +260,17 @@ class TrainConfig(Config):
         saw); K + 1 actions and the room vector with ``completion="policy"``."""
         env = self.env_config()
         shape, candidates = tuple(env.observation.shape), env.robot.navigation.max_candidates
-        if self.completion == "policy":
-            return NetworkConfig(
-                voxel_shape=shape, candidates=candidates, actions=candidates + 1, room_features=len(ROOM_FEATURES)
-            )
-        return NetworkConfig(voxel_shape=shape, candidates=candidates, actions=candidates)
+        try:
+            if self.completion == "policy":
+                return NetworkConfig(
+                    voxel_shape=shape, candidates=candidates, actions=candidates + 1, room_features=len(ROOM_FEATURES)
+                )
+            return NetworkConfig(voxel_shape=shape, candidates=candidates, actions=candidates)
+        except ConfigError as exc:  # the network's field names are not what the user set
+            raise ConfigError(
+                f"no network takes observation.shape={list(shape)} with robot.navigation.max_candidates={candidates} "
+                f"(the network's {exc})"
+            ) from None
 
 
 #: The share of this machine's memory a run's own arrays may claim (:func:`memory_claim`): the rest is
@@ -1308,6 +1314,8 @@ def behaviour_clone(
     samples: list[tuple[dict, np.ndarray, np.ndarray]] = []
     # The structure the teacher's finished episodes mapped: what hold_coverage holds.
     mapped: list[float] = []
+    rewards: list[np.ndarray] = []
+    ends: list[np.ndarray] = []
     for _ in range(steps):
         if stop is not None and stop.signal is not None:
             return None
@@ -1326,7 +1334,9 @@ def behaviour_clone(
             ]
         )
         samples.append(({k: v.copy() for k, v in obs.items()}, masks.copy(), actions))
-        obs, _, dones, infos = venv.step(actions)
+        obs, reward, dones, infos = venv.step(actions)
+        rewards.append(np.asarray(reward, dtype=float))
+        ends.append(np.asarray(dones, dtype=bool))
         mapped.extend(float(info["mapped_pct"]) for info, done in zip(infos, dones, strict=True) if done)
     policy = model.policy
     keys = samples[0][0].keys()
@@ -1358,6 +1368,7 @@ def behaviour_clone(
             dist = policy.get_distribution(tensors, action_masks=all_masks[part])
             chosen.append(dist.get_actions(deterministic=True).cpu().numpy())
     agreement = float((np.concatenate(chosen) == all_actions).mean())
+    value_fit = fit_value(model, all_obs, np.stack(rewards), np.stack(ends), epochs=epochs, batch_size=batch_size)
     return {
         "samples": n,
         "loss_first": losses[0],
@@ -1367,7 +1378,96 @@ def behaviour_clone(
         "rooms_declared": int((all_actions == all_masks.shape[1] - 1).sum()) if room_action else 0,
         "episodes": len(mapped),
         "mapped": float(np.mean(mapped)) if mapped else None,
+        **value_fit,
     }
+
+
+def discounted_returns(rewards: np.ndarray, ends: np.ndarray, gamma: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each step's discounted return to its episode's end, from a vector env's rollout.
+
+    Parameters
+    ----------
+    rewards, ends : (T, E) float, (T, E) bool
+        The reward of each step of each env, and whether the episode ended with that step.
+    gamma : float
+
+    Returns
+    -------
+    returns : (T * E,) float
+        G_t = r_t + gamma (1 - end_t) G_{t+1}, in the rollout's order (step-major, as its samples).
+    complete : (T * E,) bool
+        Whether the step's episode ended within the rollout: the others' returns are cut short.
+    """
+    returns = np.zeros_like(rewards, dtype=float)
+    complete = np.zeros_like(ends, dtype=bool)
+    running = np.zeros(rewards.shape[1])
+    ended = np.zeros(rewards.shape[1], dtype=bool)
+    for t in range(len(rewards) - 1, -1, -1):
+        running = rewards[t] + gamma * np.where(ends[t], 0.0, running)
+        ended |= ends[t]
+        returns[t], complete[t] = running, ended
+    return returns.reshape(-1), complete.reshape(-1)
+
+
+#: The fewest minibatch updates :func:`fit_value` makes.
+VALUE_UPDATES = 1500
+
+
+def fit_value(
+    model, obs: dict[str, np.ndarray], rewards: np.ndarray, ends: np.ndarray, epochs: int = 30, batch_size: int = 64
+) -> dict:
+    """Fit the critic to the teacher's discounted returns, the encoder left as cloning made it.
+
+    A critic that starts from nothing explains none of the return for thousands of PPO steps (run
+    hold1: explained variance 0.000 over 41 updates), and its advantages are then noise; after
+    cloning, the teacher's own episodes are returns of the policy PPO starts from. Only the value
+    branch learns (the features are shared with the policy: fitting them would undo the clone).
+    One sample in five is held out to measure the fit.
+
+    Returns ``{"value_samples", "value_explained_variance"}``: the complete-episode samples and the
+    explained variance of the held-out returns (None when too few episodes ended).
+    """
+    import torch
+
+    policy = model.policy
+    returns, complete = discounted_returns(rewards, ends, model.gamma)
+    index = np.flatnonzero(complete)
+    if len(index) < 10:
+        return {"value_samples": len(index), "value_explained_variance": None}
+    with torch.no_grad():  # the encoder once for every sample, in minibatches
+        parts = []
+        for start in range(0, len(index), batch_size):
+            tensors, _ = policy.obs_to_tensor({k: v[index[start : start + batch_size]] for k, v in obs.items()})
+            parts.append(policy.extract_features(tensors))
+        features = torch.cat(parts)
+    target = torch.as_tensor(returns[index], dtype=torch.float32, device=policy.device)
+    rng = np.random.default_rng(0)
+    order = rng.permutation(len(index))
+    held, fit = order[: len(order) // 5], order[len(order) // 5 :]
+    branch = [*policy.mlp_extractor.value_net.parameters(), *policy.value_net.parameters()]
+    optimiser = torch.optim.Adam(branch, lr=1e-3)
+
+    def values(rows: np.ndarray) -> torch.Tensor:
+        return policy.value_net(policy.mlp_extractor.forward_critic(features[rows])).flatten()
+
+    policy.set_training_mode(True)
+    # A small network on fixed features: cheap, and slower to fit than the clone; at least
+    # VALUE_UPDATES minibatches however few the samples.
+    rounds = max(epochs * 3, -(-VALUE_UPDATES // -(-len(fit) // batch_size)))
+    for _ in range(rounds):
+        rng.shuffle(fit)
+        for start in range(0, len(fit), batch_size):
+            rows = fit[start : start + batch_size]
+            loss = torch.nn.functional.mse_loss(values(rows), target[rows])
+            optimiser.zero_grad()
+            loss.backward()
+            optimiser.step()
+    policy.set_training_mode(False)
+    with torch.no_grad():
+        error = (values(held) - target[held]).cpu().numpy()
+    spread = float(target[held].var(unbiased=False))
+    explained = 1.0 - float(error.var()) / spread if spread > 0 else None
+    return {"value_samples": len(index), "value_explained_variance": explained}
 
 
 def plot_learning_curve(log: str | Path, out: str | Path) -> Path | None:

@@ -46,7 +46,7 @@ class ObservationConfig(Config):
     def __post_init__(self) -> None:
         _plain_numbers(self)
         _require(
-            len(self.shape) == 3 and all(isinstance(n, int) and n >= 1 for n in self.shape),
+            len(self.shape) == 3 and all(isinstance(n, int) and not isinstance(n, bool) and n >= 1 for n in self.shape),
             f"shape must be three positive integers, got {self.shape}",
         )
         cells = int(np.prod([float(n) for n in self.shape]))
