@@ -248,7 +248,7 @@ def resolve_scene(
             ):
                 raise TypeError
             start = np.asarray(start, dtype=float)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):  # 10**400 overflows
             start = np.full(1, np.nan)
         if start.shape not in ((2,), (3,)) or not np.isfinite(start).all():
             shown = repr(given)[:80]

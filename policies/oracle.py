@@ -113,7 +113,7 @@ class OraclePlan:
             best = float(record["max_coverage_pct"])
             candidates, samples = record["candidates"], record["samples"]
             rooms = {int(k): float(v) for k, v in rooms_record.items()}
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:  # 10**400 overflows
             raise ValueError(f"not an oracle plan ({type(exc).__name__}: {exc})") from None
         if positions.size == 0:  # [] reads as shape (0,): a plan of no scans
             positions = positions.reshape(0, 3)

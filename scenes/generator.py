@@ -106,7 +106,10 @@ class GeneratorConfig:
             return isinstance(value, numbers.Integral) and not isinstance(value, bool)
 
         def number(value: object) -> bool:
-            return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+            try:  # math.isfinite(10**400) raises
+                return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+            except OverflowError:
+                return False
 
         def pair(name: str, check: Callable[[object], bool], low: float, high: float, kind: str) -> tuple:
             value = getattr(self, name)

@@ -17,6 +17,8 @@ import json
 import math
 import re
 import struct
+import warnings
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -393,6 +395,7 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
     # Before anything is read: trimesh skips what it cannot decode (printing a line of its own) and
     # would load the file's fallback or placeholder data as the geometry.
     _check_extensions(source, doc)
+    _check_primitives(source, doc)
     _check_sparse(source, doc)
     buffers = _items(source, doc, "buffers")
     views = _items(source, doc, "bufferViews")
@@ -512,18 +515,29 @@ def _check_extensions(source: str, doc: dict) -> None:
         )
 
 
+def _check_primitives(source: str, doc: dict) -> None:
+    """glTF 2.0: a mesh holds a list of at least one primitive, each an object; ``{}`` or ``[]``
+    dropped the mesh without a word, and ``[5]`` was an AttributeError inside the reader."""
+    for m, mesh in enumerate(_items(source, doc, "meshes")):
+        primitives = mesh.get("primitives")
+        if not isinstance(primitives, list) or not primitives:
+            raise InvalidMeshError(
+                source, f"meshes[{m}].primitives is {repr(primitives)[:40]}, not a list of one or more primitives"
+            )
+        for p, primitive in enumerate(primitives):
+            if not isinstance(primitive, dict):
+                raise InvalidMeshError(
+                    source, f"meshes[{m}].primitives[{p}] is {repr(primitive)[:40]}, not a primitive (an object)"
+                )
+
+
 def _check_sparse(source: str, doc: dict) -> None:
     """Refuse sparse accessors among a mesh's positions or indices: trimesh reads only the dense base
     (zeros, or the bufferView) and drops the sparse values, so the geometry would be wrong. Refuse
     positions that are not VEC3 floats and indices that are not unsigned integer scalars."""
     accessors = _items(source, doc, "accessors")
     for m, mesh in enumerate(_items(source, doc, "meshes")):
-        primitives = mesh.get("primitives", [])
-        if not isinstance(primitives, list):
-            continue
-        for p, primitive in enumerate(primitives):
-            if not isinstance(primitive, dict):
-                continue
+        for p, primitive in enumerate(mesh["primitives"]):  # lists of objects (_check_primitives)
             attributes = primitive.get("attributes")
             used = {"indices": primitive.get("indices")}
             if isinstance(attributes, dict):
@@ -727,6 +741,19 @@ def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> int:
         k = doc["scene"]
         if not (isinstance(k, int) and not isinstance(k, bool) and 0 <= k < len(scenes)):
             raise InvalidMeshError(source, f"scene is {repr(k)[:40]}, but the file has {len(scenes)} scene(s)")
+    children = {k for node in nodes for k in node.get("children", [])}  # once: a scene per node was quadratic
+    if not scenes and _items(source, doc, "meshes"):
+        # glTF 2.0 allows a file of no scene (a library of parts); the reader then draws nothing, and
+        # "the mesh is empty" named no cause.
+        raise InvalidMeshError(
+            source,
+            f"the file lists no scenes, so nothing of its {len(nodes)} node(s) and "
+            f"{len(_items(source, doc, 'meshes'))} mesh(es) is drawn: export it with a scene",
+        )
+    if len(scenes) > 1 and "scene" not in doc:
+        warnings.warn(
+            f"{source}: the file has {len(scenes)} scenes and names none ('scene'): scenes[0] is read", stacklevel=4
+        )
     for i, scene in enumerate(scenes):
         roots = scene.get("nodes", [])
         if not isinstance(roots, list) or not all(
@@ -734,10 +761,9 @@ def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> int:
         ):
             raise InvalidMeshError(source, f"scenes[{i}].nodes must name nodes 0..{len(nodes) - 1}")
         # glTF 2.0: a scene lists root nodes, each once; a repeat or a child drew its meshes twice.
-        twice = [n for n in set(roots) if roots.count(n) > 1]
+        twice = [n for n, count in Counter(roots).items() if count > 1]
         if twice:
             raise InvalidMeshError(source, f"scenes[{i}].nodes lists node {twice[0]} twice")
-        children = {k for node in nodes for k in node.get("children", [])}
         inner = [n for n in roots if n in children]
         if inner:
             raise InvalidMeshError(
@@ -745,6 +771,11 @@ def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> int:
             )
     meshes = _items(source, doc, "meshes")
     accessors = _items(source, doc, "accessors")
+    for key in ("scenes", "nodes", "meshes", "materials"):
+        # The reader keys its geometry by these names: a list as a name was a TypeError from inside it.
+        for i, item in enumerate(_items(source, doc, key)):
+            if "name" in item and not isinstance(item["name"], str):
+                raise InvalidMeshError(source, f"{key}[{i}].name is {repr(item['name'])[:40]}, not a string")
     for i, node in enumerate(nodes):
         if "mesh" in node and "camera" in node:
             raise InvalidMeshError(
@@ -759,11 +790,10 @@ def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> int:
             )
     faces: list[int] = []  # each mesh's triangles, for the instances' total below
     for m, mesh in enumerate(meshes):
-        primitives = mesh.get("primitives", [])
         faces.append(0)
-        for p, primitive in enumerate(primitives if isinstance(primitives, list) else ()):
+        for p, primitive in enumerate(mesh["primitives"]):  # lists of objects (_check_primitives)
             where = f"meshes[{m}].primitives[{p}]"
-            mode = primitive.get("mode", 4) if isinstance(primitive, dict) else 4
+            mode = primitive.get("mode", 4)
             if not (isinstance(mode, int) and not isinstance(mode, bool) and 0 <= mode <= 6):
                 raise InvalidMeshError(source, f"{where}.mode is {repr(mode)[:40]}; glTF's modes are 0 to 6")
             if mode == 6:
@@ -771,8 +801,6 @@ def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> int:
                 raise InvalidMeshError(
                     source, f"{where} is a triangle fan (mode 6), which the reader does not read: export triangles"
                 )
-            if not isinstance(primitive, dict):
-                continue
             attributes = primitive.get("attributes")
             if not isinstance(attributes, dict) or "POSITION" not in attributes:
                 raise InvalidMeshError(source, f"{where}.attributes has no POSITION")
@@ -797,6 +825,14 @@ _TRANSFORM_LENGTHS = {"matrix": 16, "translation": 3, "rotation": 4, "scale": 3}
 #: How far from 1 a quaternion's length, and from 0 a matrix's bottom row or its columns' cosines, may
 #: lie: float32 exporters land within 1e-6; 1e-3 is a transform no exporter meant.
 UNIT_TOLERANCE = 1e-3
+
+
+def _finite(value: float) -> bool:
+    """math.isfinite, False for an int beyond a float's range (it raises OverflowError)."""
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
 
 
 def _not_trs(matrix: list[float]) -> str | None:
@@ -826,7 +862,7 @@ def _check_node_tree(source: str, nodes: list[dict]) -> None:
             if value is not None and not (
                 isinstance(value, list)
                 and len(value) == length
-                and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+                and all(isinstance(v, (int, float)) and not isinstance(v, bool) and _finite(v) for v in value)
             ):
                 raise InvalidMeshError(
                     source, f"nodes[{i}].{key} must be {length} finite numbers, got {repr(value)[:60]}"

@@ -25,6 +25,7 @@ __all__ = [
     "MAX_JSON_DEPTH",
     "JSONDuplicateKeyError",
     "JSONNestingError",
+    "JSONNumberError",
     "JSONSizeError",
     "read_json",
     "read_json_file",
@@ -61,6 +62,10 @@ class JSONSizeError(json.JSONDecodeError):
         return str(self.msg)
 
 
+class JSONNumberError(json.JSONDecodeError):
+    """An integer beyond a float's range (JSON sets no bound; every number nbs-env reads is used as a float)."""
+
+
 class JSONDuplicateKeyError(JSONSizeError):
     """A JSON object that names one key twice. The JSON standard leaves such a document's meaning open
     and Python keeps the last value, so a plan or a glTF header edited by hand would be read as what
@@ -81,6 +86,22 @@ def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
                 raise _RepeatedKeyError(key)
             seen.add(key)
     return document
+
+
+class _HugeIntegerError(ValueError):
+    """An integer literal no float can hold (every number nbs-env reads is used as one)."""
+
+
+def _integer(literal: str) -> int:
+    # JSON integers have no bound, and float(10**400) raises OverflowError wherever a setting, a
+    # coordinate or a figure is used as a float; refused here, with its place, for every reader.
+    value = int(literal)
+    if len(literal) > 300:
+        try:
+            float(value)
+        except OverflowError:
+            raise _HugeIntegerError(literal) from None
+    return value
 
 
 def read_json_file(path: str | os.PathLike[str], *, max_bytes: int = MAX_JSON_BYTES, **kwargs: Any) -> Any:
@@ -125,7 +146,7 @@ def read_json(text: str, *, max_depth: int = MAX_JSON_DEPTH, **kwargs: Any) -> A
     JSONDuplicateKeyError
         An object names a key twice (a ``json.JSONDecodeError``).
     json.JSONDecodeError
-        Invalid JSON, as ``json.loads`` raises it, or an integer too long to convert.
+        Invalid JSON, as ``json.loads`` raises it, or an integer beyond a float's range.
     """
     # Strings are blanked out keeping their length, so positions stay those of the text. Brackets are
     # ASCII, so the UTF-8 bytes find them at a byte a character (UTF-32 took four).
@@ -140,13 +161,21 @@ def read_json(text: str, *, max_depth: int = MAX_JSON_DEPTH, **kwargs: Any) -> A
             raise JSONNestingError(f"nested deeper than {max_depth} levels", text, at)
     del masked, codes, brackets
     kwargs.setdefault("object_pairs_hook", _unique_keys)
+    kwargs.setdefault("parse_int", _integer)
     try:
         return json.loads(text, **kwargs)
     except _RepeatedKeyError as exc:
         raise JSONDuplicateKeyError(f"the key {exc.args[0][:80]!r} appears twice in one object") from None
+    except _HugeIntegerError as exc:
+        literal = exc.args[0]
+        raise JSONNumberError(
+            f"an integer of {len(literal.lstrip('-')):,} digits, beyond the range of any number nbs-env reads",
+            text,
+            max(text.find(literal), 0),
+        ) from None
     except ValueError as exc:
         if isinstance(exc, json.JSONDecodeError) or "integer string conversion" not in str(exc):
             raise  # bad JSON, or a caller's own refusal (parse_constant refusing NaN)
         # Python refuses to convert an integer of more than 4,300 digits (a ValueError that is no
         # JSONDecodeError): a number no honest document holds, reported as the bad JSON it is.
-        raise json.JSONDecodeError("a number of more than 4,300 digits", text, 0) from None
+        raise JSONNumberError("a number of more than 4,300 digits", text, 0) from None

@@ -44,6 +44,8 @@ __all__ = [
 MESH_EXTENSIONS = (".obj", ".glb", ".gltf", ".ply")
 SUPPORTED_EXTENSIONS = (".json", *MESH_EXTENSIONS, ".ifc")
 _GENERATED = "generated:"
+#: The longest ``generated:SEED`` seed read (numpy seeds its generator from any integer; no one types more).
+MAX_SEED_DIGITS = 100
 
 
 def list_scenes() -> list[str]:
@@ -227,7 +229,11 @@ def check_source(text: str) -> None:
         # storey had several names (a comparison ran it twice).
         if not re.fullmatch(r"[0-9]+", seed_text):
             raise UnknownSceneError(
-                text, f"the seed {seed_text!r} is not an integer >= 0 in digits (use generated:SEED)"
+                text, f"the seed {seed_text[:40]!r} is not an integer >= 0 in digits (use generated:SEED)"
+            )
+        if len(seed_text) > MAX_SEED_DIGITS:  # Python's int refuses 4,300 digits with a ValueError
+            raise UnknownSceneError(
+                text, f"the seed has {len(seed_text):,} digits; a generated storey's seed has at most {MAX_SEED_DIGITS}"
             )
         return
     path = Path(text)

@@ -209,9 +209,12 @@ class Scene:
         return self._start is not None
 
     def _as_floor_point(self, value: np.ndarray | tuple[float, ...]) -> np.ndarray:
-        p = np.asarray(value, dtype=float).reshape(-1)
+        try:
+            p = np.asarray(value, dtype=float).reshape(-1)
+        except (TypeError, ValueError, OverflowError):  # a string, a ragged list, 10**400
+            p = np.full(1, np.nan)
         if p.shape not in ((2,), (3,)) or not np.all(np.isfinite(p)):
-            raise InvalidMeshError(self.name, f"start must be a finite (x, y[, z]) point, got {value}")
+            raise InvalidMeshError(self.name, f"start must be a finite (x, y[, z]) point, got {str(value)[:80]}")
         if p.shape == (2,):
             p = np.array([p[0], p[1], self.floor_height_at(p)])
         return p

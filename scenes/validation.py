@@ -136,15 +136,19 @@ def validate_plan_scene(plan: PlanLike, scene: Scene) -> None:
 
     start = scene.start
     first = None
+    inside = False
     for i, room in enumerate(scene.rooms):
         if Polygon(room.polygon).covers(Point(start[0], start[1])):
+            inside = True
             first = node_of(i, start)
             break
     if first is None:
+        shown = ", ".join(f"{float(v):g}" for v in np.round(start[:2], 3))
         raise StoreyValidationError(
             name,
-            f"the start ({', '.join(f'{float(v):g}' for v in np.round(start[:2], 3))}) is not "
-            f"{STOREY_CLEARANCE} m clear of walls and clutter",
+            f"the start ({shown}) is not {STOREY_CLEARANCE} m clear of walls and clutter"
+            if inside
+            else f"the start ({shown}) lies in no room",
         )
     seen = {first}
     todo = [first]

@@ -146,3 +146,143 @@ def test_a_training_setting_no_network_takes_is_named_by_its_key(key, value, mes
 
     with pytest.raises(ConfigError, match=message):
         _ = TrainConfig(completion="policy", overrides={key: value}).network
+
+
+# ---------------------------------------------------------------------- probe 19: numbers no float holds
+_HUGE = 10**400  # a JSON integer has no bound; float() of it raises OverflowError
+
+
+def test_json_refuses_an_integer_no_float_holds_and_names_its_place():
+    import json as json_module
+
+    from scenes.jsonio import read_json
+
+    assert read_json('{"a": 1' + "0" * 300 + "}")["a"] == 10**300  # a float holds it
+    with pytest.raises(json_module.JSONDecodeError, match="an integer of 401 digits") as info:
+        read_json('{"a": [0, 1' + "0" * 400 + "]}")
+    assert info.value.pos == 10
+
+
+def test_a_setting_no_float_holds_is_a_config_error_not_an_overflow():
+    """`--set robot.voxel_size=1000...0` (401 digits) and a checkpoint recording one were tracebacks."""
+    from nbs_env.config import ObservationConfig
+    from nbs_env.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="cell must be a finite number"):
+        ObservationConfig(cell=_HUGE)
+    with pytest.raises(ConfigError, match=r"about 10\^400 cells"):  # a float product was inf, then int(inf)
+        ObservationConfig(shape=(10**200, 10**200, 1))
+
+
+@pytest.mark.parametrize(
+    "edit",
+    [{"max_coverage_pct": _HUGE}, {"positions": [[_HUGE, 2.0, 1.2], [3.0, 2.0, 1.2]]}, {"room_max_pct": {"0": _HUGE}}],
+)
+def test_an_oracle_record_of_a_number_no_float_holds_is_a_value_error(edit):
+    from policies.oracle import OraclePlan
+
+    with pytest.raises(ValueError, match="not an oracle plan"):
+        OraclePlan.from_dict({**_PLAN, **edit})
+
+
+def test_an_svm_file_says_what_its_json_reader_refused(tmp_path):
+    """A key named twice was "truncated or not JSON" without the reader's reason; a 401-digit gamma
+    an OverflowError."""
+    from nbs_env.errors import ModelFileError
+    from nbs_env.perception.structure import SEClassifier
+
+    text = SEClassifier.load_default().save(tmp_path / "se.json").read_text()
+    (tmp_path / "twice.json").write_text(text.replace("{", '{"format": "x", ', 1))
+    with pytest.raises(ModelFileError, match="appears twice"):
+        SEClassifier.load(tmp_path / "twice.json")
+    (tmp_path / "huge.json").write_text(text.replace('"gamma":', f'"gamma": {_HUGE}, "g":', 1))
+    with pytest.raises(ModelFileError, match="401 digits"):
+        SEClassifier.load(tmp_path / "huge.json")
+
+
+# ---------------------------------------------------------------------- probe 19: glTF meshes and names
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda doc: doc["meshes"][0].update(primitives={}), r"primitives is \{\}, not a list"),  # mesh dropped
+        (lambda doc: doc["meshes"][0].update(primitives=[]), r"primitives is \[\], not a list"),
+        (lambda doc: doc["meshes"][0].update(primitives=[5]), r"primitives\[0\] is 5, not a primitive"),
+        (lambda doc: doc["meshes"][0].pop("primitives"), "primitives is None"),
+        (lambda doc: doc["nodes"][0].update(name=5), r"nodes\[0\]\.name is 5, not a string"),
+        (lambda doc: doc["meshes"][0].update(name=["floor"]), r"meshes\[0\]\.name is \['floor'\], not a string"),
+    ],
+)
+def test_a_mesh_without_primitives_or_a_name_that_is_no_string_is_refused(edit, message, glb_parts, tmp_path):  # noqa: F811
+    """An empty or non-list `primitives` dropped the mesh without a word; a primitive or name of
+    another type was an error from inside the reader (AttributeError, TypeError)."""
+    from scenes import InvalidMeshError
+
+    with pytest.raises(InvalidMeshError, match=message):
+        load_scene(_gltf(glb_parts, tmp_path, edit))
+
+
+def test_a_plan_start_outside_every_room_is_said_to_be_outside(tmp_path):
+    """It was said to be "not 0.45 m clear of walls and clutter"."""
+    from importlib import resources
+
+    from scenes import StoreyValidationError
+
+    plan = json.loads((resources.files("scenes") / "data" / "l_room.json").read_text())
+    (tmp_path / "p.json").write_text(json.dumps({**plan, "start": [-50.0, -50.0]}))
+    with pytest.raises(StoreyValidationError, match=r"the start \(-50, -50\) lies in no room"):
+        load_scene(str(tmp_path / "p.json"))
+
+
+def test_a_start_no_float_holds_is_the_start_error():
+    """`start=(10**400, 1)` was a bare OverflowError from numpy (an infinite start was named)."""
+    from nbs_env import NBSEnv
+    from nbs_env.errors import ConfigError
+    from scenes import InvalidMeshError
+
+    with pytest.raises(InvalidMeshError, match="start must be a finite"):
+        load_scene("l_room", start=(_HUGE, 1.0))
+    env = NBSEnv(scene="l_room", preset="fast")
+    try:
+        with pytest.raises(ConfigError, match=r"options\['start'\] must be 2 or 3 finite numbers"):
+            env.reset(seed=0, options={"start": [_HUGE, 1.0]})
+    finally:
+        env.close()
+
+
+def test_a_generated_seed_of_thousands_of_digits_is_named():
+    """5,000 digits passed the digit check and Python's int refused them with a traceback."""
+    from scenes import UnknownSceneError
+
+    with pytest.raises(UnknownSceneError, match="the seed has 5,000 digits"):
+        load_scene("generated:" + "9" * 5000)
+
+
+def test_a_set_value_of_thousands_of_digits_is_said_to_be_too_long():
+    """It was taken as a string, then "max_scans must be an integer >= 1, got '999...'"."""
+    import argparse
+
+    from train.arguments import _assignment as parse_override
+
+    with pytest.raises(argparse.ArgumentTypeError, match="max_scans: the value holds a number of more than 4,300"):
+        parse_override("max_scans=" + "9" * 5000)
+    with pytest.raises(argparse.ArgumentTypeError, match="an integer of 401 digits"):
+        parse_override("robot.voxel_size=1" + "0" * 400)
+    assert parse_override("rooms.completion_fraction=0.05") == ("rooms.completion_fraction", 0.05)
+
+
+def test_which_gltf_scene_is_read_is_said(glb_parts, tmp_path):  # noqa: F811
+    """No scenes gave "the mesh is empty"; two and no `scene` read the first without a word."""
+    from scenes import InvalidMeshError
+
+    def none(doc):
+        doc.pop("scenes", None)
+        doc.pop("scene", None)
+
+    def two(doc):
+        doc.pop("scene", None)
+        doc["scenes"] = [doc["scenes"][0], {"nodes": []}]
+
+    with pytest.raises(InvalidMeshError, match="lists no scenes, so nothing"):
+        load_scene(_gltf(glb_parts, tmp_path, none))
+    with pytest.warns(UserWarning, match=r"2 scenes and names none \('scene'\): scenes\[0\] is read"):
+        assert len(load_scene(_gltf(glb_parts, tmp_path, two)).mesh.faces) > 0

@@ -164,12 +164,13 @@ def _assignment(text: str) -> tuple[str, Any]:
     Raises
     ------
     argparse.ArgumentTypeError
-        No ``=`` or no key, or a value nested deeper than :data:`scenes.jsonio.MAX_JSON_DEPTH` levels.
+        No ``=`` or no key, a value nested deeper than :data:`scenes.jsonio.MAX_JSON_DEPTH` levels, or
+        an integer beyond a float's range.
     """
     key, eq, value = text.partition("=")
     if not eq or not key.strip():
         raise argparse.ArgumentTypeError(f"expected KEY=VALUE (e.g. rooms.completion_fraction=0.05), got {text!r}")
-    from scenes.jsonio import MAX_JSON_DEPTH, JSONNestingError, read_json
+    from scenes.jsonio import MAX_JSON_DEPTH, JSONNestingError, JSONNumberError, read_json
 
     try:
         parsed = read_json(value)
@@ -178,6 +179,8 @@ def _assignment(text: str) -> tuple[str, Any]:
             f"{key.strip()}: the value nests arrays or objects deeper than {MAX_JSON_DEPTH} levels, "
             f"the most --set reads"
         ) from None
+    except JSONNumberError as exc:  # digits, not a word: "must be an integer, got '999...'" misled
+        raise argparse.ArgumentTypeError(f"{key.strip()}: the value holds {exc.msg}") from None
     except ValueError:
         parsed = value  # a bare word: a string
     return key.strip(), parsed

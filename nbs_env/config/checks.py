@@ -65,11 +65,19 @@ def _require(condition: bool, message: str) -> None:
         raise ConfigError(message)
 
 
+def _float_range(value: float) -> bool:
+    """Finite, and within a float's range: a Python int may not be (math.isfinite(10**400) raises)."""
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
 def _finite(**values: float) -> None:
     for name, value in values.items():
         _require(
-            isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value),
-            f"{name} must be a finite number, got {value!r}",
+            isinstance(value, (int, float)) and not isinstance(value, bool) and _float_range(value),
+            f"{name} must be a finite number, got {repr(value)[:60]}",
         )
 
 

@@ -4,6 +4,7 @@ the evaluation, put together in :class:`EnvConfig`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -49,10 +50,12 @@ class ObservationConfig(Config):
             len(self.shape) == 3 and all(isinstance(n, int) and not isinstance(n, bool) and n >= 1 for n in self.shape),
             f"shape must be three positive integers, got {self.shape}",
         )
-        cells = int(np.prod([float(n) for n in self.shape]))
+        cells = math.prod(self.shape)  # Python ints: a float product overflowed to inf (10**200 cells)
         _require(
             cells <= MAX_WINDOW_CELLS,
-            f"shape {tuple(self.shape)} has {cells:,} cells; at most {MAX_WINDOW_CELLS:,} (the default has 65,536)",
+            f"shape {str(tuple(self.shape))[:80]} has "
+            f"{f'{cells:,}' if cells < 10**18 else f'about 10^{len(str(cells)) - 1}'} cells; "
+            f"at most {MAX_WINDOW_CELLS:,} (the default has 65,536)",
         )
         _finite(cell=self.cell, below_floor=self.below_floor)
         _require(self.cell > 0, f"cell must be > 0 metres, got {self.cell}")

@@ -15,6 +15,7 @@ from nbs_env.config.checks import (
     _at_most,
     _finite,
     _finite_fields,
+    _float_range,
     _integer,
     _plain_numbers,
     _require,
@@ -453,7 +454,7 @@ class RegistrationConfig(Config):
         _require(
             0 < len(correspondence) <= 10
             and all(
-                isinstance(d, (int, float)) and not isinstance(d, bool) and math.isfinite(d) and 0 < d <= 100
+                isinstance(d, (int, float)) and not isinstance(d, bool) and _float_range(d) and 0 < d <= 100
                 for d in correspondence
             ),
             f"max_correspondence must be 1 to 10 distances within (0, 100] metres, got {self.max_correspondence}",
@@ -465,7 +466,7 @@ class RegistrationConfig(Config):
             _require(
                 len(self.stage_voxels) == len(self.max_correspondence)
                 and all(
-                    isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                    isinstance(v, (int, float)) and not isinstance(v, bool) and _float_range(v)
                     for v in self.stage_voxels
                 )
                 and all(self.voxel_size <= v <= 2.0 for v in self.stage_voxels),

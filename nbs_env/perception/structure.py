@@ -587,7 +587,9 @@ class SEClassifier:
         """Parse and check a stored model; ``source`` names it in error messages."""
         try:
             document = read_json(text)
-        except (json.JSONDecodeError, RecursionError):
+        except json.JSONDecodeError as exc:  # the reader's own words: a key twice, nesting, a huge number
+            raise ModelFileError(f"{source}: truncated or not JSON ({exc})") from None
+        except RecursionError:
             raise ModelFileError(f"{source}: truncated or not JSON") from None
 
         def fail(field: str, message: str) -> ModelFileError:
@@ -632,7 +634,7 @@ class SEClassifier:
                 array = np.array(value, dtype=float)
                 if _has_non_number(value):
                     raise TypeError
-            except (TypeError, ValueError):
+            except (TypeError, ValueError, OverflowError):  # an int of 400 digits overflows
                 raise fail(f"{section}.{key}", "expected numbers") from None
             return array
 
