@@ -396,6 +396,7 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
     # would load the file's fallback or placeholder data as the geometry.
     _check_extensions(source, doc)
     _check_primitives(source, doc)
+    _check_morph_targets(source, doc)
     _check_sparse(source, doc)
     buffers = _items(source, doc, "buffers")
     views = _items(source, doc, "bufferViews")
@@ -528,6 +529,33 @@ def _check_primitives(source: str, doc: dict) -> None:
             if not isinstance(primitive, dict):
                 raise InvalidMeshError(
                     source, f"meshes[{m}].primitives[{p}] is {repr(primitive)[:40]}, not a primitive (an object)"
+                )
+
+
+def _check_morph_targets(source: str, doc: dict) -> None:
+    """glTF 2.0 §3.7.2.2: a primitive's drawn positions are its own plus the weighted morph targets.
+    trimesh reads the base alone, so a mesh drawn with non-zero weights (its own or a node's) would be
+    another storey than the one other readers show: refused. Targets at weight 0 change nothing."""
+    meshes = _items(source, doc, "meshes")
+    weights: dict[int, list[tuple[str, Any]]] = {}
+    for m, mesh in enumerate(meshes):
+        weights.setdefault(m, []).append((f"meshes[{m}].weights", mesh.get("weights")))
+    for i, node in enumerate(_items(source, doc, "nodes")):
+        if isinstance(node.get("mesh"), int) and "weights" in node:
+            weights.setdefault(node["mesh"], []).append((f"nodes[{i}].weights", node["weights"]))
+    for m, mesh in enumerate(meshes):
+        if not any(isinstance(p, dict) and p.get("targets") for p in mesh["primitives"]):
+            continue
+        for where, value in weights.get(m, []):
+            if value is None:
+                continue
+            if not (isinstance(value, list) and all(type(w) in (int, float) and _finite(w) for w in value)):
+                raise InvalidMeshError(source, f"{where} must be a list of finite numbers, got {repr(value)[:40]}")
+            if any(w != 0 for w in value):
+                raise InvalidMeshError(
+                    source,
+                    f"meshes[{m}] has morph targets drawn at {where} {value[:4]}, which nbs-env does not apply "
+                    "(it would read the undeformed mesh): export the mesh with the morph applied",
                 )
 
 

@@ -83,7 +83,7 @@ from scenes.geometry import split_long_faces
 from scenes.importers import footprint_polygon
 from scenes.interior import derive_rooms, rooms_by_probe
 from scenes.labels import STRUCTURAL_CLASSES
-from scenes.limits import check_file_size, check_storey_size
+from scenes.limits import MAX_ORIGIN_DISTANCE, check_file_size, check_storey_size
 from scenes.model import Door, Room, Scene, SurfaceClass
 from scenes.stepgraph import check_chains, check_references
 
@@ -364,7 +364,9 @@ def _check_si_prefixes(source: str, data: bytes) -> None:
 #: An SI unit's instance and its prefix, where it has one (``#2=IFCSIUNIT(*,.LENGTHUNIT.,.MILLI.,.METRE.)``).
 _SI_UNIT = re.compile(rb"#(\d+)\s*=\s*IFCSIUNIT\s*\(\s*[^,]*,\s*\.\w+\.\s*,\s*\.(\w+)\.", re.IGNORECASE)
 #: A STEP string ('...', a quote written twice) or comment (/* ... */) (ISO 10303-21).
-_STEP_TEXT = re.compile(rb"'(?:[^']|'')*'|/\*.*?\*/", re.DOTALL)
+# A string or comment never closed runs to the end (the last two branches): without them each later quote
+# was tried as a start and scanned to the end, quadratic in the file.
+_STEP_TEXT = re.compile(rb"'(?:[^']|'')*'|/\*.*?\*/|'[\s\S]*|/\*[\s\S]*", re.DOTALL)
 #: IFC's SI prefixes (IfcSIPrefix).
 _SI_PREFIXES = frozenset(
     ("EXA", "PETA", "TERA", "GIGA", "MEGA", "KILO", "HECTO", "DECA", "DECI", "CENTI", "MILLI", "MICRO", "NANO",
@@ -558,6 +560,9 @@ def load_ifc_scene(
     # Doors are meshed even when left out of the scene: their geometry gives the Door ground truth.
     wanted = {e.id(): e for e in [*(on_storey[i] for i in classes), *others, *spaces, *door_elements]}
     shapes = _triangulate(source, ifcopenshell, model, wanted.values())
+    offset = _survey_offset(source, chosen, shapes, classes)
+    if offset is not None:
+        shapes = {i: (verts - [offset[0], offset[1], 0.0], tris) for i, (verts, tris) in shapes.items()}
     unbuilt = [
         on_storey[i]
         for i, c in classes.items()
@@ -608,13 +613,14 @@ def load_ifc_scene(
         _face_rooms(mesh, rooms) if spaces_used else rooms_by_probe(rooms, mesh.triangles_center, mesh.face_normals)
     )
     door_list = _doors(door_elements, shapes, rooms, scale)
+    start = _file_start(source, chosen, on_storey.values(), scale)
     return Scene(
         mesh,
         labels,
         face_rooms,
         rooms=rooms,
         doors=door_list,
-        start=_file_start(source, chosen, on_storey.values(), scale),
+        start=None if start is None else start - (0.0 if offset is None else offset),
         name=name if name is not None else f"{source}#{chosen.name}",
         metadata={
             "source": source,
@@ -625,6 +631,8 @@ def load_ifc_scene(
             "elevation": elevation,
             "height": top - elevation,
             "rooms": "file" if spaces_used else "derived" if rooms else "none",
+            # Where the file's frame lies in the scene's: file xy = scene xy + offset (metres).
+            "offset": None if offset is None else [float(v) for v in offset],
         },
     )
 
@@ -855,6 +863,32 @@ def _is_external(space: Any) -> bool:
         return True
     common = ifcopenshell.util.element.get_psets(space).get("Pset_SpaceCommon", {})
     return common.get("IsExternal") is True
+
+
+def _survey_offset(
+    source: str, chosen: _Storey, shapes: Mapping[int, tuple[np.ndarray, np.ndarray]], classes: Mapping[int, Any]
+) -> np.ndarray | None:
+    """The plan offset that brings a storey placed at survey coordinates near the origin, or None.
+
+    Authoring tools export "shared" or survey coordinates (a storey at UTM 600,000, 5,800,000 m):
+    IFC bounds no placement, and the geometry is relative, but float32 ray casting loses millimetres
+    beyond :data:`~scenes.limits.MAX_ORIGIN_DISTANCE`. Such a storey is moved by whole metres (its
+    walls' lowest corner) and a warning says by how much; ``Scene.metadata["offset"]`` keeps it.
+    """
+    walls = [shapes[i][0] for i, c in classes.items() if c == SurfaceClass.WALL and i in shapes]
+    if not walls:
+        return None
+    points = np.concatenate(walls)
+    if np.abs(points[:, :2]).max() <= MAX_ORIGIN_DISTANCE:
+        return None
+    offset = np.floor(points[:, :2].min(axis=0))
+    warnings.warn(
+        f"{source}: storey {chosen.name!r} lies at survey coordinates ({offset[0]:,.0f}, {offset[1]:,.0f}) m, "
+        f"beyond {MAX_ORIGIN_DISTANCE:,.0f} m of the origin: it is moved by that offset, and every position "
+        "nbs-env reports for it is in the moved frame (Scene.metadata['offset'])",
+        stacklevel=3,
+    )
+    return offset
 
 
 def _file_start(source: str, chosen: _Storey, elements: Iterable[Any], scale: float) -> np.ndarray | None:

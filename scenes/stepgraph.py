@@ -34,7 +34,9 @@ CORPUS_DEEPEST = 14
 MAX_REFERENCE_DEPTH = 160
 
 # Strings ('' escapes a quote) and comments may hold anything, '#12' and ';' included.
-_STRINGS_AND_COMMENTS = re.compile(rb"'(?:[^']|'')*'|/\*.*?\*/", re.DOTALL)
+# A string or comment never closed runs to the end (the last two branches): without them each later quote
+# was tried as a start and scanned to the end, quadratic in the file.
+_STRINGS_AND_COMMENTS = re.compile(rb"'(?:[^']|'')*'|/\*.*?\*/|'[\s\S]*|/\*[\s\S]*", re.DOTALL)
 
 
 def _blank(data: bytes) -> bytes:

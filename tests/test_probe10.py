@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
 import pytest
 
 from scenes import load_scene
@@ -286,3 +287,87 @@ def test_which_gltf_scene_is_read_is_said(glb_parts, tmp_path):  # noqa: F811
         load_scene(_gltf(glb_parts, tmp_path, none))
     with pytest.warns(UserWarning, match=r"2 scenes and names none \('scene'\): scenes\[0\] is read"):
         assert len(load_scene(_gltf(glb_parts, tmp_path, two)).mesh.faces) > 0
+
+
+# ---------------------------------------------------------------------- probe 20
+@pytest.mark.parametrize(
+    "build, message",
+    [
+        (lambda: __import__("nbs_env.config", fromlist=["x"]).ObservationConfig(shape=5), "ObservationConfig: a field"),
+        (lambda: __import__("nbs_env.config", fromlist=["x"]).EnvConfig(robot=0), "EnvConfig: a field"),
+        (
+            lambda: __import__("nbs_env.config", fromlist=["x"]).EnvConfig.from_dict(
+                {"robot": {"doors": {"min_behind_points": _HUGE}}}
+            ),
+            "min_behind_points must be at most .*, got an integer of 401 digits",
+        ),
+    ],
+)
+def test_a_configuration_of_a_field_of_the_wrong_kind_is_a_config_error(build, message):
+    """`ObservationConfig(shape=5)` was a TypeError from `len`, a 401-digit bound an OverflowError
+    from the message's own formatting."""
+    from nbs_env.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=message):
+        build()
+
+
+def test_a_set_object_naming_a_key_twice_says_so():
+    import argparse
+
+    from train.arguments import _assignment
+
+    with pytest.raises(argparse.ArgumentTypeError, match="rooms: the key 'completion_fraction' appears twice"):
+        _assignment('rooms={"completion_fraction": 0.05, "completion_fraction": 0.5}')
+
+
+@pytest.mark.parametrize("seconds", ['"nan"', "1" + "0" * 400, "-5", "true"])
+def test_a_run_s_recorded_seconds_that_are_no_count_are_taken_as_none(seconds, tmp_path):
+    """A string "nan" went into the next policy.json as NaN (not JSON); 401 digits were an
+    OverflowError after the resumed session's work, which was then lost."""
+    from train.ppo import _previous_seconds
+
+    (tmp_path / "policy.json").write_text('{"training": {"seconds": ' + seconds + "}}")
+    assert _previous_seconds(tmp_path) == 0.0
+    (tmp_path / "policy.json").write_text('{"training": {"seconds": 12.5}}')
+    assert _previous_seconds(tmp_path) == 12.5
+
+
+def test_a_mesh_drawn_with_morph_targets_is_refused(glb_parts, tmp_path):  # noqa: F811
+    """The reader drew the undeformed mesh where other readers add the weighted targets (a wall 3 m out)."""
+    from scenes import InvalidMeshError
+
+    def morph(weight):
+        def edit(doc):
+            primitive = doc["meshes"][0]["primitives"][0]
+            primitive["targets"] = [{"POSITION": primitive["attributes"]["POSITION"]}]
+            doc["meshes"][0]["weights"] = [weight]
+
+        return edit
+
+    with pytest.raises(InvalidMeshError, match=r"morph targets drawn at meshes\[0\]\.weights \[1\.0\]"):
+        load_scene(_gltf(glb_parts, tmp_path, morph(1.0)))
+    assert len(load_scene(_gltf(glb_parts, tmp_path, morph(0.0))).mesh.faces) > 0  # weight 0 changes nothing
+
+
+def test_an_ifc_storey_at_survey_coordinates_is_moved_near_the_origin(tmp_path):
+    """Storeys exported at "shared" survey coordinates were refused ("move the model near the origin"):
+    IFC bounds no placement, and only the geometry's relative positions matter."""
+    from tests.test_probe8 import _ifc_with_start
+
+    # The file's own start (StartX 6, StartY 2 in the storey's frame) moves with the storey.
+    original = _ifc_with_start(tmp_path, "IFCLENGTHMEASURE(6.)").read_text()
+    moved = original.replace("#21=IFCCARTESIANPOINT((0.,0.,0.));", "#21=IFCCARTESIANPOINT((600000.,5800000.,0.));")
+    moved = moved.replace("#32=IFCCARTESIANPOINT((0.,0.,3.));", "#32=IFCCARTESIANPOINT((600000.,5800000.,3.));")
+    assert moved.count("5800000.") == 2
+    (tmp_path / "utm.ifc").write_text(moved)
+    plain = load_scene(str(tmp_path / "start.ifc"))
+    with pytest.warns(UserWarning, match=r"survey coordinates \(600,000, 5,800,000\) m"):
+        scene = load_scene(str(tmp_path / "utm.ifc"))
+    # The walls' lowest corner was the file's (0, 0): moved by exactly the survey offset.
+    assert scene.metadata["offset"] == [600000.0, 5800000.0]
+    assert np.allclose(np.sort(scene.mesh.vertices, axis=0), np.sort(plain.mesh.vertices, axis=0), atol=1e-6)
+    assert [round(r.area, 6) for r in scene.rooms] == [round(r.area, 6) for r in plain.rooms]
+    assert np.allclose([d.position for d in scene.doors], [d.position for d in plain.doors], atol=1e-6)
+    assert np.allclose(scene.start, plain.start, atol=1e-6) and plain.start[:2].tolist() == [6.0, 2.0]
+    assert plain.metadata["offset"] is None

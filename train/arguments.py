@@ -170,7 +170,7 @@ def _assignment(text: str) -> tuple[str, Any]:
     key, eq, value = text.partition("=")
     if not eq or not key.strip():
         raise argparse.ArgumentTypeError(f"expected KEY=VALUE (e.g. rooms.completion_fraction=0.05), got {text!r}")
-    from scenes.jsonio import MAX_JSON_DEPTH, JSONNestingError, JSONNumberError, read_json
+    from scenes.jsonio import MAX_JSON_DEPTH, JSONDuplicateKeyError, JSONNestingError, JSONNumberError, read_json
 
     try:
         parsed = read_json(value)
@@ -181,6 +181,8 @@ def _assignment(text: str) -> tuple[str, Any]:
         ) from None
     except JSONNumberError as exc:  # digits, not a word: "must be an integer, got '999...'" misled
         raise argparse.ArgumentTypeError(f"{key.strip()}: the value holds {exc.msg}") from None
+    except JSONDuplicateKeyError as exc:  # an object, not a word: "must be a JSON object" misled
+        raise argparse.ArgumentTypeError(f"{key.strip()}: {exc.msg}") from None
     except ValueError:
         parsed = value  # a bare word: a string
     return key.strip(), parsed

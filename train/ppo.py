@@ -1245,11 +1245,16 @@ def _curve_record_problem(record: Any) -> str | None:
 
 
 def _previous_seconds(out: Path) -> float:
-    """The seconds the run's earlier sessions took, as its last policy.json recorded them."""
+    """The seconds the run's earlier sessions took, as its last policy.json recorded them (0 where
+    it records no count of seconds: a string "nan" once went into the next policy.json as NaN, and a
+    401-digit number was an OverflowError after the resumed session's work)."""
     try:
-        return float(json.loads((out / "policy.json").read_text())["training"]["seconds"])
+        seconds = read_json_file(out / "policy.json")["training"]["seconds"]
     except (OSError, ValueError, KeyError, TypeError):
         return 0.0
+    if type(seconds) not in (int, float) or not 0 <= seconds < 1e12:  # NaN fails too
+        return 0.0
+    return float(seconds)
 
 
 def _load_init(path: str, network: NetworkConfig):

@@ -102,6 +102,8 @@ def _integer(config: Any, name: str, least: int, most: int | None = None) -> Non
 
 def _text(value: float) -> str:
     """A bound as a message states it: ``10,000``, ``0.05``, ``1e-09``."""
+    if isinstance(value, int) and not _float_range(value):  # format(10**400, "g") raises too
+        return f"an integer of {len(str(abs(value))):,} digits"
     if isinstance(value, (int, float)) and math.isfinite(value) and float(value).is_integer() and abs(value) < 1e15:
         return f"{int(value):,}"
     return f"{value:g}" if isinstance(value, (int, float)) else repr(value)
@@ -187,7 +189,32 @@ def json_form(value: Any) -> Any:
 
 
 class Config:
-    """Base of the frozen configuration dataclasses: their JSON-safe tree and back."""
+    """Base of the frozen configuration dataclasses: their JSON-safe tree and back.
+
+    Every subclass's ``__post_init__`` checks are wrapped so that a field of a kind they did not
+    expect (``shape=5``, ``robot=0``, an int no float holds) is a :class:`ConfigError`, never a
+    ``TypeError`` or ``OverflowError`` from inside a check.
+    """
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        checks = cls.__dict__.get("__post_init__")
+        if checks is None:
+            return
+
+        @functools.wraps(checks)
+        def checked(self: Any) -> None:
+            try:
+                checks(self)
+            except ConfigError:
+                raise
+            except (TypeError, ValueError, AttributeError, OverflowError, IndexError) as exc:
+                raise ConfigError(
+                    f"{type(self).__name__}: a field of a kind or size it cannot hold ({type(exc).__name__}: "
+                    f"{str(exc)[:120]})"
+                ) from None
+
+        cls.__post_init__ = checked  # type: ignore[attr-defined]
 
     def to_dict(self) -> dict[str, Any]:
         """The fields as a JSON-safe tree of dicts (nested configurations become dicts).
@@ -240,7 +267,7 @@ def _build(cls: type, data: Any, where: str) -> Any:
     }
     try:
         return cls(**values)
-    except (TypeError, ValueError) as exc:  # a value of a kind the class's own checks did not expect
+    except (TypeError, ValueError, OverflowError) as exc:  # a value of a kind the class's checks did not expect
         if isinstance(exc, ConfigError) and not where:
             raise
         raise ConfigError(_qualified(str(exc), where or cls.__name__, fields)) from None
