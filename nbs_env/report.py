@@ -16,6 +16,9 @@ scene's ground truth (true positions, true rooms), which the robot never sees.
 
     schema                  "nbs-metrics/1"
     scene                   str     the scene as given (bundled name, file, generated:SEED)
+    scene_offset_m          [x, y] | null   where the file's plan frame lies in the scene's (file xy =
+                                    scene xy + offset): an IFC storey at survey coordinates is moved
+                                    near the origin, and every position here is in the moved frame
     policy                  str     the policy's name
     seed                    int | null
     complete                bool    the storey was completed (False: the scan budget ran out)
@@ -352,6 +355,7 @@ def metrics_dict(
     metrics = {
         "schema": SCHEMA,
         "scene": str(scene_name),
+        "scene_offset_m": getattr(storey.scene, "metadata", {}).get("offset"),
         "policy": policy_name,
         "seed": None if seed is None else int(seed),
         "complete": bool(storey.complete),

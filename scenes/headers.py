@@ -77,8 +77,16 @@ class PlyElement:
 
     @property
     def least_binary_bytes(self) -> int:
-        """The fewest bytes a binary record takes: its scalars', and each list's count (it may be empty)."""
-        return sum(_PLY_TYPES[p.count_type or p.type] for p in self.properties)
+        """The fewest bytes a binary record takes: its scalars', and each list's count (it may be
+        empty), except a face's vertex list, which holds three indices at least (a face of fewer is
+        none: counted as its count alone, a file short by less than its faces' indices was read on,
+        face bytes as vertex bytes)."""
+        return sum(
+            _PLY_TYPES[p.count_type] + 3 * _PLY_TYPES[p.type]
+            if p.count_type and self.name == "face" and p.name in ("vertex_indices", "vertex_index")
+            else _PLY_TYPES[p.count_type or p.type]
+            for p in self.properties
+        )
 
 
 @dataclass(frozen=True)
@@ -396,7 +404,6 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
     # would load the file's fallback or placeholder data as the geometry.
     _check_extensions(source, doc)
     _check_primitives(source, doc)
-    _check_morph_targets(source, doc)
     _check_sparse(source, doc)
     buffers = _items(source, doc, "buffers")
     views = _items(source, doc, "bufferViews")
@@ -409,6 +416,7 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
     nodes = _items(source, doc, "nodes")
     _check_node_tree(source, nodes)
     drawn = _check_scenes_and_modes(source, doc, nodes)
+    _check_morph_targets(source, doc)  # on a checked node forest and scenes
     buffer_length = []
     for i, buffer in enumerate(buffers):
         declared = _natural(source, buffer, "byteLength", f"buffers[{i}]")
@@ -533,30 +541,49 @@ def _check_primitives(source: str, doc: dict) -> None:
 
 
 def _check_morph_targets(source: str, doc: dict) -> None:
-    """glTF 2.0 §3.7.2.2: a primitive's drawn positions are its own plus the weighted morph targets.
-    trimesh reads the base alone, so a mesh drawn with non-zero weights (its own or a node's) would be
-    another storey than the one other readers show: refused. Targets at weight 0 change nothing."""
+    """glTF 2.0 §3.7.2.2: a primitive's drawn positions are its own plus its POSITION morph targets
+    times the drawing node's weights (the node's own, else the mesh's). trimesh reads the base alone,
+    so a mesh a drawn node shows at non-zero weights would be another storey than the one other
+    readers show: refused. Targets at weight 0, targets that move no position (NORMAL alone) and
+    nodes no scene draws change nothing."""
     meshes = _items(source, doc, "meshes")
-    weights: dict[int, list[tuple[str, Any]]] = {}
-    for m, mesh in enumerate(meshes):
-        weights.setdefault(m, []).append((f"meshes[{m}].weights", mesh.get("weights")))
-    for i, node in enumerate(_items(source, doc, "nodes")):
-        if isinstance(node.get("mesh"), int) and "weights" in node:
-            weights.setdefault(node["mesh"], []).append((f"nodes[{i}].weights", node["weights"]))
-    for m, mesh in enumerate(meshes):
-        if not any(isinstance(p, dict) and p.get("targets") for p in mesh["primitives"]):
+    nodes = _items(source, doc, "nodes")
+    moving = {
+        m
+        for m, mesh in enumerate(meshes)
+        if any(
+            isinstance(p, dict)
+            and isinstance(p.get("targets"), list)
+            and any(isinstance(t, dict) and "POSITION" in t for t in p["targets"])
+            for p in mesh["primitives"]
+        )
+    }
+    if not moving:
+        return
+    scenes = _items(source, doc, "scenes")
+    k = doc.get("scene", 0)
+    roots = scenes[k].get("nodes", []) if isinstance(k, int) and 0 <= k < len(scenes) else []
+    drawn, todo = set(), list(roots)
+    while todo:  # nodes, children and scenes are checked (a forest of valid indices) before this runs
+        n = todo.pop()
+        drawn.add(n)
+        todo.extend(nodes[n].get("children", []))
+    for i in sorted(drawn):
+        m = nodes[i].get("mesh")
+        if m not in moving:
             continue
-        for where, value in weights.get(m, []):
-            if value is None:
-                continue
-            if not (isinstance(value, list) and all(type(w) in (int, float) and _finite(w) for w in value)):
-                raise InvalidMeshError(source, f"{where} must be a list of finite numbers, got {repr(value)[:40]}")
-            if any(w != 0 for w in value):
-                raise InvalidMeshError(
-                    source,
-                    f"meshes[{m}] has morph targets drawn at {where} {value[:4]}, which nbs-env does not apply "
-                    "(it would read the undeformed mesh): export the mesh with the morph applied",
-                )
+        where = f"nodes[{i}].weights" if "weights" in nodes[i] else f"meshes[{m}].weights"
+        value = nodes[i].get("weights", meshes[m].get("weights"))
+        if value is None:
+            continue
+        if not (isinstance(value, list) and all(type(w) in (int, float) and _finite(w) for w in value)):
+            raise InvalidMeshError(source, f"{where} must be a list of finite numbers, got {repr(value)[:40]}")
+        if any(w != 0 for w in value):
+            raise InvalidMeshError(
+                source,
+                f"meshes[{m}] has morph targets drawn at {where} {value[:4]}, which nbs-env does not apply "
+                "(it would read the undeformed mesh): export the mesh with the morph applied",
+            )
 
 
 def _check_sparse(source: str, doc: dict) -> None:

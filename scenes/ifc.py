@@ -167,10 +167,10 @@ MAX_EXTRUSION = 10_000.0
 #: The shallowest, metres: a hundredth of a millimetre, below any element a scan could see (a unit of
 #: 1e-300 m collapsed every wall to nothing, reported as "no wall faces").
 MIN_EXTRUSION = 1e-5
-#: The farthest a point may lie from its placement's origin, metres: georeferenced coordinates (a
-#: UTM northing is some 5,000 km) are within it; 1e300 m is not a building's, and the geometry
-#: engine dropped what was placed there without a word.
-MAX_COORDINATE = 1e7
+#: The farthest a point may lie from its placement's origin, metres: survey coordinates (a UTM
+#: northing is some 5,000 km, an easting with its zone in front up to 61,000 km) are within it;
+#: 1e300 m is not a building's, and the geometry engine dropped what was placed there without a word.
+MAX_COORDINATE = 1e8
 _INSTALL_HINT = "reading IFC needs ifcopenshell: pip install 'nbs-env[ifc]'"
 _BOUNDING_CLASSES = ("IfcSlab", "IfcCovering", "IfcRoof")
 
@@ -412,8 +412,9 @@ def _check_geometry_values(source: str, model: Any, scale: float) -> None:
             # The geometry engine dropped what was placed there without a word (a storey's ceiling).
             raise IfcError(
                 source,
-                f"the point #{point.id()} lies {far:g} m from its placement's origin; a building's coordinates lie "
-                f"within {MAX_COORDINATE:,.0f} m (the file's length unit is {scale:g} m: is it right?)",
+                f"the point #{point.id()} lies {far:g} m from its placement's origin; a building's coordinates, "
+                f"survey coordinates included, lie within {MAX_COORDINATE:,.0f} m (the file's length unit is "
+                f"{scale:g} m: is it right?)",
             )
         if len(point.Coordinates or ()) not in (2, 3):
             raise IfcError(
@@ -885,7 +886,7 @@ def _survey_offset(
     warnings.warn(
         f"{source}: storey {chosen.name!r} lies at survey coordinates ({offset[0]:,.0f}, {offset[1]:,.0f}) m, "
         f"beyond {MAX_ORIGIN_DISTANCE:,.0f} m of the origin: it is moved by that offset, and every position "
-        "nbs-env reports for it is in the moved frame (Scene.metadata['offset'])",
+        "nbs-env reports for it is in the moved frame (Scene.metadata['offset'], metrics.json's scene_offset_m)",
         stacklevel=3,
     )
     return offset

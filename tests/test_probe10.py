@@ -294,7 +294,7 @@ def test_which_gltf_scene_is_read_is_said(glb_parts, tmp_path):  # noqa: F811
     "build, message",
     [
         (lambda: __import__("nbs_env.config", fromlist=["x"]).ObservationConfig(shape=5), "ObservationConfig: a field"),
-        (lambda: __import__("nbs_env.config", fromlist=["x"]).EnvConfig(robot=0), "EnvConfig: a field"),
+        (lambda: __import__("nbs_env.config", fromlist=["x"]).EnvConfig(robot=0), "robot must be a RobotConfig, got 0"),
         (
             lambda: __import__("nbs_env.config", fromlist=["x"]).EnvConfig.from_dict(
                 {"robot": {"doors": {"min_behind_points": _HUGE}}}
@@ -350,24 +350,121 @@ def test_a_mesh_drawn_with_morph_targets_is_refused(glb_parts, tmp_path):  # noq
     assert len(load_scene(_gltf(glb_parts, tmp_path, morph(0.0))).mesh.faces) > 0  # weight 0 changes nothing
 
 
-def test_an_ifc_storey_at_survey_coordinates_is_moved_near_the_origin(tmp_path):
+@pytest.mark.parametrize("easting, shown", [("600000.", "600,000"), ("32600000.", "32,600,000")])  # zone in front
+def test_an_ifc_storey_at_survey_coordinates_is_moved_near_the_origin(easting, shown, tmp_path):
     """Storeys exported at "shared" survey coordinates were refused ("move the model near the origin"):
     IFC bounds no placement, and only the geometry's relative positions matter."""
     from tests.test_probe8 import _ifc_with_start
 
     # The file's own start (StartX 6, StartY 2 in the storey's frame) moves with the storey.
     original = _ifc_with_start(tmp_path, "IFCLENGTHMEASURE(6.)").read_text()
-    moved = original.replace("#21=IFCCARTESIANPOINT((0.,0.,0.));", "#21=IFCCARTESIANPOINT((600000.,5800000.,0.));")
-    moved = moved.replace("#32=IFCCARTESIANPOINT((0.,0.,3.));", "#32=IFCCARTESIANPOINT((600000.,5800000.,3.));")
+    moved = original.replace("#21=IFCCARTESIANPOINT((0.,0.,0.));", f"#21=IFCCARTESIANPOINT(({easting},5800000.,0.));")
+    moved = moved.replace("#32=IFCCARTESIANPOINT((0.,0.,3.));", f"#32=IFCCARTESIANPOINT(({easting},5800000.,3.));")
     assert moved.count("5800000.") == 2
     (tmp_path / "utm.ifc").write_text(moved)
     plain = load_scene(str(tmp_path / "start.ifc"))
-    with pytest.warns(UserWarning, match=r"survey coordinates \(600,000, 5,800,000\) m"):
+    with pytest.warns(UserWarning, match=rf"survey coordinates \({shown}, 5,800,000\) m"):
         scene = load_scene(str(tmp_path / "utm.ifc"))
     # The walls' lowest corner was the file's (0, 0): moved by exactly the survey offset.
-    assert scene.metadata["offset"] == [600000.0, 5800000.0]
+    assert scene.metadata["offset"] == [float(easting), 5800000.0]
     assert np.allclose(np.sort(scene.mesh.vertices, axis=0), np.sort(plain.mesh.vertices, axis=0), atol=1e-6)
     assert [round(r.area, 6) for r in scene.rooms] == [round(r.area, 6) for r in plain.rooms]
     assert np.allclose([d.position for d in scene.doors], [d.position for d in plain.doors], atol=1e-6)
     assert np.allclose(scene.start, plain.start, atol=1e-6) and plain.start[:2].tolist() == [6.0, 2.0]
+    if easting == "600000.":  # the report says where the scan lies in the file's frame
+        from nbs_env import NBSEnv
+        from nbs_env.report import metrics_dict
+
+        env = NBSEnv(preset="fast")
+        try:
+            env.reset(seed=0, options={"scene": scene})
+            assert metrics_dict(env.storey, "utm.ifc", "greedy", 0)["scene_offset_m"] == [600000.0, 5800000.0]
+        finally:
+            env.close()
     assert plain.metadata["offset"] is None
+
+
+# ---------------------------------------------------------------------- probe 21
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda c: c.EnvConfig(observation=0), "observation must be a ObservationConfig, got 0"),
+        (lambda c: c.EnvConfig(generator=5), "generator must be a GeneratorConfig, got 5"),
+        (lambda c: c.RobotConfig(scanner=None), "scanner must be a ScannerConfig, got None"),
+        (lambda c: c.EnvConfig(keep_scans="no"), r"keep_scans must be a bool \(true or false\), got 'no'"),
+        (lambda c: c.EnvConfig.from_dict({"keep_scans": 0.5}), "keep_scans must be a bool \\(true or false\\)"),
+    ],
+)
+def test_a_configuration_field_holds_its_declared_kind(make, message):
+    """`EnvConfig(observation=0)` was taken and failed in the env; `keep_scans="no"` kept every scan."""
+    import numpy
+
+    from nbs_env import config
+    from nbs_env.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=message):
+        make(config)
+    kept = config.EnvConfig(keep_scans=numpy.True_)
+    assert kept.keep_scans is True and config.EnvConfig.from_dict(kept.to_dict()) == kept
+
+
+@pytest.mark.parametrize(
+    "edit",
+    [
+        # a node's weights 0 override the mesh's 1 (glTF 2.0 §5.25)
+        lambda doc, acc: (doc["meshes"][0].update(weights=[1.0]), doc["nodes"][0].update(weights=[0.0])),
+        # a node no scene draws
+        lambda doc, acc: doc["nodes"].append({"mesh": 0, "weights": [1.0]}),
+        # targets that move no position
+        lambda doc, acc: (
+            doc["meshes"][0]["primitives"][0].update(targets=[{"NORMAL": acc}]),
+            doc["meshes"][0].update(weights=[1.0]),
+        ),
+    ],
+)
+def test_morph_targets_that_move_nothing_drawn_are_read(edit, glb_parts, tmp_path):  # noqa: F811
+    """Three files that draw the base geometry were refused as "morph targets drawn"."""
+
+    def apply(doc):
+        primitive = doc["meshes"][0]["primitives"][0]
+        accessor = primitive["attributes"]["POSITION"]
+        primitive["targets"] = [{"POSITION": accessor}]
+        edit(doc, accessor)
+
+    assert len(load_scene(_gltf(glb_parts, tmp_path, apply)).mesh.faces) > 0
+
+
+def test_a_resumed_run_s_settings_that_ask_too_much_memory_name_its_file(tiny_run, tmp_path):
+    """ "--n-steps 10...0 x --envs 1 asks for ... TiB" named options the user never typed."""
+    import shutil
+
+    from nbs_env.errors import ModelFileError
+    from train.ppo import resume_config
+
+    run = tmp_path / "run"
+    shutil.copytree(tiny_run, run)
+    for state in run.rglob("training_state.json"):
+        document = json.loads(state.read_text())
+        document["run"]["n_steps"] = 10**30
+        state.write_text(json.dumps(document))
+    with pytest.raises(ModelFileError, match=r"training_state\.json: its run settings are refused \(.*n.steps"):
+        resume_config(run)
+
+
+def test_a_binary_ply_shorter_than_its_faces_indices_is_named_truncated(tmp_path):
+    """A file short by less than its faces' indices was read on, face bytes as vertex bytes ("the
+    mesh is empty", or "8 bytes follow the last record" for a file 4 bytes short)."""
+    import struct
+
+    from scenes import InvalidMeshError
+
+    header = (
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty double x\nproperty float y\n"
+        b"property float z\nelement face 1\nproperty list uchar int vertex_indices\nproperty uchar label\n"
+        b"end_header\n"
+    )
+    body = b"".join(struct.pack("<dff", *v) for v in ((0, 0, 0), (1, 0, 0), (0, 1, 0)))
+    body += struct.pack("<B3iB", 3, 0, 1, 2, 1)
+    (tmp_path / "short.ply").write_bytes(header + body[:-5])
+    with pytest.raises(InvalidMeshError, match="at least 62 bytes, but 57 bytes follow the header"):
+        load_scene(str(tmp_path / "short.ply"))

@@ -73,6 +73,7 @@ def report(tmp_path_factory) -> SimpleNamespace:
 TOP_LEVEL = {
     "schema": str,
     "scene": str,
+    "scene_offset_m": type(None),  # a list [x, y] for an IFC storey at survey coordinates
     "policy": str,
     "seed": int,
     "complete": bool,

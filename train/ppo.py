@@ -810,6 +810,8 @@ def resume_config(run_folder: str | Path, timesteps: int | None = None) -> Train
         config = TrainConfig.from_dict(document["run"])
         if timesteps is not None:
             config = dataclasses.replace(config, timesteps=timesteps)
+        # The file's settings, not options the user typed: "--n-steps 10...0 asks for TiB" named none.
+        check_memory(config, behaviour_cloning=False)
     except (ConfigError, TypeError) as exc:
         raise ModelFileError(f"{folder / STATE_JSON}: its run settings are refused ({exc})") from None
     return config

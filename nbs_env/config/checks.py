@@ -19,6 +19,8 @@ import typing
 from dataclasses import asdict
 from typing import Any, TypeVar
 
+import numpy as np
+
 from nbs_env.errors import ConfigError
 
 __all__ = ["Config", "json_form", "parse_float", "parse_int"]
@@ -204,6 +206,7 @@ class Config:
 
         @functools.wraps(checks)
         def checked(self: Any) -> None:
+            _check_field_kinds(self)
             try:
                 checks(self)
             except ConfigError:
@@ -251,6 +254,31 @@ class Config:
             a value the constructor refuses.
         """
         return _build(cls, data, where)
+
+
+def _check_field_kinds(config: Any) -> None:
+    """The fields declared as a configuration or a bool hold one: ``EnvConfig(observation=0)`` was
+    taken and failed later in the env, ``keep_scans="no"`` kept every scan (a non-empty string is true)."""
+    hints = _field_hints(type(config))
+    for name, hint in hints.items():
+        value = getattr(config, name)
+        kinds = hint.__args__ if isinstance(hint, types.UnionType) else (hint,)
+        if value is None and type(None) in kinds:
+            continue
+        configs = [k for k in kinds if isinstance(k, type) and (issubclass(k, Config) or dataclasses.is_dataclass(k))]
+        if configs and not isinstance(value, tuple(configs)):
+            raise ConfigError(f"{name} must be a {configs[0].__name__}, got {repr(value)[:60]}")
+        if bool in kinds and len(kinds) == 1:
+            if isinstance(value, np.bool_):  # numpy's bool: stored as Python's, JSON-safe
+                object.__setattr__(config, name, bool(value))
+            elif not isinstance(value, bool):
+                raise ConfigError(f"{name} must be a bool (true or false), got {repr(value)[:60]}")
+
+
+@functools.cache
+def _field_hints(cls: type) -> dict[str, Any]:
+    hints = typing.get_type_hints(cls)
+    return {f.name: hints[f.name] for f in dataclasses.fields(cls) if f.name in hints}
 
 
 def _build(cls: type, data: Any, where: str) -> Any:
