@@ -832,6 +832,14 @@ def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> int:
             if "name" in item and not isinstance(item["name"], str):
                 raise InvalidMeshError(source, f"{key}[{i}].name is {repr(item['name'])[:40]}, not a string")
     for i, node in enumerate(nodes):
+        if "mesh" in node and "skin" in node:
+            # glTF 2.0 §3.7.3: a skinned mesh is drawn by its joints' transforms, not its node's; the
+            # reader applies neither, so the storey would be another than other readers show.
+            raise InvalidMeshError(
+                source,
+                f"nodes[{i}] draws its mesh with a skin (skins), which nbs-env does not apply: export the mesh "
+                "with its pose applied",
+            )
         if "mesh" in node and "camera" in node:
             raise InvalidMeshError(
                 source,

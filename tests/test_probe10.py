@@ -468,3 +468,51 @@ def test_a_binary_ply_shorter_than_its_faces_indices_is_named_truncated(tmp_path
     (tmp_path / "short.ply").write_bytes(header + body[:-5])
     with pytest.raises(InvalidMeshError, match="at least 62 bytes, but 57 bytes follow the header"):
         load_scene(str(tmp_path / "short.ply"))
+
+
+# ---------------------------------------------------------------------- probe 22
+def test_a_dotted_field_inside_a_section_set_to_no_section_is_a_config_error():
+    """`make_config(robot=5, **{"robot.scanner.height": 2.0})` was a TypeError from inside; a
+    GeneratorConfig instance with a dotted generator field one of item assignment."""
+    from nbs_env.config import make_config
+    from nbs_env.errors import ConfigError
+    from scenes.generator import GeneratorConfig
+
+    with pytest.raises(ConfigError, match=r"robot is set to 5, not a section, and robot\.scanner\.height inside it"):
+        make_config(**{"robot": 5, "robot.scanner.height": 2.0})
+    assert make_config(generator=GeneratorConfig(), **{"generator.rooms": 3}).generator.rooms == 3
+
+
+@pytest.mark.parametrize("n_steps, envs, batch_size", [(65, 1, 64), (43, 3, 64), (8, 2, 1)])
+def test_a_rollout_that_leaves_a_minibatch_of_one_sample_is_refused_before_the_work(n_steps, envs, batch_size):
+    """PPO normalises each minibatch's advantages by their spread: one of a single sample gave NaN
+    logits and a traceback after the first rollout, and the run was lost."""
+    from nbs_env.errors import ConfigError
+    from train.ppo import TrainConfig
+
+    with pytest.raises(ConfigError, match="leaves a minibatch of one sample"):
+        TrainConfig(n_steps=n_steps, envs=envs, batch_size=batch_size)
+    assert TrainConfig(n_steps=64, envs=envs, batch_size=64).n_steps == 64
+
+
+def test_a_training_configuration_takes_numpy_numbers():
+    import numpy
+
+    from train.ppo import TrainConfig
+
+    config = TrainConfig(rooms=(numpy.int64(1), numpy.int64(3)), cell_size=(numpy.float32(2.0), numpy.float32(3.0)))
+    assert config.rooms == (1, 3) and type(config.rooms[0]) is int and type(config.cell_size[0]) is float
+    assert TrainConfig.from_dict(json.loads(json.dumps(config.to_dict()))) == config
+
+
+def test_a_skinned_mesh_is_refused(glb_parts, tmp_path):  # noqa: F811
+    """glTF 2.0 §3.7.3: a skinned mesh is drawn by its joints' transforms; it was read unposed without a word."""
+    from scenes import InvalidMeshError
+
+    def skin(doc):
+        doc["nodes"].append({"name": "bone", "translation": [0, 0, 1.5]})
+        doc["skins"] = [{"joints": [len(doc["nodes"]) - 1]}]
+        doc["nodes"][0]["skin"] = 0
+
+    with pytest.raises(InvalidMeshError, match=r"nodes\[0\] draws its mesh with a skin"):
+        load_scene(_gltf(glb_parts, tmp_path, skin))

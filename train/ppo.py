@@ -32,7 +32,7 @@ import numpy as np
 from nbs_env import threads
 from nbs_env.atomic import replacing, write_text
 from nbs_env.config import Config, EnvConfig, _integer, _require
-from nbs_env.config.checks import _within, parse_float
+from nbs_env.config.checks import _plain_numbers, _within, parse_float
 from nbs_env.config.rooms import MAX_SCANS
 from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES
@@ -168,6 +168,7 @@ class TrainConfig(Config):
     hold_coverage: float = 0.0
 
     def __post_init__(self) -> None:
+        _plain_numbers(self)  # numpy numbers in rooms, cell_size: plain, as every configuration takes them
         object.__setattr__(self, "rooms", tuple(self.rooms))
         object.__setattr__(self, "cell_size", tuple(self.cell_size))
         _require(
@@ -200,6 +201,15 @@ class TrainConfig(Config):
         _require(
             self.n_steps * self.envs >= 2,
             f"n_steps x envs must be at least 2 (a rollout PPO can normalise), got {self.n_steps} x {self.envs}",
+        )
+        # The same for every minibatch: the rollout's last one holds its remainder (65 steps in
+        # minibatches of 64 left one: NaN logits and a traceback after the rollout, the run lost).
+        rollout = self.n_steps * self.envs
+        _require(
+            self.batch_size >= 2 and rollout % self.batch_size != 1,
+            f"n_steps x envs = {rollout:,} in minibatches of batch_size {self.batch_size} leaves a minibatch of "
+            "one sample, which PPO cannot normalise: make n_steps x envs a multiple of batch_size "
+            "(or not one more than a multiple), and batch_size at least 2",
         )
         _require(
             len(self.rooms) == 2

@@ -145,10 +145,13 @@ def make_config(preset: str | EnvConfig | None = None, /, **overrides: Any) -> E
 def _set(tree: dict[str, Any], path: str, value: Any) -> None:
     *parents, leaf = path.split(".")
     node = tree
-    for part in parents:
+    for k, part in enumerate(parents):
+        if not isinstance(node.get(part), dict):  # robot=5 with robot.scanner.height=2: a TypeError from here
+            section = ".".join(parents[: k + 1])
+            raise ConfigError(f"{section} is set to {repr(node.get(part))[:40]}, not a section, and {path} inside it")
         node = node[part]
-    if isinstance(value, Config):
-        node[leaf] = value.to_dict()
+    if isinstance(value, Config) or (dataclasses.is_dataclass(value) and not isinstance(value, type)):
+        node[leaf] = dataclasses.asdict(value)  # a GeneratorConfig is a dataclass of its own
     elif isinstance(value, dict) and isinstance(node.get(leaf), dict) and leaf != "scene_options":
         node[leaf] = {**node[leaf], **value}
     else:
