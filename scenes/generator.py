@@ -40,6 +40,7 @@ from scenes.floorplan import (
     _rectangle,
 )
 from scenes.geometry import STOREY_CLEARANCE
+from scenes.limits import is_finite
 from scenes.model import Scene
 from scenes.validation import validate_plan_scene
 
@@ -106,10 +107,7 @@ class GeneratorConfig:
             return isinstance(value, numbers.Integral) and not isinstance(value, bool)
 
         def number(value: object) -> bool:
-            try:  # math.isfinite(10**400) raises
-                return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
-            except OverflowError:
-                return False
+            return isinstance(value, numbers.Real) and not isinstance(value, bool) and is_finite(value)
 
         def pair(name: str, check: Callable[[object], bool], low: float, high: float, kind: str) -> tuple:
             value = getattr(self, name)

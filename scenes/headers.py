@@ -26,7 +26,7 @@ from urllib.parse import unquote, urlsplit
 
 from scenes.errors import InvalidMeshError
 from scenes.jsonio import read_json
-from scenes.limits import MAX_FACES, check_face_count
+from scenes.limits import MAX_FACES, check_face_count, is_finite
 
 __all__ = [
     "PlyElement",
@@ -576,7 +576,7 @@ def _check_morph_targets(source: str, doc: dict) -> None:
         value = nodes[i].get("weights", meshes[m].get("weights"))
         if value is None:
             continue
-        if not (isinstance(value, list) and all(type(w) in (int, float) and _finite(w) for w in value)):
+        if not (isinstance(value, list) and all(type(w) in (int, float) and is_finite(w) for w in value)):
             raise InvalidMeshError(source, f"{where} must be a list of finite numbers, got {repr(value)[:40]}")
         if any(w != 0 for w in value):
             raise InvalidMeshError(
@@ -890,14 +890,6 @@ _TRANSFORM_LENGTHS = {"matrix": 16, "translation": 3, "rotation": 4, "scale": 3}
 UNIT_TOLERANCE = 1e-3
 
 
-def _finite(value: float) -> bool:
-    """math.isfinite, False for an int beyond a float's range (it raises OverflowError)."""
-    try:
-        return math.isfinite(value)
-    except OverflowError:
-        return False
-
-
 def _not_trs(matrix: list[float]) -> str | None:
     """Why a node's column-major 4x4 matrix is not decomposable to translation, rotation and scale
     (glTF 2.0 §5.25), or None: its last row must be 0, 0, 0, 1 (readers that divide by w and those that
@@ -925,7 +917,7 @@ def _check_node_tree(source: str, nodes: list[dict]) -> None:
             if value is not None and not (
                 isinstance(value, list)
                 and len(value) == length
-                and all(isinstance(v, (int, float)) and not isinstance(v, bool) and _finite(v) for v in value)
+                and all(isinstance(v, (int, float)) and not isinstance(v, bool) and is_finite(v) for v in value)
             ):
                 raise InvalidMeshError(
                     source, f"nodes[{i}].{key} must be {length} finite numbers, got {repr(value)[:60]}"

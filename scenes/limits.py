@@ -102,6 +102,7 @@ __all__ = [
     "check_sample_count",
     "check_storey_shape",
     "check_storey_size",
+    "is_finite",
     "machine_memory",
     "memory_left",
     "unit_scale",
@@ -298,6 +299,15 @@ def check_storey_size(
     else:
         cause = "is there geometry far from the building, or are the coordinates broken?"
     raise StoreySizeError(source, f"{sizes}: {cause}")
+
+
+def is_finite(value: float) -> bool:
+    """``math.isfinite``, and False for an integer no float holds (``math.isfinite(10**400)`` raises
+    OverflowError; JSON and Python integers have no bound)."""
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
 
 
 def check_origin_distance(source: str, vertices: np.ndarray) -> None:

@@ -22,6 +22,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from nbs_env.errors import ConfigError
+from scenes.limits import is_finite
 
 __all__ = ["Config", "json_form", "parse_float", "parse_int"]
 
@@ -67,18 +68,10 @@ def _require(condition: bool, message: str) -> None:
         raise ConfigError(message)
 
 
-def _float_range(value: float) -> bool:
-    """Finite, and within a float's range: a Python int may not be (math.isfinite(10**400) raises)."""
-    try:
-        return math.isfinite(value)
-    except OverflowError:
-        return False
-
-
 def _finite(**values: float) -> None:
     for name, value in values.items():
         _require(
-            isinstance(value, (int, float)) and not isinstance(value, bool) and _float_range(value),
+            isinstance(value, (int, float)) and not isinstance(value, bool) and is_finite(value),
             f"{name} must be a finite number, got {repr(value)[:60]}",
         )
 
@@ -104,7 +97,7 @@ def _integer(config: Any, name: str, least: int, most: int | None = None) -> Non
 
 def _text(value: float) -> str:
     """A bound as a message states it: ``10,000``, ``0.05``, ``1e-09``."""
-    if isinstance(value, int) and not _float_range(value):  # format(10**400, "g") raises too
+    if isinstance(value, int) and not is_finite(value):  # format(10**400, "g") raises too
         return f"an integer of {len(str(abs(value))):,} digits"
     if isinstance(value, (int, float)) and math.isfinite(value) and float(value).is_integer() and abs(value) < 1e15:
         return f"{int(value):,}"

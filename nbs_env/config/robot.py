@@ -15,12 +15,12 @@ from nbs_env.config.checks import (
     _at_most,
     _finite,
     _finite_fields,
-    _float_range,
     _integer,
     _plain_numbers,
     _require,
     _within,
 )
+from scenes.limits import is_finite
 
 __all__ = [
     "MAX_ANGULAR_STEP",
@@ -454,7 +454,7 @@ class RegistrationConfig(Config):
         _require(
             0 < len(correspondence) <= 10
             and all(
-                isinstance(d, (int, float)) and not isinstance(d, bool) and _float_range(d) and 0 < d <= 100
+                isinstance(d, (int, float)) and not isinstance(d, bool) and is_finite(d) and 0 < d <= 100
                 for d in correspondence
             ),
             f"max_correspondence must be 1 to 10 distances within (0, 100] metres, got {self.max_correspondence}",
@@ -466,8 +466,7 @@ class RegistrationConfig(Config):
             _require(
                 len(self.stage_voxels) == len(self.max_correspondence)
                 and all(
-                    isinstance(v, (int, float)) and not isinstance(v, bool) and _float_range(v)
-                    for v in self.stage_voxels
+                    isinstance(v, (int, float)) and not isinstance(v, bool) and is_finite(v) for v in self.stage_voxels
                 )
                 and all(self.voxel_size <= v <= 2.0 for v in self.stage_voxels),
                 f"stage_voxels must give one voxel size within [voxel_size ({self.voxel_size}), 2] metres per stage "

@@ -11,13 +11,13 @@ from nbs_env.config.checks import (
     Config,
     _at_most,
     _finite_fields,
-    _float_range,
     _integer,
     _plain_numbers,
     _require,
     _within,
 )
 from nbs_env.config.robot import MAX_RAYS
+from scenes.limits import is_finite
 
 __all__ = ["COMPLETIONS", "MAX_SCANS", "MAX_SEARCH_SCANS", "RoomRules", "WallSearchConfig"]
 
@@ -152,7 +152,7 @@ class WallSearchConfig(Config):
         _require(
             0 < len(heights) <= 100
             and all(
-                isinstance(h, int | float) and not isinstance(h, bool) and _float_range(h) and 0 < h <= 100
+                isinstance(h, int | float) and not isinstance(h, bool) and is_finite(h) and 0 < h <= 100
                 for h in heights
             ),
             f"heights must be 1 to 100 heights within (0, 100] metres, got {self.heights!r}",
