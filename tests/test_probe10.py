@@ -516,3 +516,25 @@ def test_a_skinned_mesh_is_refused(glb_parts, tmp_path):  # noqa: F811
 
     with pytest.raises(InvalidMeshError, match=r"nodes\[0\] draws its mesh with a skin"):
         load_scene(_gltf(glb_parts, tmp_path, skin))
+
+
+# ---------------------------------------------------------------------- scanner presets
+def test_a_scanner_preset_name_must_describe_the_values_the_scanner_holds():
+    """``--set robot.scanner.preset=rtc360:6mm`` ran the generic scanner while metrics.json and the E57
+    header named the RTC360."""
+    from dataclasses import replace
+
+    from nbs_env.config import make_config
+    from nbs_env.config.scanners import scanner_config
+    from nbs_env.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"'rtc360:6mm' records the Leica RTC360.*max_range 350\.0 .*130\.0"):
+        make_config("fast", **{"robot.scanner.preset": "rtc360:6mm"})
+    sheet = scanner_config("rtc360:6mm", simulated_step=1.0, height=1.2).to_dict()
+    assert make_config("fast", **{"robot.scanner": sheet}).robot.scanner.preset == "rtc360:6mm"
+    with pytest.raises(ConfigError, match=r"station_time .*use --scanner rtc360:6mm"):  # one value changed
+        make_config("fast", **{"robot.scanner": {**sheet, "station_time": 5.0}})
+    config = make_config("fast", **{"robot.scanner": {**sheet, "station_time": 5.0, "preset": None}})
+    assert config.robot.scanner.station_time == 5.0  # a scanner set by hand names no datasheet
+    with pytest.raises(ConfigError, match=r"holds station_time 5\.0 \(the datasheet.s 22\.9\):"):
+        replace(config, robot=replace(config.robot, scanner=replace(config.robot.scanner, preset="rtc360:6mm")))

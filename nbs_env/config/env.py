@@ -13,7 +13,7 @@ import numpy as np
 from nbs_env.config.checks import Config, _at_most, _finite, _integer, _plain_numbers, _require, _within
 from nbs_env.config.robot import RobotConfig
 from nbs_env.config.rooms import MAX_SCANS, RoomRules
-from nbs_env.config.scanners import SCANNERS
+from nbs_env.config.scanners import SCANNERS, datasheet_differences
 from scenes.generator import GeneratorConfig
 from scenes.limits import UNITS
 from scenes.loader import source_options
@@ -309,6 +309,15 @@ class EnvConfig(Config):
                 preset in presets,
                 f"robot.scanner.preset must be None or a datasheet scanner's NAME:SETTING ({', '.join(presets)}), "
                 f"got {repr(preset)[:60]}",
+            )
+            odd = datasheet_differences(self.robot.scanner)
+            _require(
+                not odd,
+                f"robot.scanner.preset {preset!r} records the {SCANNERS[preset.split(':')[0]].title} at its "
+                f"{preset.split(':')[1]} setting, but the scanner holds {', '.join(odd[:4])}"
+                f"{f' and {len(odd) - 4} more' if len(odd) > 4 else ''}: use --scanner {preset} (in Python "
+                f"scanner_config({preset!r})) for the datasheet's values, or set robot.scanner.preset to null "
+                "for a scanner set by hand",
             )
         _require(self.travel_speed > 0, f"travel_speed must be > 0, got {self.travel_speed}")
         # The travel time is metres over the speed: a millimetre a second is already days per storey.

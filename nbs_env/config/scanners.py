@@ -578,3 +578,30 @@ def scanner_config(spec: str, *, simulated_step: float | None = None, height: fl
         station_time=setting.station_time,
         preset=f"{key}:{setting.name}",
     )
+
+
+def datasheet_differences(scanner: ScannerConfig) -> list[str]:
+    """The datasheet fields a scanner that names a preset holds at other values.
+
+    ``ScannerConfig.preset`` is what ``metrics.json`` and the E57 header record as the instrument
+    simulated, so it must describe the values the scanner holds. Only the simulated step and the
+    height are the user's: neither is a datasheet figure.
+
+    Parameters
+    ----------
+    scanner : ScannerConfig
+        A scanner whose ``preset`` is a valid ``"NAME:SETTING"`` (or None).
+
+    Returns
+    -------
+    list of str
+        ``"max_range 350.0 (the datasheet's 130.0)"`` per differing field, in field order; empty when
+        the preset is None or every datasheet value is held.
+    """
+    if scanner.preset is None:
+        return []
+    sheet = scanner_config(scanner.preset, simulated_step=scanner.angular_step, height=scanner.height)
+    held, wanted = scanner.to_dict(), sheet.to_dict()
+    return [
+        f"{name} {held[name]!r} (the datasheet's {wanted[name]!r})" for name in wanted if held[name] != wanted[name]
+    ]
