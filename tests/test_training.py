@@ -389,7 +389,8 @@ def test_the_reward_is_its_two_terms():
 
 
 def test_the_cost_weight_holds_the_teachers_coverage():
-    """CostWeight reweighs the rewards as gain - weight x cost, counts each env's episode, and moves
+    """CostWeight reweighs the rewards as 2 (gain - weight x cost) / (1 + weight) (the env's reward at
+    weight 1, bounded by twice the gain or the cost at any weight), counts each env's episode, and moves
     the weight up while the episodes map more than the teacher, down while they map less, by a
     bounded step."""
     from train.ppo import CostWeight
@@ -402,7 +403,13 @@ def test_the_cost_weight_holds_the_teachers_coverage():
     ]
     dual.weight = 2.0
     dual.reweigh(rewards, infos, np.array([False, True]))
-    np.testing.assert_allclose(rewards, [4.0 - 2.0, 1.5 - 1.0])
+    np.testing.assert_allclose(rewards, [2 * (4.0 - 2.0) / 3, 2 * (1.5 - 1.0) / 3])
+    same = np.array([3.0], dtype=np.float32)
+    CostWeight(rate=0.1, target=50.0).reweigh(same, infos[:1], np.array([False]))
+    assert same[0] == 3.0  # weight 1: the env's own reward, the one the critic was fitted to
+    heavy = CostWeight(rate=0.1, target=50.0, weight=CostWeight.HIGH)
+    heavy.reweigh(big := np.array([3.0], dtype=np.float32), infos[:1], np.array([False]))
+    assert -2.0 <= big[0] < 0  # the price dominates, at twice the cost at most
     assert dual.finished == [1.5]  # env 1's episode ended, env 0's goes on
     dual.weight = 1.0
     dual.update()

@@ -140,8 +140,8 @@ class TrainConfig(Config):
         Structure, % of the storey's structural surface) and ``teacher`` the behaviour-cloning
         teacher's mean on its own episodes: the prices rise while the policy maps
         more than its teacher and fall while it maps less, so that PPO lowers scans and metres at the
-        teacher's coverage (a Lagrangian multiplier on the costs, :class:`CostWeight`). Needs
-        ``bc_steps``.
+        teacher's coverage (a Lagrangian multiplier on the costs, :class:`CostWeight`; the reward is
+        divided by ``(1 + weight) / 2`` so that its scale stays the critic's). Needs ``bc_steps``.
     """
 
     timesteps: int = 2048
@@ -630,12 +630,19 @@ class CostWeight:
 
     def reweigh(self, rewards: np.ndarray, infos: list[dict], dones: np.ndarray) -> None:
         """Reweigh a vector step's ``rewards`` in place (before the rollout buffer holds them):
-        gain - weight × cost from the env's ``reward_terms``; keep the mapped structure of the
-        episodes that ended."""
+        ``2 (gain - weight × cost) / (1 + weight)`` from the env's ``reward_terms``; keep the
+        mapped structure of the episodes that ended.
+
+        The division keeps the reward's scale whatever the weight (between twice the gain and
+        twice the cost, the env's own reward at weight 1): with ``gain - weight × cost`` alone the
+        return grew with the weight faster than the critic followed (its explained variance fell
+        from 0.5 to 0.01 as the weight rose from 1.8 to 5.1). Stooke, Achiam and Abbeel (2020),
+        "Responsive safety in reinforcement learning by PID Lagrangian methods", normalise so."""
+        scale = 2.0 / (1.0 + self.weight)
         for i, info in enumerate(infos):
             terms = info.get("reward_terms")
             if terms is not None:
-                rewards[i] += (1.0 - self.weight) * terms["cost"]
+                rewards[i] = scale * (rewards[i] + (1.0 - self.weight) * terms["cost"])
             if dones[i] and "mapped_pct" in info:
                 self.finished.append(float(info["mapped_pct"]))
 
