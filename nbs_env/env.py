@@ -21,6 +21,7 @@ from nbs_env.errors import ConfigError, InvalidActionError
 from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES, BeliefView, candidate_table_of, observe
 from nbs_env.storey import STAGES, StageTimes, StepOutcome, Storey, resolve_scene
 from scenes import Scene
+from scenes.limits import MAX_SEED_DIGITS
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -218,6 +219,8 @@ class NBSEnv(gym.Env):
         ):
             # gymnasium's own Error otherwise, which no caller of nbs-env expects.
             raise ConfigError(f"seed must be None or an integer >= 0, got {seed!r}")
+        if seed is not None and seed >= 10**MAX_SEED_DIGITS:
+            raise ConfigError(f"seed must have at most {MAX_SEED_DIGITS} digits, got one of more")
         # A numpy integer (what vector envs pass) as the Python int gymnasium requires.
         super().reset(seed=None if seed is None else int(seed))
         if options is not None and not isinstance(options, Mapping):

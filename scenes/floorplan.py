@@ -98,7 +98,10 @@ MAX_COORDINATE = 1e5
 MAX_LENGTH = 100.0
 _COORDINATE = {"type": "number", "minimum": -MAX_COORDINATE, "maximum": MAX_COORDINATE}
 _POINT = {"type": "array", "items": _COORDINATE, "minItems": 2, "maxItems": 2}
-_POSITIVE = {"type": "number", "exclusiveMinimum": 0, "maximum": MAX_LENGTH}
+#: The shortest length a plan may give (a millimetre): below it a wall strip or a face has no area
+#: a float keeps (a 1e-320 m sill made zero-area faces and overflow warnings).
+MIN_LENGTH = 0.001
+_POSITIVE = {"type": "number", "minimum": MIN_LENGTH, "maximum": MAX_LENGTH}
 PLAN_SCHEMA: dict[str, Any] = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
     "title": "nbs-env floor plan, version 1",
@@ -155,7 +158,7 @@ PLAN_SCHEMA: dict[str, Any] = {
                     "position": _POINT,
                     "width": _POSITIVE,
                     "height": _POSITIVE,
-                    "sill": {"type": "number", "minimum": 0, "maximum": MAX_LENGTH},
+                    "sill": {"anyOf": [{"const": 0}, _POSITIVE]},  # at the floor, or a millimetre up
                 },
             },
         },

@@ -417,6 +417,7 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
     _check_node_tree(source, nodes)
     drawn = _check_scenes_and_modes(source, doc, nodes)
     _check_morph_targets(source, doc)  # on a checked node forest and scenes
+    _check_skins(source, doc)
     buffer_length = []
     for i, buffer in enumerate(buffers):
         declared = _natural(source, buffer, "byteLength", f"buffers[{i}]")
@@ -540,6 +541,39 @@ def _check_primitives(source: str, doc: dict) -> None:
                 )
 
 
+def _drawn_nodes(source: str, doc: dict) -> set[int]:
+    """The nodes the scene read draws: its roots and their descendants (on a node forest and scenes
+    :func:`_check_scenes_and_modes` has checked)."""
+    nodes = _items(source, doc, "nodes")
+    scenes = _items(source, doc, "scenes")
+    k = doc.get("scene", 0)
+    roots = scenes[k].get("nodes", []) if isinstance(k, int) and 0 <= k < len(scenes) else []
+    drawn, todo = set(), list(roots)
+    while todo:
+        n = todo.pop()
+        drawn.add(n)
+        todo.extend(nodes[n].get("children", []))
+    return drawn
+
+
+def _check_skins(source: str, doc: dict) -> None:
+    """glTF 2.0 §3.7.3: a skinned mesh is drawn by its joints' transforms, not its node's; the
+    reader applies neither, so a drawn skinned node would be another storey than other readers show:
+    refused. A skinned node no scene draws changes nothing."""
+    nodes = _items(source, doc, "nodes")
+    skinned = [i for i, node in enumerate(nodes) if "mesh" in node and "skin" in node]
+    if not skinned:
+        return
+    drawn = _drawn_nodes(source, doc)
+    for i in skinned:
+        if i in drawn:
+            raise InvalidMeshError(
+                source,
+                f"nodes[{i}] draws its mesh with a skin (skins), which nbs-env does not apply: export the mesh "
+                "with its pose applied",
+            )
+
+
 def _check_morph_targets(source: str, doc: dict) -> None:
     """glTF 2.0 §3.7.2.2: a primitive's drawn positions are its own plus its POSITION morph targets
     times the drawing node's weights (the node's own, else the mesh's). trimesh reads the base alone,
@@ -560,15 +594,7 @@ def _check_morph_targets(source: str, doc: dict) -> None:
     }
     if not moving:
         return
-    scenes = _items(source, doc, "scenes")
-    k = doc.get("scene", 0)
-    roots = scenes[k].get("nodes", []) if isinstance(k, int) and 0 <= k < len(scenes) else []
-    drawn, todo = set(), list(roots)
-    while todo:  # nodes, children and scenes are checked (a forest of valid indices) before this runs
-        n = todo.pop()
-        drawn.add(n)
-        todo.extend(nodes[n].get("children", []))
-    for i in sorted(drawn):
+    for i in sorted(_drawn_nodes(source, doc)):
         m = nodes[i].get("mesh")
         if m not in moving:
             continue
@@ -832,14 +858,6 @@ def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> int:
             if "name" in item and not isinstance(item["name"], str):
                 raise InvalidMeshError(source, f"{key}[{i}].name is {repr(item['name'])[:40]}, not a string")
     for i, node in enumerate(nodes):
-        if "mesh" in node and "skin" in node:
-            # glTF 2.0 §3.7.3: a skinned mesh is drawn by its joints' transforms, not its node's; the
-            # reader applies neither, so the storey would be another than other readers show.
-            raise InvalidMeshError(
-                source,
-                f"nodes[{i}] draws its mesh with a skin (skins), which nbs-env does not apply: export the mesh "
-                "with its pose applied",
-            )
         if "mesh" in node and "camera" in node:
             raise InvalidMeshError(
                 source,

@@ -805,6 +805,15 @@ def _read_ascii_ply(source: str, data: bytes, header: PlyHeader) -> tuple[np.nda
                     f"{shown} is no {checked[1]!r}, its header's type",
                 )
             if prop.count_type is None and _PLY_NUMPY[prop.type] == "f4":
+                # A value beyond float32's range became inf with a bare numpy warning before.
+                big = np.isfinite(values) & (np.abs(values) > np.finfo(np.float32).max)
+                if big.any():
+                    k = int(np.flatnonzero(big)[0])
+                    raise InvalidMeshError(
+                        source,
+                        f"element '{element.name}' record {k:,} (line {first_line + at + k:,}): its '{prop.name}' "
+                        f"value {values[k]:g} is beyond what its header's type 'float' holds (3.4e38)",
+                    )
                 columns[prop.name] = values.astype(np.float32).astype(float)  # as every reader of a float
         at += element.count
         read[element.name] = columns
@@ -929,7 +938,7 @@ def _ply_polygons(column: np.ndarray, n: int, kind: str = "int") -> list[np.ndar
         if outside.any():
             at = int(np.flatnonzero(outside)[0])
             raise _PlyValueError(
-                f"PLY face {face_of(at)} has vertex index {flat[at]:.0f}, which its header's type {kind!r} cannot hold"
+                f"PLY face {face_of(at)} has vertex index {flat[at]:.15g}, which its header's type {kind!r} cannot hold"
             )
     indices = flat.astype(np.int64)
     if col.dtype != object:

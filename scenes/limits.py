@@ -109,6 +109,9 @@ __all__ = [
 ]
 
 MAX_STOREY_WIDTH = 500.0
+#: The most digits a seed has (a generated storey's, an episode's): numpy seeds its generator from
+#: any integer, no one types more, and a run's folder is named by its seed (``seed{N}``).
+MAX_SEED_DIGITS = 100
 MAX_STOREY_HEIGHT = 50.0
 MAX_FACES = 5_000_000
 BYTES_PER_FACE = 3072

@@ -28,7 +28,7 @@ from scenes.errors import (
 from scenes.floorplan import FloorPlan, extrude, load_plan
 from scenes.generator import GeneratorConfig, generate_storey
 from scenes.labels import SurfaceClass
-from scenes.limits import check_origin_distance, check_storey_shape
+from scenes.limits import MAX_SEED_DIGITS, check_origin_distance, check_storey_shape
 from scenes.model import Scene
 
 __all__ = [
@@ -44,8 +44,6 @@ __all__ = [
 MESH_EXTENSIONS = (".obj", ".glb", ".gltf", ".ply")
 SUPPORTED_EXTENSIONS = (".json", *MESH_EXTENSIONS, ".ifc")
 _GENERATED = "generated:"
-#: The longest ``generated:SEED`` seed read (numpy seeds its generator from any integer; no one types more).
-MAX_SEED_DIGITS = 100
 
 
 def list_scenes() -> list[str]:

@@ -159,7 +159,7 @@ def test_invalid_json_names_file_and_position(tmp_path):
     [
         (lambda d: d.pop("wall_thickness"), "(top level)", "wall_thickness"),
         (lambda d: d["rooms"][1].update(polygon=[[5, 0], [9, "x"], [9, 4]]), "rooms[1].polygon[1][1]", "not of type"),
-        (lambda d: d["doors"][0].update(width=-1), "doors[0].width", "less than or equal to the minimum of 0"),
+        (lambda d: d["doors"][0].update(width=-1), "doors[0].width", "less than the minimum of 0.001"),
         (lambda d: d["clutter"][0].update(kind="piano"), "clutter[0].kind", "piano"),
         (lambda d: d.update(version=7), "version", "unsupported format version 7"),
         (lambda d: d.update(colour="red"), "(top level)", "colour"),

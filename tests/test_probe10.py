@@ -517,6 +517,15 @@ def test_a_skinned_mesh_is_refused(glb_parts, tmp_path):  # noqa: F811
     with pytest.raises(InvalidMeshError, match=r"nodes\[0\] draws its mesh with a skin"):
         load_scene(_gltf(glb_parts, tmp_path, skin))
 
+    def undrawn(doc):  # a skinned copy of mesh 0 that no scene draws: the storey is the plain one
+        doc["nodes"].append({"name": "bone"})
+        doc["skins"] = [{"joints": [len(doc["nodes"]) - 1]}]
+        doc["nodes"].append({"name": "library", "mesh": 0, "skin": 0})
+
+    plain = load_scene(_gltf(glb_parts, tmp_path, lambda doc: None))
+    scene = load_scene(_gltf(glb_parts, tmp_path, undrawn))
+    assert len(scene.mesh.triangles) == len(plain.mesh.triangles)
+
 
 # ---------------------------------------------------------------------- scanner presets
 def test_a_scanner_preset_name_must_describe_the_values_the_scanner_holds():

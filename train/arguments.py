@@ -123,8 +123,9 @@ def number(text: str) -> float:
     return _number(text)
 
 
-def integer_from(least: int, what: str = "expected an integer"):
-    """An argparse type: an integer of at least ``least``; ``what`` begins the message."""
+def integer_from(least: int, what: str = "expected an integer", digits: int | None = None):
+    """An argparse type: an integer of at least ``least`` (and of at most ``digits`` digits);
+    ``what`` begins the message."""
 
     def parse(text: str) -> int:
         from nbs_env.config.checks import parse_int
@@ -135,9 +136,19 @@ def integer_from(least: int, what: str = "expected an integer"):
             raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
         if value < least:
             raise argparse.ArgumentTypeError(f"{what} >= {least}, got {text!r}")
+        if digits is not None and abs(value) >= 10**digits:
+            raise argparse.ArgumentTypeError(f"{what} of at most {digits} digits, got {text.strip()[:40]}...")
         return value
 
     return parse
+
+
+def seed_number(text: str) -> int:
+    """An argparse type: a seed, an integer >= 0 of at most :data:`scenes.limits.MAX_SEED_DIGITS`
+    digits (a run's folder is named by it)."""
+    from scenes.limits import MAX_SEED_DIGITS  # here, not at the top: `nbs --help` loads no scenes
+
+    return integer_from(0, "a seed is an integer", digits=MAX_SEED_DIGITS)(text)
 
 
 def storey_name(text: str) -> str:
@@ -325,11 +336,19 @@ def config_from_arguments(
             raise ConfigError(f"--set {key}: {COMMAND_FIELDS[root]}")
         if key not in paths:
             raise ConfigError(f"--set {key}: the configuration has no such field (dotted names, e.g. robot.voxel_size)")
+        if key in by_set:
+            raise ConfigError(f"--set {key} is given twice; give each field once")
+        if args.scanner is not None and key.startswith("robot.scanner."):
+            # A field of the --scanner's scanner: the height is the user's, and a datasheet value set
+            # here is refused by the configuration's check unless robot.scanner.preset is set to null.
+            if key == "robot.scanner.angular_step" and args.resolution is not None:
+                raise ConfigError(f"--set {key} and --resolution both set {key}")
+            given["robot.scanner"] = {**given["robot.scanner"], key.rsplit(".", 1)[1]: value}
+            by_set.add(key)
+            continue
         clash = [p for p in given if p == key or p.startswith(key + ".") or key.startswith(p + ".")]
         if clash:
             other = f"--set {clash[0]}" if clash[0] in by_set else FLAGS.get(clash[0], clash[0])
-            if other == f"--set {key}":
-                raise ConfigError(f"--set {key} is given twice; give each field once")
             raise ConfigError(f"--set {key} and {other} both set {key}")
         given[key] = value
         by_set.add(key)

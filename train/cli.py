@@ -28,7 +28,7 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from train.arguments import add_robot_arguments, add_scene_arguments, integer_from, scene_option_error
+from train.arguments import add_robot_arguments, add_scene_arguments, integer_from, scene_option_error, seed_number
 from train.outputs import NamedStream, Output, OutputError, check_outputs, output_path
 from train.stopping import STOP_SIGNALS, StopRequest, exit_code
 
@@ -66,7 +66,7 @@ def _clutter_density(text: str) -> float:
     return value
 
 
-_seed = integer_from(0, "a seed is an integer")
+_seed = seed_number
 _positive_int = integer_from(1)
 
 #: What matplotlib's savefig writes, by file suffix.

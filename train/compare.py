@@ -59,6 +59,7 @@ from nbs_env.atomic import write_text as _write_text
 from nbs_env.config import json_form
 from nbs_env.config.checks import parse_int
 from scenes.jsonio import read_json_file
+from scenes.limits import MAX_SEED_DIGITS
 from train.arguments import MAX_RUNS, parse_range
 
 __all__ = [
@@ -1256,16 +1257,25 @@ def _settings_apart(stored: dict[str, Any], wanted: dict[str, Any]) -> tuple[str
     if stored.get("preset") != wanted.get("preset"):
         apart.append(("preset", stored.get("preset"), wanted.get("preset")))
     old, new = stored.get("overrides"), wanted.get("overrides")
-    old, new = (old if isinstance(old, dict) else {}), (new if isinstance(new, dict) else {})
-    for key in sorted(set(old) | set(new), key=str):
-        if old.get(key, "unset") != new.get(key, "unset"):
-            apart.append((str(key), old.get(key, "unset"), new.get(key, "unset")))
+    _apart(old if isinstance(old, dict) else {}, new if isinstance(new, dict) else {}, "", apart)
     if not apart:
         return "other settings", "its own"
     return (
         ", ".join(f"{k} {_shown(a)}" for k, a, _ in apart[:4]),
         ", ".join(f"{k} {_shown(b)}" for k, _, b in apart[:4]),
     )
+
+
+def _apart(old: dict[Any, Any], new: dict[Any, Any], prefix: str, apart: list[tuple[str, Any, Any]]) -> None:
+    """Append to ``apart`` each dotted override the two differ in; a section both set as a dict
+    (``robot.scanner`` of ``--scanner``) is opened into its fields, so that a message names the
+    field that differs, not two dicts cut alike."""
+    for key in sorted(set(old) | set(new), key=str):
+        a, b = old.get(key, "unset"), new.get(key, "unset")
+        if isinstance(a, dict) and isinstance(b, dict):
+            _apart(a, b, f"{prefix}{key}.", apart)
+        elif a != b:
+            apart.append((f"{prefix}{key}", a, b))
 
 
 def _shown(value: Any) -> str:
@@ -1599,6 +1609,8 @@ def grid(
         raise CompareError("no seeds given")
     if min(seed_list) < 0:
         raise CompareError(f"seeds are integers >= 0, got {seeds!r}")
+    if max(seed_list) >= 10**MAX_SEED_DIGITS:  # a run's folder is named by its seed
+        raise CompareError(f"seeds have at most {MAX_SEED_DIGITS} digits, got one of more in --seeds")
     _refuse_repeats("--seeds", seed_list)
     options = overrides.get("scene_options", {})
     for scene in scene_list:

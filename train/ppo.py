@@ -32,7 +32,7 @@ import numpy as np
 from nbs_env import threads
 from nbs_env.atomic import replacing, write_text
 from nbs_env.config import Config, EnvConfig, _integer, _require
-from nbs_env.config.checks import _plain_numbers, _within, parse_float
+from nbs_env.config.checks import _plain_numbers, _plain_values, _within, parse_float
 from nbs_env.config.rooms import MAX_SCANS
 from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES
@@ -184,6 +184,13 @@ class TrainConfig(Config):
             _integer(self, name, 1)
         for name in ("seed", "eval_every", "checkpoint_every", "bc_steps"):
             _integer(self, name, 0)
+        # stable-baselines3 counts steps in floats (10**400 steps: an OverflowError after the first
+        # rollout) and a saved state claims at most this many.
+        for name in ("timesteps", "eval_every", "checkpoint_every", "bc_steps"):
+            _require(
+                getattr(self, name) <= MAX_STATE_TIMESTEPS,
+                f"{name} must be at most {MAX_STATE_TIMESTEPS:,}, got {str(getattr(self, name))[:40]}",
+            )
         # stable-baselines3 seeds numpy's legacy generator, which takes 32 bits (a traceback beyond).
         _require(self.seed < 2**32, f"seed must be below 2**32 = {2**32:,}, got {self.seed:,}")
         # An episode's steps are its scans at most (evaluation runs with max_scans = this).
@@ -233,6 +240,8 @@ class TrainConfig(Config):
             self.completion in ("policy", "gain"), f"completion must be 'policy' or 'gain', got {self.completion!r}"
         )
         _require(isinstance(self.overrides, dict), f"overrides must be a dict, got {self.overrides!r}")
+        # Numpy numbers the env's configuration takes; the run's records write them as JSON.
+        object.__setattr__(self, "overrides", _plain_values(self.overrides))
         self.env_config()  # a bad preset or override fails here, before any worker starts
 
     def env_config(self, **overrides: Any) -> EnvConfig:
@@ -823,14 +832,26 @@ def resume_config(run_folder: str | Path, timesteps: int | None = None) -> Train
         No resumable state, or settings this version refuses.
     """
     folder, document = latest_state(run_folder)
+    run = document["run"]
+    missing = [f.name for f in dataclasses.fields(TrainConfig) if isinstance(run, dict) and f.name not in run]
+    if missing:
+        # The run's own settings, every one written: a default in place of one changes the run.
+        raise ModelFileError(
+            f"{folder / STATE_JSON}: its run settings lack {', '.join(missing[:4])}"
+            f"{f' and {len(missing) - 4} more' if len(missing) > 4 else ''}, which every state holds: restore "
+            "them as the run had them, or start a new run from its weights with --init"
+        )
     try:
-        config = TrainConfig.from_dict(document["run"])
+        config = TrainConfig.from_dict(run)
         if timesteps is not None:
             config = dataclasses.replace(config, timesteps=timesteps)
         # The file's settings, not options the user typed: "--n-steps 10...0 asks for TiB" named none.
         check_memory(config, behaviour_cloning=False)
     except (ConfigError, TypeError) as exc:
-        raise ModelFileError(f"{folder / STATE_JSON}: its run settings are refused ({exc})") from None
+        raise ModelFileError(
+            f"{folder / STATE_JSON}: its run settings are refused ({exc}); a resumed run keeps its own: "
+            "correct them in the file, or start a new run from its weights with --init"
+        ) from None
     return config
 
 
@@ -899,7 +920,7 @@ def load_model(checkpoint: str | Path, env=None, device: str = "cpu"):
     """
     _require_rl()
     folder, document = latest_state(checkpoint)
-    config = TrainConfig.from_dict(document["run"])
+    config = resume_config(checkpoint)  # the settings checked as a resume checks them
     if env is None:
         from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -1785,7 +1806,11 @@ def _resume(args, given: set[str]) -> int:
         )
         return 2
     if "envs" in given:
-        config = dataclasses.replace(config, envs=args.envs)
+        try:
+            config = dataclasses.replace(config, envs=args.envs)
+        except ConfigError as exc:  # the run's n_steps and batch size stay: only --envs can change
+            print(f"nbs train: error: --resume {args.resume} --envs {args.envs}: {exc}", file=sys.stderr)
+            return 2
     return _run(config, args.resume, args, resume=True)
 
 

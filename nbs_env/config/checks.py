@@ -166,6 +166,18 @@ def _plain_numbers(config: Any) -> None:
                 object.__setattr__(config, name, plain)
 
 
+def _plain_values(value: Any) -> Any:
+    """``value`` with every numpy scalar inside its dicts, lists and tuples a plain ``bool``,
+    ``int`` or ``float``: a free-form field (``TrainConfig.overrides``) JSON can write."""
+    if isinstance(value, dict):
+        return {k: _plain_values(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return type(value)(_plain_values(v) for v in value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return _plain_number(value, True, True)
+
+
 def json_form(value: Any) -> Any:
     """``value`` as JSON reads it back (tuples become lists): how a recorded configuration value and
     a live one are compared.

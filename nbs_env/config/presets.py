@@ -153,6 +153,18 @@ def _set(tree: dict[str, Any], path: str, value: Any) -> None:
     if isinstance(value, Config) or (dataclasses.is_dataclass(value) and not isinstance(value, type)):
         node[leaf] = dataclasses.asdict(value)  # a GeneratorConfig is a dataclass of its own
     elif isinstance(value, dict) and isinstance(node.get(leaf), dict) and leaf != "scene_options":
-        node[leaf] = {**node[leaf], **value}
+        node[leaf] = _merged(node[leaf], value)
     else:
         node[leaf] = value
+
+
+def _merged(section: dict[str, Any], value: dict[str, Any]) -> dict[str, Any]:
+    """``value`` merged into ``section`` at every depth: ``robot={"scanner": {"height": 1.2}}`` keeps
+    the preset's scanner step (a merge of the top level alone put the default scanner back)."""
+    out = dict(section)
+    for key, item in value.items():
+        if isinstance(item, dict) and isinstance(out.get(key), dict) and key != "scene_options":
+            out[key] = _merged(out[key], item)
+        else:
+            out[key] = item
+    return out

@@ -1,0 +1,209 @@
+"""Reproducers of the twenty-third bad-input probe's findings, one test per class of input."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scenes import load_scene
+from train.cli import EXIT_USAGE
+from train.cli import main as nbs
+
+
+def _err(capsys) -> str:
+    err = capsys.readouterr().err
+    assert "Traceback" not in err, err
+    return err.strip().splitlines()[-1]
+
+
+@pytest.fixture
+def run(tiny_run, tmp_path) -> Path:
+    copy = tmp_path / "run"
+    shutil.copytree(tiny_run, copy)
+    return copy
+
+
+def _edit_run(run: Path, edit) -> None:
+    path = run / "training_state.json"
+    document = json.loads(path.read_text())
+    edit(document["run"])
+    path.write_text(json.dumps(document))
+
+
+# ---------------------------------------------------------------------- resumed runs
+def test_a_resume_whose_new_envs_leave_a_minibatch_of_one_is_refused_in_one_line(run, capsys):
+    """``replace(config, envs=...)`` raised the minibatch check's ConfigError as a traceback."""
+    from train.ppo import main
+
+    _edit_run(run, lambda r: r.update(batch_size=3))  # 8 steps x 1 env in minibatches of 3: valid
+    assert main(["--resume", str(run), "--timesteps", "48", "--envs", "2", "--quiet"]) == EXIT_USAGE
+    err = _err(capsys)
+    assert err.startswith(f"nbs train: error: --resume {run} --envs 2: n_steps x envs = 16"), err
+    assert json.loads((run / "training_state.json").read_text())["timesteps"] == 16  # nothing trained
+
+
+def test_a_resumed_state_missing_a_setting_is_refused_naming_it(run, capsys):
+    """A state without ``run.n_steps`` was resumed with the default 64 in place of its 8."""
+    from nbs_env.errors import ModelFileError
+    from train.ppo import load_model, main, resume_config
+
+    _edit_run(run, lambda r: r.pop("n_steps"))
+    with pytest.raises(ModelFileError, match=r"training_state.json: its run settings lack n_steps, which every"):
+        resume_config(run)
+    with pytest.raises(ModelFileError, match="lack n_steps"):
+        load_model(run)
+    assert main(["--resume", str(run), "--timesteps", "32", "--quiet"]) == EXIT_USAGE
+    assert "lack n_steps" in _err(capsys)
+
+
+def test_a_resumed_state_refused_says_what_a_resume_can_do(run):
+    """The datasheet check's advice (``--scanner``, ``--set``) is no option on ``--resume``."""
+    from nbs_env.config.scanners import scanner_config
+    from nbs_env.errors import ModelFileError
+    from train.ppo import resume_config
+
+    scanner = {**scanner_config("rtc360:12mm").to_dict(), "max_range": 120.0}
+    _edit_run(run, lambda r: r["overrides"].update({"robot.scanner": scanner}))
+    with pytest.raises(
+        ModelFileError, match=r"max_range 120\.0 .*correct them in the file, or start a new run .*--init"
+    ):
+        resume_config(run)
+
+
+# ---------------------------------------------------------------------- training settings
+def test_training_overrides_take_numpy_numbers_and_steps_are_bounded():
+    """Numpy numbers in ``overrides`` failed ``json.dumps`` at the first checkpoint (the run lost);
+    ``--timesteps 10**400`` overflowed stable-baselines3's float count after the first rollout."""
+    from nbs_env.errors import ConfigError
+    from train.ppo import MAX_STATE_TIMESTEPS, TrainConfig
+
+    config = TrainConfig(
+        overrides={"max_scans": np.int64(20), "generator.rooms": (np.int32(1), np.int64(2)), "keep_scans": np.False_}
+    )
+    assert json.loads(json.dumps(config.to_dict()["overrides"])) == {
+        "max_scans": 20,
+        "generator.rooms": [1, 2],
+        "keep_scans": False,
+    }
+    assert type(config.overrides["max_scans"]) is int and config.env_config().max_scans == 20
+    for name in ("timesteps", "eval_every", "checkpoint_every", "bc_steps"):
+        with pytest.raises(ConfigError, match=f"{name} must be at most 1,000,000,000,000"):
+            TrainConfig(**{name: 10**400})
+    assert TrainConfig(timesteps=MAX_STATE_TIMESTEPS).timesteps == MAX_STATE_TIMESTEPS
+
+
+# ---------------------------------------------------------------------- configuration merges
+def test_a_section_given_as_a_dict_merges_at_every_depth():
+    """``robot={"scanner": {"height": 1.2}}`` put the default scanner back (fast's 1° step lost), and
+    ``rooms={"wall_search": {}}`` gave the paper preset three search scans a room."""
+    from nbs_env.config import make_config
+
+    fast = make_config("fast")
+    config = make_config("fast", robot={"scanner": {"height": 1.2}})
+    assert config.robot.scanner.height == 1.2
+    assert config.robot.scanner.angular_step == fast.robot.scanner.angular_step == 1.0
+    assert config.robot.odometry == fast.robot.odometry
+    assert make_config("paper", rooms={"wall_search": {}}).rooms == make_config("paper").rooms
+    assert make_config("fast", scene_options={"units": "cm"}).scene_options == {"units": "cm"}  # free-form: taken
+
+
+def test_the_height_of_a_datasheet_scanner_is_the_users(tmp_path, capsys):
+    """``--scanner rtc360 --set robot.scanner.height=1.2`` was refused as two options setting one field."""
+    import argparse
+
+    from train.arguments import add_robot_arguments, config_from_arguments
+
+    parser = argparse.ArgumentParser()
+    add_robot_arguments(parser)
+
+    def given(*argv: str) -> dict:
+        return config_from_arguments(parser.parse_args(["--preset", "fast", *argv]), "default")[1]
+
+    scanner = given("--scanner", "rtc360", "--set", "robot.scanner.height=1.2")["robot.scanner"]
+    assert scanner["height"] == 1.2 and scanner["preset"] == "rtc360:6mm" and scanner["angular_step"] == 1.0
+    from nbs_env.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="holds max_range 50"):  # a datasheet value: the preset would lie
+        given("--scanner", "rtc360", "--set", "robot.scanner.max_range=50")
+    odd = given("--scanner", "rtc360", "--set", "robot.scanner.max_range=50", "--set", "robot.scanner.preset=null")
+    assert odd["robot.scanner"]["max_range"] == 50 and odd["robot.scanner"]["preset"] is None
+    with pytest.raises(ConfigError, match="is given twice"):
+        given("--scanner", "rtc360", "--set", "robot.scanner.height=1.2", "--set", "robot.scanner.height=1.3")
+    with pytest.raises(ConfigError, match="and --resolution both set"):
+        given("--scanner", "rtc360", "--resolution", "2", "--set", "robot.scanner.angular_step=1")
+
+
+def test_a_resumed_comparison_of_another_scanner_names_the_field_that_differs():
+    """Both sides were cut at 40 characters of the scanner's dict and read the same."""
+    from nbs_env.config.scanners import scanner_config
+    from train.compare import _settings_apart
+
+    def spec(name: str) -> dict:
+        return {"preset": "fast", "overrides": {"robot.scanner": scanner_config(name).to_dict(), "max_scans": 3}}
+
+    theirs, mine = _settings_apart(spec("rtc360:12mm"), spec("rtc360:3mm"))
+    assert "robot.scanner.preset 'rtc360:12mm'" in theirs and "robot.scanner.preset 'rtc360:3mm'" in mine
+    assert "robot.scanner.station_time 5.8" in theirs and "max_scans" not in theirs
+
+
+# ---------------------------------------------------------------------- seeds
+def test_a_seed_of_more_digits_than_a_folder_name_holds_is_refused_before_the_work(tmp_path, capsys):
+    """``nbs compare --seeds 1e305`` ran the grid, then failed on "File name too long" and left a
+    folder the same command then refused."""
+    from nbs_env import NBSEnv
+    from nbs_env.errors import ConfigError
+
+    huge = "1" + "0" * 305
+    out = tmp_path / "c"
+    argv = ["compare", "--scenes", "office", "--policies", "greedy", "--preset", "fast", "--max-scans", "1"]
+    assert nbs([*argv, "--seeds", huge, "--out", str(out), "--quiet"]) == EXIT_USAGE
+    assert "seeds have at most 100 digits" in _err(capsys) and not out.exists()
+    with pytest.raises(SystemExit):
+        nbs(["scan", "--scene", "office", "--seed", huge, "--out", str(tmp_path / "s")])
+    assert "at most 100 digits" in _err(capsys)
+    with pytest.raises(ConfigError, match="at most 100 digits"):
+        NBSEnv(scene="office", preset="fast").reset(seed=10**5000)
+
+
+# ---------------------------------------------------------------------- files
+def test_a_floor_plan_length_below_a_millimetre_is_refused(tmp_path):
+    """A 1e-320 m sill made zero-area faces and bare numpy overflow warnings."""
+    from scenes.errors import FloorPlanError
+
+    plan = {
+        "format": "nbs-floorplan", "version": 1, "name": "o", "ceiling_height": 2.7, "wall_thickness": 0.15,
+        "rooms": [{"name": "o", "polygon": [[0, 0], [7, 0], [7, 5], [0, 5]]}],
+        "windows": [{"room": "o", "position": [3.5, 0], "width": 1.5, "height": 1.2, "sill": 0}],
+    }  # fmt: skip
+    path = tmp_path / "p.json"
+    path.write_text(json.dumps(plan))
+    assert load_scene(str(path)).name  # a window at the floor
+    for field, value in (("sill", 1e-320), ("sill", 0.0005), ("width", 1e-320)):
+        window = {**plan["windows"][0], field: value}
+        path.write_text(json.dumps({**plan, "windows": [window]}))
+        with pytest.raises(FloorPlanError, match=rf"windows\[0\]\.{field}"):
+            load_scene(str(path))
+
+
+def test_an_ascii_ply_number_beyond_its_type_is_named_as_written(tmp_path, recwarn):
+    """A float32 vertex of 1e305 warned "overflow encountered in cast" and was named "infinite"; an
+    index of 1e305 was printed as 306 digits the file does not hold."""
+    from scenes import InvalidMeshError
+
+    def ply(vertex: str, face: str) -> str:
+        head = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+        body = f"0 0 0\n{vertex}\n0 1 0\n{face}\n"
+        return head + "element face 1\nproperty list uchar int vertex_indices\nend_header\n" + body
+
+    path = tmp_path / "m.ply"
+    path.write_text(ply("1e305 0 0", "3 0 1 2"))
+    with pytest.raises(InvalidMeshError, match=r"'x' value 1e\+305 is beyond what its header's type 'float' holds"):
+        load_scene(str(path))
+    path.write_text(ply("1 0 0", "3 0 1 1e305"))
+    with pytest.raises(InvalidMeshError, match=r"vertex index 1e\+305, which its header's type 'int' cannot hold"):
+        load_scene(str(path))
+    assert not [w for w in recwarn if "overflow" in str(w.message)]
