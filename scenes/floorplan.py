@@ -113,8 +113,8 @@ PLAN_SCHEMA: dict[str, Any] = {
         "version": {"const": FORMAT_VERSION},
         "name": {"type": "string"},
         "description": {"type": "string"},
-        "ceiling_height": {"type": "number", "exclusiveMinimum": 0, "maximum": 30},
-        "wall_thickness": {"type": "number", "exclusiveMinimum": 0, "maximum": 3},
+        "ceiling_height": {"type": "number", "minimum": MIN_LENGTH, "maximum": 30},
+        "wall_thickness": {"type": "number", "minimum": MIN_LENGTH, "maximum": 3},
         "rooms": {
             "type": "array",
             "minItems": 1,

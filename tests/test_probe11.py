@@ -82,11 +82,15 @@ def test_training_overrides_take_numpy_numbers_and_steps_are_bounded():
     from train.ppo import MAX_STATE_TIMESTEPS, TrainConfig
 
     config = TrainConfig(
-        overrides={"max_scans": np.int64(20), "generator.rooms": (np.int32(1), np.int64(2)), "keep_scans": np.False_}
+        overrides={
+            "max_scans": np.int64(20),
+            "rooms.wall_search.heights": (np.int32(1), np.float64(2)),
+            "keep_scans": np.False_,
+        }
     )
     assert json.loads(json.dumps(config.to_dict()["overrides"])) == {
         "max_scans": 20,
-        "generator.rooms": [1, 2],
+        "rooms.wall_search.heights": [1, 2.0],
         "keep_scans": False,
     }
     assert type(config.overrides["max_scans"]) is int and config.env_config().max_scans == 20
@@ -207,3 +211,78 @@ def test_an_ascii_ply_number_beyond_its_type_is_named_as_written(tmp_path, recwa
     with pytest.raises(InvalidMeshError, match=r"vertex index 1e\+305, which its header's type 'int' cannot hold"):
         load_scene(str(path))
     assert not [w for w in recwarn if "overflow" in str(w.message)]
+
+
+# ---------------------------------------------------------------------- the twenty-fourth probe
+def test_an_override_of_a_field_the_run_sets_itself_is_refused(capsys, tmp_path):
+    """``nbs train --set reward.scan_cost=9`` trained at the default 0.5 (the run's own --scan-cost
+    won) while policy.json recorded 9."""
+    from nbs_env.errors import ConfigError
+    from train.ppo import RUN_FIELDS, TrainConfig, main
+
+    for path, (field, option) in RUN_FIELDS.items():
+        section, leaf = path.split(".")
+        for overrides in ({path: 1}, {section: {leaf: 1}}):
+            with pytest.raises(ConfigError, match=rf"{path} is the run's own {field} \(nbs train {option}\)"):
+                TrainConfig(overrides=overrides)
+    assert TrainConfig(overrides={"reward": {"invalid_action_penalty": 2.0}}).env_config().reward.scan_cost == 0.5
+    out = tmp_path / "r"
+    argv = ["--timesteps", "16", "--n-steps", "16", "--envs", "1", "--out", str(out), "--set", "reward.scan_cost=9"]
+    assert main(argv) == EXIT_USAGE
+    assert "reward.scan_cost is the run's own scan_cost (nbs train --scan-cost)" in _err(capsys) and not out.exists()
+
+
+def test_training_overrides_take_numpy_arrays_and_refuse_deep_nesting():
+    """An array in ``overrides`` trained the whole run and then failed ``json.dumps`` (the run lost);
+    a value nested 900 lists deep was a RecursionError; ``rooms=np.array([1, 2])`` was refused with
+    a message its value met."""
+    from nbs_env.errors import ConfigError
+    from train.ppo import TrainConfig
+
+    config = TrainConfig(overrides={"rooms.wall_search.heights": np.array([1.0, 1.5]), "scene_options": {}})
+    assert config.overrides["rooms.wall_search.heights"] == [1.0, 1.5] and json.dumps(config.to_dict())
+    deep: object = 1.0
+    for _ in range(900):
+        deep = [deep]
+    with pytest.raises(ConfigError, match="nested more than 64 levels deep"):
+        TrainConfig(overrides={"rooms.wall_search.heights": deep})
+    assert TrainConfig(rooms=np.array([1, 2]), cell_size=np.array([2.0, 3.0])).rooms == (1, 2)
+
+
+def test_a_resumed_total_beyond_the_bound_names_the_option(run, capsys):
+    """The state file was blamed ("correct them in the file") for a --timesteps the user typed."""
+    from train.ppo import MAX_STATE_TIMESTEPS, main
+
+    assert main(["--resume", str(run), "--timesteps", str(MAX_STATE_TIMESTEPS + 1), "--quiet"]) == EXIT_USAGE
+    assert _err(capsys) == "nbs train: error: --timesteps 1000000000001: must be at most 1,000,000,000,000"
+
+
+def test_a_wall_thinner_than_a_millimetre_is_refused(tmp_path):
+    """A 1e-300 m wall made 40 zero-area faces, the defect the sill's bound was added against."""
+    import scenes
+    from scenes.errors import FloorPlanError
+
+    plan = json.loads((Path(scenes.__file__).parent / "data" / "five_rooms.json").read_text())
+    for field in ("wall_thickness", "ceiling_height"):
+        path = tmp_path / f"{field}.json"
+        path.write_text(json.dumps({**plan, field: 1e-300}))
+        with pytest.raises(FloorPlanError, match=rf"{field}: 1e-300 is less than the minimum of 0.001"):
+            load_scene(str(path))
+
+
+def test_a_resumed_comparison_of_the_same_configuration_is_the_same_run():
+    """``--preset fast --resolution 1`` is fast's own step: a resume with it was refused, the
+    preset's value shown as 'unset'; an edited seed of "0" was "other settings"."""
+    from train.compare import _settings_apart, same_spec
+
+    def spec(**overrides) -> dict:
+        return {"scene": "l_room", "policy": "random", "seed": 0, "preset": "fast", "overrides": overrides}
+
+    assert same_spec(spec(), spec(**{"robot.scanner.angular_step": 1.0, "robot.voxel_size": 0.1}))
+    assert not same_spec(spec(), spec(**{"robot.scanner.angular_step": 2.0}))
+    assert not same_spec(spec(), {**spec(), "seed": "0"})
+    assert _settings_apart(spec(), spec(**{"robot.scanner.angular_step": 2.0})) == (
+        "robot.scanner.angular_step not given",
+        "robot.scanner.angular_step 2.0",
+    )
+    assert _settings_apart({**spec(), "seed": "0"}, spec()) == ("seed '0'", "seed 0")

@@ -58,6 +58,7 @@ from nbs_env.atomic import replacing
 from nbs_env.atomic import write_text as _write_text
 from nbs_env.config import json_form
 from nbs_env.config.checks import parse_int
+from nbs_env.errors import ConfigError
 from scenes.jsonio import read_json_file
 from scenes.limits import MAX_SEED_DIGITS
 from train.arguments import MAX_RUNS, parse_range
@@ -1144,7 +1145,7 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
             damaged(folder / "run.json", f"it is the record of {other}, not of the run whose folder it is in")
             continue
         wanted = json_form(asdict(spec))
-        if not (record.get("ok") is True and stored == wanted and same_file):
+        if not (record.get("ok") is True and isinstance(stored, dict) and same_spec(stored, wanted) and same_file):
             continue  # a failed run, or a run of an edited file: run it again
         path = folder / "metrics.json"
         try:
@@ -1164,7 +1165,6 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
         damaged(paths[key], problem)
         del runs[key]
     oracles: dict[str, Any] = {}
-    settings = [{"preset": s.preset, "overrides": json_form(s.overrides)} for s in specs]
     try:
         stored = read_json_file(out / "oracle.json")
     except (OSError, ValueError):
@@ -1173,7 +1173,7 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
         if (
             isinstance(plan, dict)
             and plan.get("ok")
-            and {"preset": plan.get("preset"), "overrides": plan.get("overrides")} in settings
+            and _oracle_matches(scene, plan, specs)
             and plan.get("source_sha256") == digests.get(scene)
             and _oracle_usable(plan)
         ):
@@ -1217,7 +1217,7 @@ def _check_same_comparison(out: Path, specs: Sequence[RunSpec]) -> None:
             continue
         if key not in wanted:
             left_out.append(f"scene {stored['scene']!r}, policy {stored['policy']!r}, seed {stored['seed']}")
-        elif stored != wanted[key]:
+        elif not same_spec(stored, wanted[key]):
             theirs, mine = _settings_apart(stored, wanted[key])
             raise CompareError(
                 f"{path.parent}: holds a finished run with {theirs}, where this comparison has {mine}; "
@@ -1231,7 +1231,6 @@ def _check_same_comparison(out: Path, specs: Sequence[RunSpec]) -> None:
             "comparison, and its tables would drop them; name them too, pass --force to start over, or choose "
             "another --out"
         )
-    settings = {json.dumps([s.preset, json_form(s.overrides)], sort_keys=True) for s in specs}
     try:
         stored_oracles = read_json_file(out / "oracle.json")
     except (OSError, ValueError):
@@ -1239,8 +1238,7 @@ def _check_same_comparison(out: Path, specs: Sequence[RunSpec]) -> None:
     for scene, plan in stored_oracles.items() if isinstance(stored_oracles, dict) else ():
         if not (isinstance(plan, dict) and plan.get("ok")):
             continue
-        mine = json.dumps([plan.get("preset"), plan.get("overrides")], sort_keys=True)
-        if mine not in settings:
+        if not _oracle_matches(scene, plan, specs):
             theirs, ours = _settings_apart(
                 {"preset": plan.get("preset"), "overrides": plan.get("overrides")},
                 {"preset": specs[0].preset, "overrides": json_form(specs[0].overrides)},
@@ -1251,9 +1249,53 @@ def _check_same_comparison(out: Path, specs: Sequence[RunSpec]) -> None:
             )
 
 
+class _Unset:
+    """An override one spec has and the other not (the preset's value), as a message shows it."""
+
+    def __repr__(self) -> str:
+        return "not given"
+
+
+_UNSET = _Unset()
+
+
+def _oracle_matches(scene: str, plan: dict[str, Any], specs: Sequence[RunSpec]) -> bool:
+    """Whether a recorded oracle of ``scene`` was planned with settings of this grid (the same
+    configuration, as :func:`same_spec` tells)."""
+    stored = {"scene": scene, "policy": "oracle", "seed": 0, "preset": plan.get("preset")}
+    stored["overrides"] = plan.get("overrides")
+    settings = {json.dumps([s.preset, json_form(s.overrides)], sort_keys=True): s for s in specs}
+    wanted = [{**stored, "preset": s.preset, "overrides": json_form(s.overrides)} for s in settings.values()]
+    return any(same_spec(stored, w) for w in wanted)
+
+
+def same_spec(stored: dict[str, Any], wanted: dict[str, Any]) -> bool:
+    """Whether a recorded run spec is the run ``wanted`` describes: the same scene, policy and seed,
+    and options that make the same configuration (``--preset fast --resolution 1`` is fast's own
+    step: the same run as ``--preset fast``).
+
+    Parameters
+    ----------
+    stored, wanted : dict
+        ``RunSpec`` as JSON reads it (``json_form(asdict(spec))``); ``stored`` from a record.
+    """
+    if stored == wanted:
+        return True
+    if any(stored.get(k) != wanted.get(k) for k in ("scene", "policy", "seed")) or set(stored) != set(wanted):
+        return False
+    try:
+        return RunSpec(**stored).config().to_dict() == RunSpec(**wanted).config().to_dict()
+    except (ConfigError, TypeError):  # a record this version cannot build: not this run
+        return False
+
+
 def _settings_apart(stored: dict[str, Any], wanted: dict[str, Any]) -> tuple[str, str]:
-    """The settings two run specs differ in (preset, each override), as each has them."""
+    """The settings two run specs differ in (scene, policy, seed, preset, each override), as each
+    has them."""
     apart: list[tuple[str, Any, Any]] = []
+    for key in ("scene", "policy", "seed"):  # a record edited by hand: "seed": "0"
+        if key in stored and stored.get(key) != wanted.get(key):
+            apart.append((key, stored.get(key), wanted.get(key)))
     if stored.get("preset") != wanted.get("preset"):
         apart.append(("preset", stored.get("preset"), wanted.get("preset")))
     old, new = stored.get("overrides"), wanted.get("overrides")
@@ -1271,7 +1313,7 @@ def _apart(old: dict[Any, Any], new: dict[Any, Any], prefix: str, apart: list[tu
     (``robot.scanner`` of ``--scanner``) is opened into its fields, so that a message names the
     field that differs, not two dicts cut alike."""
     for key in sorted(set(old) | set(new), key=str):
-        a, b = old.get(key, "unset"), new.get(key, "unset")
+        a, b = old.get(key, _UNSET), new.get(key, _UNSET)
         if isinstance(a, dict) and isinstance(b, dict):
             _apart(a, b, f"{prefix}{key}.", apart)
         elif a != b:

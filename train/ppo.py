@@ -69,6 +69,31 @@ def _require_rl():
         raise SystemExit('nbs train needs the rl extra: pip install torch==2.13.0 "nbs-env[rl]"') from None
 
 
+#: Environment fields a run sets from its own settings: dotted path -> (TrainConfig field, option).
+RUN_FIELDS = {
+    "generator.rooms": ("rooms", "--rooms"),
+    "generator.cell_size": ("cell_size", "--cell-size"),
+    "reward.metre_cost": ("metre_cost", "--metre-cost"),
+    "reward.scan_cost": ("scan_cost", "--scan-cost"),
+    "rooms.completion": ("completion", "--completion"),
+}
+
+
+def _leaf_paths(overrides: dict[str, Any], prefix: str = "") -> list[str]:
+    """The dotted fields ``overrides`` sets: a section given as a dict (or a configuration) opened
+    into its fields."""
+    paths = []
+    for key, value in overrides.items():
+        path = f"{prefix}{key}"
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            value = dataclasses.asdict(value)
+        if isinstance(value, dict) and value and path != "scene_options":
+            paths.extend(_leaf_paths(value, path + "."))
+        else:
+            paths.append(path)
+    return paths
+
+
 @dataclass(frozen=True)
 class TrainConfig(Config):
     """What a training run is (JSON-safe, frozen, checked on construction); ``nbs train --help``
@@ -242,6 +267,15 @@ class TrainConfig(Config):
         _require(isinstance(self.overrides, dict), f"overrides must be a dict, got {self.overrides!r}")
         # Numpy numbers the env's configuration takes; the run's records write them as JSON.
         object.__setattr__(self, "overrides", _plain_values(self.overrides))
+        for path in _leaf_paths(self.overrides):
+            # The run's own settings win over an override of the same field (env_config): one set
+            # there would be recorded and not applied.
+            owner = next((o for p, o in RUN_FIELDS.items() if path == p or path.startswith(p + ".")), None)
+            if owner is not None:
+                raise ConfigError(
+                    f"{path} is the run's own {owner[0]} (nbs train {owner[1]}): set it there, not as an "
+                    "override (--set)"
+                )
         self.env_config()  # a bad preset or override fails here, before any worker starts
 
     def env_config(self, **overrides: Any) -> EnvConfig:
@@ -1773,6 +1807,12 @@ def _resume(args, given: set[str]) -> int:
         print(f"nbs train: error: --resume: {exc}", file=sys.stderr)
         return 2
     done = int(document["timesteps"])
+    if args.timesteps is not None and args.timesteps > MAX_STATE_TIMESTEPS:  # the option's fault, not the file's
+        print(
+            f"nbs train: error: --timesteps {str(args.timesteps)[:40]}: must be at most {MAX_STATE_TIMESTEPS:,}",
+            file=sys.stderr,
+        )
+        return 2
     # A total below the steps done would rewrite the policy and leave a state that says both; one
     # equal to them has nothing left to do, unless the run's own final state was never written (a full
     # disk at its end: its newest state is a checkpoint's, and resuming writes the final policy).

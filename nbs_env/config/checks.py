@@ -22,6 +22,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from nbs_env.errors import ConfigError
+from scenes.jsonio import MAX_JSON_DEPTH
 from scenes.limits import is_finite
 
 __all__ = ["Config", "json_form", "parse_float", "parse_int"]
@@ -156,6 +157,9 @@ def _plain_numbers(config: Any) -> None:
     checks, which refuse them where a number is wanted."""
     for name, (takes_int, takes_float) in _numeric_hints(type(config)).items():
         value = getattr(config, name)
+        if isinstance(value, np.ndarray) and value.ndim == 1:  # a pair given as an array: a tuple of numbers
+            value = tuple(value.tolist())
+            object.__setattr__(config, name, value)
         if isinstance(value, (tuple, list)):
             items = [_plain_number(v, takes_int, takes_float) for v in value]
             if any(p is not v for p, v in zip(items, value, strict=True)):
@@ -166,15 +170,28 @@ def _plain_numbers(config: Any) -> None:
                 object.__setattr__(config, name, plain)
 
 
-def _plain_values(value: Any) -> Any:
+def _plain_values(value: Any, depth: int = 0) -> Any:
     """``value`` with every numpy scalar inside its dicts, lists and tuples a plain ``bool``,
-    ``int`` or ``float``: a free-form field (``TrainConfig.overrides``) JSON can write."""
+    ``int``, ``float`` or ``str`` and every numpy array a list: a free-form field
+    (``TrainConfig.overrides``) JSON can write.
+
+    Raises
+    ------
+    ConfigError
+        ``value`` nested deeper than a JSON file may be (:data:`scenes.jsonio.MAX_JSON_DEPTH`).
+    """
+    if depth > MAX_JSON_DEPTH:  # a RecursionError otherwise, as JSON read without a bound
+        raise ConfigError(f"a value nested more than {MAX_JSON_DEPTH} levels deep")
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
     if isinstance(value, dict):
-        return {k: _plain_values(v) for k, v in value.items()}
+        return {k: _plain_values(v, depth + 1) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return type(value)(_plain_values(v) for v in value)
+        return type(value)(_plain_values(v, depth + 1) for v in value)
     if isinstance(value, np.bool_):
         return bool(value)
+    if isinstance(value, np.str_):
+        return str(value)
     return _plain_number(value, True, True)
 
 
