@@ -257,6 +257,7 @@ class NetworkConfig(Config):
         for name, most in _FIELD_LIMITS.items():
             _integer(self, name, 1)
             _require(getattr(self, name) <= most, f"{name} must be an integer <= {most}, got {getattr(self, name)!r}")
+        _integer(self, "room_features", 0)  # 0.0 passed the test below, and torch refused it as a size
         _require(
             self.room_features in (0, len(ROOM_FEATURES)),
             f"room_features must be 0 or {len(ROOM_FEATURES)} (the room vector), got {self.room_features!r}",
@@ -812,4 +813,9 @@ class LearnedPolicy:
         logits = self.logits(obs)
         if len(mask) != len(logits):
             raise ValueError(f"the env has {len(mask)} actions, the network {len(logits)}")
+        if not np.isfinite(logits[mask]).all():  # NaN orders as the largest: the argmax would be no choice
+            raise ModelFileError(
+                f"{self.name}: the network's scores are not finite for this observation (its weights overflow "
+                "float32): the checkpoint cannot choose"
+            )
         return int(np.argmax(np.where(mask, logits, -np.inf)))

@@ -286,3 +286,91 @@ def test_a_resumed_comparison_of_the_same_configuration_is_the_same_run():
         "robot.scanner.angular_step 2.0",
     )
     assert _settings_apart({**spec(), "seed": "0"}, spec()) == ("seed '0'", "seed 0")
+
+
+# ---------------------------------------------------------------------- the twenty-fifth probe
+def test_a_run_field_by_its_own_name_or_in_a_configuration_is_named_or_taken():
+    """``overrides={"scan_cost": 9}`` (make_config's short name) gave "'reward.scan_cost' and another
+    name both set"; ``{"generator": GeneratorConfig(clutter_density=0.5)}`` was refused for rooms no
+    one set."""
+    from nbs_env.errors import ConfigError
+    from scenes.generator import GeneratorConfig
+    from train.ppo import TrainConfig
+
+    with pytest.raises(ConfigError, match=r"reward.scan_cost is the run's own scan_cost \(nbs train --scan-cost\)"):
+        TrainConfig(overrides={"scan_cost": 9})
+    config = TrainConfig(rooms=(2, 3), overrides={"generator": GeneratorConfig(clutter_density=0.5)})
+    assert config.env_config().generator.clutter_density == 0.5 and config.env_config().generator.rooms == (2, 3)
+    with pytest.raises(ConfigError, match=r"generator\.rooms is the run's own rooms"):
+        TrainConfig(overrides={"generator": GeneratorConfig(rooms=(2, 2))})
+
+
+def test_numpy_arrays_are_taken_by_every_override_and_deep_values_refused():
+    """``make_config(**{"generator.clutter_density": np.array(0.5)})`` said "got 0.5" of a value within
+    its range; a value nested 1,200 levels deep was a RecursionError from a message's repr."""
+    from nbs_env.config import EnvConfig, make_config
+    from nbs_env.errors import ConfigError
+    from train.ppo import TrainConfig
+
+    config = make_config(
+        "fast", **{"generator.clutter_density": np.array(0.5), "generator.cell_size": np.array([2, 3.6])}
+    )
+    assert config.generator.clutter_density == 0.5 and config.generator.cell_size == (2, 3.6)
+    deep: object = 1
+    for _ in range(1200):
+        deep = {"a": deep}
+    with pytest.raises(ConfigError, match="nested more than 64 levels"):
+        TrainConfig(overrides={"robot": deep})
+    with pytest.raises(ConfigError, match="nested more than 64 levels"):
+        make_config("fast", scene_options={"storey": deep})
+    with pytest.raises(ConfigError, match="nested too deep to check"):
+        EnvConfig(scene_options={"storey": deep})
+
+
+def test_a_checkpoint_whose_room_vector_size_is_no_integer_is_refused(run):
+    """``network.room_features: 0.0`` passed ``in (0, 5)`` and torch's Linear raised a traceback."""
+    from nbs_env.errors import ConfigError, ModelFileError
+    from policies.learned import NetworkConfig, load_checkpoint
+
+    with pytest.raises(ConfigError, match="room_features must be an integer"):
+        NetworkConfig(room_features=0.0)
+    description = run / "policy.json"
+    document = json.loads(description.read_text())
+    document["network"]["room_features"] = float(document["network"]["room_features"])
+    description.write_text(json.dumps(document))
+    with pytest.raises(ModelFileError, match="room_features"):
+        load_checkpoint(run)
+
+
+def test_a_network_whose_scores_overflow_cannot_choose(run):
+    """Weights of 1e38 made every logit NaN and ``act`` returned action 0 without a word."""
+    import hashlib
+
+    torch = pytest.importorskip("torch")
+    from nbs_env import NBSEnv
+    from nbs_env.errors import ModelFileError
+    from policies.learned import LearnedPolicy
+
+    tensors = torch.load(run / "policy.pt", weights_only=True)
+    first = next(k for k, v in tensors.items() if k.endswith("weight") and v.dim() > 1)
+    tensors[first].fill_(1e38)
+    torch.save(tensors, run / "policy.pt")
+    description = run / "policy.json"
+    document = json.loads(description.read_text())
+    document["sha256"] = hashlib.sha256((run / "policy.pt").read_bytes()).hexdigest()
+    description.write_text(json.dumps(document))
+    policy = LearnedPolicy(run)
+    obs, info = NBSEnv(scene="l_room", preset="fast", **{"rooms.completion": "policy"}).reset(seed=0)
+    with pytest.raises(ModelFileError, match="scores are not finite"):
+        policy.act(obs, info)
+
+
+def test_a_resumed_comparison_spelling_a_run_otherwise_says_so():
+    """``generated:01`` for ``generated:1`` (one storey) was "runs this comparison leaves out"."""
+    from train.compare import RunSpec, _spelled_otherwise
+
+    stored = {"scene": "generated:1", "policy": "greedy", "seed": 0}
+    spelled = _spelled_otherwise(stored, [RunSpec("generated:01", "greedy", 0)])
+    assert spelled is not None and spelled.scene == "generated:01"
+    assert _spelled_otherwise(stored, [RunSpec("generated:2", "greedy", 0)]) is None
+    assert _spelled_otherwise({**stored, "policy": "no-such"}, [RunSpec("generated:1", "greedy", 0)]) is None

@@ -1191,6 +1191,22 @@ class _BadRecordError(ValueError):
     """Why a run's ``metrics.json`` cannot go into the table (:func:`record_problem`)."""
 
 
+def _spelled_otherwise(stored: dict[str, Any], specs: Sequence[RunSpec]) -> RunSpec | None:
+    """The spec of ``specs`` that names the run ``stored`` records under another spelling (the
+    identities :func:`_refuse_repeats` compares), or None."""
+    from policies import make_policy
+
+    def identity(scene: str, policy: str, seed: Any) -> Any:
+        made = None if policy.startswith("ppo:") else make_policy(policy, 0)
+        return (_scene_identity(scene), _policy_identity(policy, made), seed)
+
+    try:
+        theirs = identity(str(stored["scene"]), str(stored["policy"]), stored["seed"])
+        return next((s for s in specs if identity(s.scene, s.policy, s.seed) == theirs), None)
+    except Exception:  # a record naming no policy this version makes: left out, as before
+        return None
+
+
 def _check_same_comparison(out: Path, specs: Sequence[RunSpec]) -> None:
     """``--resume`` continues one comparison: every finished run in ``out`` must be one this grid
     names, with its settings, and every oracle of ``oracle.json`` of its settings; else the tables,
@@ -1216,6 +1232,13 @@ def _check_same_comparison(out: Path, specs: Sequence[RunSpec]) -> None:
         except (KeyError, TypeError):
             continue
         if key not in wanted:
+            spelled = _spelled_otherwise(stored, specs)
+            if spelled is not None:  # ppo:./run for ppo:run, generated:01 for generated:1
+                raise CompareError(
+                    f"{path.parent}: holds the run of scene {stored['scene']!r}, policy {stored['policy']!r}, which "
+                    f"this comparison names scene {spelled.scene!r}, policy {spelled.policy!r}: --resume reuses "
+                    "runs by name, so spell them as the earlier comparison did"
+                )
             left_out.append(f"scene {stored['scene']!r}, policy {stored['policy']!r}, seed {stored['seed']}")
         elif not same_spec(stored, wanted[key]):
             theirs, mine = _settings_apart(stored, wanted[key])

@@ -80,13 +80,22 @@ RUN_FIELDS = {
 
 
 def _leaf_paths(overrides: dict[str, Any], prefix: str = "") -> list[str]:
-    """The dotted fields ``overrides`` sets: a section given as a dict (or a configuration) opened
-    into its fields."""
+    """The dotted fields ``overrides`` sets, a field's own name as its path (``scan_cost`` is
+    ``reward.scan_cost``): a section given as a dict opened into its fields, one given as a
+    configuration into the fields it holds at other values than its class's defaults."""
+    from nbs_env.config.presets import resolve_path
+
     paths = []
     for key, value in overrides.items():
         path = f"{prefix}{key}"
+        if not prefix:
+            with contextlib.suppress(ConfigError):  # an unknown name: make_config names it
+                path = resolve_path(key)
         if dataclasses.is_dataclass(value) and not isinstance(value, type):
-            value = dataclasses.asdict(value)
+            defaults = dataclasses.asdict(type(value)())
+            value = {k: v for k, v in dataclasses.asdict(value).items() if v != defaults[k]}
+            if not value:
+                continue
         if isinstance(value, dict) and value and path != "scene_options":
             paths.extend(_leaf_paths(value, path + "."))
         else:
@@ -264,7 +273,7 @@ class TrainConfig(Config):
         _require(
             self.completion in ("policy", "gain"), f"completion must be 'policy' or 'gain', got {self.completion!r}"
         )
-        _require(isinstance(self.overrides, dict), f"overrides must be a dict, got {self.overrides!r}")
+        _require(isinstance(self.overrides, dict), f"overrides must be a dict, got {type(self.overrides).__name__}")
         # Numpy numbers the env's configuration takes; the run's records write them as JSON.
         object.__setattr__(self, "overrides", _plain_values(self.overrides))
         for path in _leaf_paths(self.overrides):

@@ -217,7 +217,7 @@ class Config:
 
     Every subclass's ``__post_init__`` checks are wrapped so that a field of a kind they did not
     expect (``shape=5``, ``robot=0``, an int no float holds) is a :class:`ConfigError`, never a
-    ``TypeError`` or ``OverflowError`` from inside a check.
+    ``TypeError``, ``OverflowError`` or ``RecursionError`` from inside a check.
     """
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
@@ -233,6 +233,11 @@ class Config:
                 checks(self)
             except ConfigError:
                 raise
+            except RecursionError:  # a repr or a walk of a value nested thousands of levels deep
+                raise ConfigError(
+                    f"{type(self).__name__}: a value nested too deep to check (a JSON file or --set may nest "
+                    f"{MAX_JSON_DEPTH} levels)"
+                ) from None
             except (TypeError, ValueError, AttributeError, OverflowError, IndexError) as exc:
                 raise ConfigError(
                     f"{type(self).__name__}: a field of a kind or size it cannot hold ({type(exc).__name__}: "

@@ -12,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from nbs_env.config.checks import Config
+from nbs_env.config.checks import Config, _plain_values
 from nbs_env.config.env import EnvConfig
 from nbs_env.errors import ConfigError
 
@@ -74,8 +74,23 @@ def config_paths(cls: type = EnvConfig, prefix: str = "") -> list[str]:
     return out
 
 
-def _resolve(key: str, paths: list[str]) -> str:
-    """The dotted path a key names: itself, or the one path whose last part it is."""
+def resolve_path(key: str, paths: list[str] | None = None) -> str:
+    """The dotted path a key names: itself, or the one path whose last part it is
+    (``"scan_cost"`` is ``"reward.scan_cost"``).
+
+    Parameters
+    ----------
+    key : str
+        A dotted path or a field's own name.
+    paths : list of str, optional
+        :func:`config_paths` (computed when not given).
+
+    Raises
+    ------
+    ConfigError
+        No field has that name, or more than one does.
+    """
+    paths = config_paths() if paths is None else paths
     if key in paths:
         return key
     if "." in key:
@@ -131,10 +146,11 @@ def make_config(preset: str | EnvConfig | None = None, /, **overrides: Any) -> E
     paths = config_paths()
     resolved: dict[str, Any] = {}
     for key, value in overrides.items():
-        path = _resolve(key, paths)
+        path = resolve_path(key, paths)
         if path in resolved:
             raise ConfigError(f"{key!r} and another name both set {path}")
-        resolved[path] = value
+        # Numpy arrays and scalars as their JSON form: every configuration takes that.
+        resolved[path] = value if isinstance(value, Config) else _plain_values(value)
     tree = base
     for path, value in [*preset_overrides.items(), *sorted(resolved.items(), key=lambda kv: kv[0].count("."))]:
         _set(tree, path, value)
