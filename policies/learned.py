@@ -622,8 +622,9 @@ def load_checkpoint(path: str | Path):
         name = document["weights"]
         # A name in the checkpoint's own folder: a path would let a description handed to a user
         # make the tool read any file of theirs (checksummed, then refused, but read).
-        if not isinstance(name, str) or Path(name).name != name or name in ("", ".", ".."):
-            raise TypeError(f"weights must name a file beside {path.name}, got {name!r}")
+        if not isinstance(name, str) or Path(name).name != name or name in ("", ".", "..") or len(name) > 255:
+            # 255 bytes: no file system holds a longer name (a bare OSError from is_file below).
+            raise TypeError(f"weights must name a file beside {path.name}, got {name[:40]!r}")
         weights = path.parent / name
         layout = str(document.get("input_layout", "xyz"))
     except (KeyError, TypeError, ConfigError) as exc:

@@ -95,6 +95,12 @@ class GeneratorConfig:
     max_attempts: int = 200
 
     def __post_init__(self) -> None:
+        try:
+            self._check()
+        except RecursionError:  # a repr of a value nested thousands of levels deep, in a message
+            raise ValueError("GeneratorConfig: a value nested too deep to check") from None
+
+    def _check(self) -> None:
         import numbers
         from collections.abc import Callable
 

@@ -111,7 +111,8 @@ DEFAULT_ROOM_HEIGHT = 2.7
 
 _PREFIXES = {c.name.lower(): c for c in SurfaceClass}
 _PREFIX_RE = re.compile(r"^(" + "|".join(_PREFIXES) + r")(?=$|[_\-. 0-9])", re.IGNORECASE)
-_ROOM_RE = re.compile(r"(?:^|[_\-. ])room(\d+)(?=$|[_\-. ])", re.IGNORECASE)
+# ASCII digits only: \d reads Arabic-Indic and full-width digits, which other readers of the name do not.
+_ROOM_RE = re.compile(r"(?:^|[_\-. ])room([0-9]+)(?=$|[_\-. ])", re.IGNORECASE)
 #: The largest room number a part name may give (``wall_room12``): numbers name rooms, and no storey
 #: has a million of them; a longer one overflowed the arrays of room ids.
 MAX_ROOM_NUMBER = 999_999

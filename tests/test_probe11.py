@@ -374,3 +374,82 @@ def test_a_resumed_comparison_spelling_a_run_otherwise_says_so():
     assert spelled is not None and spelled.scene == "generated:01"
     assert _spelled_otherwise(stored, [RunSpec("generated:2", "greedy", 0)]) is None
     assert _spelled_otherwise({**stored, "policy": "no-such"}, [RunSpec("generated:1", "greedy", 0)]) is None
+
+
+# ---------------------------------------------------------------------- the twenty-sixth probe
+def test_a_value_nested_thousands_deep_is_a_config_error_at_every_entry():
+    """A repr of a value nested 3,000 levels deep raised RecursionError from GeneratorConfig,
+    ``_check_field_kinds``, ``from_dict`` and ``make_config``'s own messages."""
+    from nbs_env.config import EnvConfig, make_config
+    from nbs_env.config.robot import RobotConfig
+    from nbs_env.errors import ConfigError
+    from scenes import GeneratorConfig, SceneError
+
+    deep: object = 1
+    for _ in range(3000):
+        deep = [deep]
+    for build in (
+        lambda: EnvConfig(robot=deep),
+        lambda: EnvConfig(keep_scans=deep),
+        lambda: RobotConfig(scanner=deep),
+        lambda: EnvConfig.from_dict({"robot": deep}),
+        lambda: EnvConfig.from_dict({"generator": {"rooms": deep}}),
+        lambda: make_config(deep),
+    ):
+        with pytest.raises(ConfigError, match="nested too deep"):
+            build()
+    with pytest.raises(ValueError, match="nested too deep"):
+        GeneratorConfig(rooms=deep)
+    with pytest.raises(SceneError, match="nested too deep"):
+        load_scene("generated:1", rooms=deep)
+
+
+def test_a_start_whose_scores_overflow_is_refused_before_training(tmp_path, capsys):
+    """``nbs train --init`` of a checkpoint whose scores are NaN raised torch's ValueError after the
+    first rollout began."""
+    torch = pytest.importorskip("torch")
+    import hashlib
+
+    from policies.learned import BUNDLED
+    from train.ppo import main
+
+    start = tmp_path / "start"
+    shutil.copytree(BUNDLED["reference"], start)
+    tensors = torch.load(start / "policy.pt", weights_only=True)
+    for key in [k for k in tensors if k.endswith("weight")]:
+        tensors[key] = tensors[key] * 1e30
+    torch.save(tensors, start / "policy.pt")
+    document = json.loads((start / "policy.json").read_text())
+    document["sha256"] = hashlib.sha256((start / "policy.pt").read_bytes()).hexdigest()
+    (start / "policy.json").write_text(json.dumps(document))
+    out = tmp_path / "run"
+    argv = ["--timesteps", "16", "--n-steps", "16", "--envs", "1", "--completion", "policy", "--rooms", "1-1"]
+    argv += ["--init", str(start), "--out", str(out), "--quiet"]
+    assert main(argv) == EXIT_USAGE
+    assert "scores are not finite for an observation" in _err(capsys) and not out.exists()
+
+
+def test_small_refusals_of_the_twenty_sixth_probe(run, tmp_path, capsys):
+    """A 300-character weights name was a bare OSError; ``wall_room1١`` was room 11; ``--set
+    scan_cost`` said no such field; a comparison's oracle.json wrote over the plan it read."""
+    from nbs_env.errors import ModelFileError
+    from policies.learned import load_checkpoint
+    from scenes.importers import parse_part_name
+
+    document = json.loads((run / "policy.json").read_text())
+    (run / "policy.json").write_text(json.dumps({**document, "weights": "a" * 300}))
+    with pytest.raises(ModelFileError, match="weights must name a file beside"):
+        load_checkpoint(run)
+    assert parse_part_name("wall_room1\u0661")[1] == -1 and parse_part_name("wall_room12")[1] == 12
+    assert nbs(["scan", "--scene", "office", "--set", "scan_cost=9", "--out", str(tmp_path / "s")]) == EXIT_USAGE
+    assert _err(capsys).endswith("--set scan_cost: give the field's dotted name (reward.scan_cost)")
+    import scenes
+
+    out = tmp_path / "c"
+    out.mkdir()
+    plan = out / "oracle.json"
+    shutil.copy(Path(scenes.__file__).parent / "data" / "l_room.json", plan)
+    before = plan.read_bytes()
+    argv = ["compare", "--scenes", str(plan), "--policies", "greedy", "--preset", "fast", "--max-scans", "1"]
+    assert nbs([*argv, "--out", str(out), "--force", "--quiet"]) == EXIT_USAGE
+    assert "writes oracle.json in" in _err(capsys) and plan.read_bytes() == before

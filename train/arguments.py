@@ -335,6 +335,9 @@ def config_from_arguments(
         if root in COMMAND_FIELDS:
             raise ConfigError(f"--set {key}: {COMMAND_FIELDS[root]}")
         if key not in paths:
+            full = [p for p in paths if p.rpartition(".")[2] == key]
+            if full:  # make_config takes a field's own name; --set names the field whole
+                raise ConfigError(f"--set {key}: give the field's dotted name ({' or '.join(full[:3])})")
             raise ConfigError(f"--set {key}: the configuration has no such field (dotted names, e.g. robot.voxel_size)")
         if key in by_set:
             raise ConfigError(f"--set {key} is given twice; give each field once")

@@ -956,6 +956,19 @@ def write_outputs(
 
 #: The files a run writes into its folder (:func:`write_record`).
 _RUN_FILES = ("run.json", "metrics.json", "error.txt")
+#: The files a comparison writes at the top of its folder.
+_TOP_FILES = (
+    "oracle.json", "table.md", "table.csv", "methods.md", "quality.md", "storeys.md", "summary_error.txt",
+    "coverage_vs_scans.png", "quality_vs_scans.png", "path_time.png",
+)  # fmt: skip
+
+
+def _within_folder(path: Path, folder: Path) -> bool:
+    """Whether ``path`` lies inside ``folder`` (both resolved; False where either cannot be)."""
+    try:
+        return path.resolve().is_relative_to(folder.resolve())
+    except (OSError, RuntimeError):
+        return False
 
 
 def check_out_dir(out: str | Path, *, keep: bool = False, specs: Sequence[RunSpec] = ()) -> Path:
@@ -982,8 +995,15 @@ def check_out_dir(out: str | Path, *, keep: bool = False, specs: Sequence[RunSpe
 
     out = Path(out)
     replace = None if keep else "pass --resume to continue that comparison, or --force to write over it"
+    # A scene file among what the grid writes (an oracle.json plan in --out) was written over.
+    reads = [("--scenes", Path(s.scene)) for s in specs if Path(s.scene).suffix]
+    inside = next((p for _, p in reads if _within_folder(p, out / "runs")), None)
+    if inside is not None:
+        raise CompareError(
+            f"--out {out}: its runs/ holds --scenes {inside}, which the grid writes over: choose another --out"
+        )
     try:
-        check_outputs([Output("--out", out, "folder", replace=replace)])
+        check_outputs([Output("--out", out, "folder", replace=replace, files=_TOP_FILES)], reads=reads)
         out.mkdir(exist_ok=True)
     except OutputError as exc:
         raise CompareError(str(exc)) from None

@@ -1089,6 +1089,7 @@ def _train(
     elif initial is not None:  # the encoder and scorer from the checkpoint; the value head starts afresh
         model.policy.features_extractor.encoder.load_state_dict(initial[0].state_dict())
         model.policy.action_net.load_state_dict(initial[1].state_dict())
+        _check_scores(model, venv, config.init)
     if backend == "ray":
         venv.attach(model)
     held_out = [VALIDATION_BASE + k for k in range(config.eval_storeys)]
@@ -1338,6 +1339,26 @@ def _previous_seconds(out: Path) -> float:
     if type(seconds) not in (int, float) or not 0 <= seconds < 1e12:  # NaN fails too
         return 0.0
     return float(seconds)
+
+
+def _check_scores(model, venv, path: str) -> None:
+    """Refuse a start whose network scores an observation NaN or inf (weights that overflow float32):
+    the first rollout raised a traceback from torch's distribution. The observation is a sample of
+    the space, not an env's: the run's storeys stay those its seed gives."""
+    import torch
+
+    sample = venv.observation_space.sample()
+    batch = {key: np.asarray(value)[None] for key, value in sample.items()}
+    with torch.no_grad():
+        tensor, _ = model.policy.obs_to_tensor(batch)
+        logits = model.policy.action_net(
+            model.policy.mlp_extractor.forward_actor(model.policy.extract_features(tensor))
+        )
+    if not bool(torch.isfinite(logits).all()):
+        raise ModelFileError(
+            f"{path}: the network's scores are not finite for an observation (its weights overflow float32): "
+            "it cannot start a run"
+        )
 
 
 def _load_init(path: str, network: NetworkConfig):

@@ -228,8 +228,8 @@ class Config:
 
         @functools.wraps(checks)
         def checked(self: Any) -> None:
-            _check_field_kinds(self)
             try:
+                _check_field_kinds(self)
                 checks(self)
             except ConfigError:
                 raise
@@ -280,7 +280,10 @@ class Config:
             ``data`` is not a dict, names a field ``cls`` has not (the message lists its fields), or
             a value the constructor refuses.
         """
-        return _build(cls, data, where)
+        try:
+            return _build(cls, data, where)
+        except RecursionError:  # a repr of a value nested thousands of levels deep, in a message
+            raise ConfigError(f"{cls.__name__}: a value nested too deep to check") from None
 
 
 def _check_field_kinds(config: Any) -> None:

@@ -130,6 +130,13 @@ def make_config(preset: str | EnvConfig | None = None, /, **overrides: Any) -> E
         An unknown preset or field name, an ambiguous name (the message lists the candidates), or a
         value a configuration refuses.
     """
+    try:
+        return _make_config(preset, overrides)
+    except RecursionError:  # a repr of a value nested thousands of levels deep, in a message
+        raise ConfigError("make_config: a value nested too deep to check") from None
+
+
+def _make_config(preset: str | EnvConfig | None, overrides: dict[str, Any]) -> EnvConfig:
     named = overrides.pop("preset", None)
     if named is not None:
         if preset is not None and (preset.preset if isinstance(preset, EnvConfig) else preset) != named:
