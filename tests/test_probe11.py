@@ -453,3 +453,13 @@ def test_small_refusals_of_the_twenty_sixth_probe(run, tmp_path, capsys):
     argv = ["compare", "--scenes", str(plan), "--policies", "greedy", "--preset", "fast", "--max-scans", "1"]
     assert nbs([*argv, "--out", str(out), "--force", "--quiet"]) == EXIT_USAGE
     assert "writes oracle.json in" in _err(capsys) and plan.read_bytes() == before
+
+
+def test_a_training_run_refuses_scene_options_its_generated_storeys_never_read():
+    """``TrainConfig(overrides={"scene_options": {"rooms": 8}})`` trained on 1-5-room storeys without a word."""
+    from nbs_env.errors import ConfigError
+    from train.ppo import TrainConfig
+
+    with pytest.raises(ConfigError, match="scene_options, which a run's generated storeys do not read"):
+        TrainConfig(overrides={"scene_options": {"rooms": 8}})
+    assert TrainConfig(overrides={"scene_options": {}}).env_config().scene_options == {}

@@ -276,6 +276,13 @@ class TrainConfig(Config):
         _require(isinstance(self.overrides, dict), f"overrides must be a dict, got {type(self.overrides).__name__}")
         # Numpy numbers the env's configuration takes; the run's records write them as JSON.
         object.__setattr__(self, "overrides", _plain_values(self.overrides))
+        # A run trains on generated storeys, which read no scene_options ({"rooms": 8} was taken
+        # without a word): the generator's own fields say what the storeys are.
+        _require(
+            not self.overrides.get("scene_options"),
+            "overrides set scene_options, which a run's generated storeys do not read: set generator.* "
+            "(or --rooms, --cell-size) instead",
+        )
         for path in _leaf_paths(self.overrides):
             # The run's own settings win over an override of the same field (env_config): one set
             # there would be recorded and not applied.
