@@ -23,6 +23,7 @@ coverage through registration error and noise, and exceed it slightly only by no
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -220,6 +221,10 @@ def _positions(scene: Scene, lattice: float, clearance: float, radius: float) ->
     return np.asarray(out, dtype=float).reshape(-1, 3)
 
 
+class PlanningStoppedError(Exception):
+    """:func:`oracle_plan` was asked to stop (a signal to the command running it) before it finished."""
+
+
 def oracle_plan(
     scene: Scene,
     scanner: ScannerConfig | None = None,
@@ -228,6 +233,7 @@ def oracle_plan(
     clearance: float | None = None,
     spacing: float = 0.05,
     radius: float = 0.05,
+    stop: Callable[[], bool] | None = None,
 ) -> OraclePlan:
     """Greedy set cover of the scene's structural surface by scan positions (module docstring).
 
@@ -245,6 +251,9 @@ def oracle_plan(
     spacing, radius : float
         The evaluation's sample spacing and sensing radius (as the env's ``coverage_spacing`` and
         ``coverage_radius``).
+    stop : callable, optional
+        Asked before each candidate's scan; True ends the planning with :class:`PlanningStoppedError`
+        (a storey's scans take tens of seconds: a signal waited for all of them).
     """
     from dataclasses import replace
 
@@ -264,6 +273,8 @@ def oracle_plan(
     caster = Scanner(scene, scanner)
     sees = np.zeros((len(positions), len(samples)), dtype=bool)
     for k, (x, y, z) in enumerate(positions):
+        if stop is not None and stop():
+            raise PlanningStoppedError(f"stopped after {k} of {len(positions)} candidate scans")
         pose = planar(x, y, 0.0, z + scanner.height)
         points = caster.scan(pose).to_world(pose)
         if not len(points):

@@ -463,3 +463,21 @@ def test_a_training_run_refuses_scene_options_its_generated_storeys_never_read()
     with pytest.raises(ConfigError, match="scene_options, which a run's generated storeys do not read"):
         TrainConfig(overrides={"scene_options": {"rooms": 8}})
     assert TrainConfig(overrides={"scene_options": {}}).env_config().scene_options == {}
+
+
+def test_an_oracle_being_planned_stops_at_the_next_candidate():
+    """SIGTERM to ``nbs compare --jobs 1`` while an oracle was planned waited for every candidate's
+    scan (25 s; a signal to the process group was not answered in 30 s)."""
+    from policies.oracle import PlanningStoppedError, oracle_plan
+    from train.compare import _oracle
+
+    asked: list[int] = []
+
+    def stop() -> bool:
+        asked.append(1)
+        return len(asked) > 2
+
+    with pytest.raises(PlanningStoppedError, match="stopped after 2 of"):
+        oracle_plan(load_scene("l_room"), stop=stop)
+    assert _oracle("l_room", "fast", {}, stop=lambda: True) is None  # nothing kept: --resume plans it again
+    assert _oracle("no_such_scene", "fast", {}, stop=lambda: True)["ok"] is False  # errors stay records

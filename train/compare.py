@@ -258,8 +258,16 @@ def run_one(spec: RunSpec, stop: Callable[[], bool] | None = None) -> dict[str, 
         }
 
 
-def _oracle(scene: str, preset: str = "default", overrides: dict[str, Any] | None = None) -> dict[str, Any]:
-    """The oracle's plan of ``scene`` with the grid's scanner and evaluation (never raises)."""
+def _oracle(
+    scene: str,
+    preset: str = "default",
+    overrides: dict[str, Any] | None = None,
+    stop: Callable[[], bool] | None = None,
+) -> dict[str, Any] | None:
+    """The oracle's plan of ``scene`` with the grid's scanner and evaluation (never raises); None
+    when ``stop`` said to stop before it was done (nothing to keep: ``--resume`` plans it again)."""
+    from policies.oracle import PlanningStoppedError
+
     setting = {"preset": preset, "overrides": json_form(overrides or {}), "source_sha256": source_digest(scene)}
     try:
         from policies.oracle import oracle_plan
@@ -271,8 +279,11 @@ def _oracle(scene: str, preset: str = "default", overrides: dict[str, Any] | Non
             cfg.robot.scanner,
             spacing=cfg.coverage_spacing,
             radius=cfg.coverage_radius,
+            stop=stop,
         )
         return {"scene": scene, **setting, "ok": True, **plan.to_dict()}
+    except PlanningStoppedError:
+        return None
     except Exception as exc:
         return {"scene": scene, **setting, "ok": False, "error": f"{type(exc).__name__}: {exc}"}
 
@@ -367,7 +378,7 @@ def run_grid(
                 if stopping():
                     raise stopped()
                 if kind == "oracle":
-                    record = _oracle(arg, preset, overrides)
+                    record = _oracle(arg, preset, overrides, stop)
                 else:
                     record = run_one(arg) if stop is None else run_one(arg, stop)
                 if record is None:  # the run was cut short: no result
