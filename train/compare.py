@@ -975,11 +975,10 @@ _TOP_FILES = (
 
 
 def _within_folder(path: Path, folder: Path) -> bool:
-    """Whether ``path`` lies inside ``folder`` (both resolved; False where either cannot be)."""
-    try:
-        return path.resolve().is_relative_to(folder.resolve())
-    except (OSError, RuntimeError):
-        return False
+    """Whether ``path`` lies inside ``folder``, as the file system finds both (links resolved)."""
+    from train.outputs import _where
+
+    return _where(path).is_relative_to(_where(folder))
 
 
 def check_out_dir(out: str | Path, *, keep: bool = False, specs: Sequence[RunSpec] = ()) -> Path:
