@@ -132,6 +132,40 @@ def test_a_resumed_run_continues_with_its_optimiser(tmp_path):
         torch.testing.assert_close(value.cpu(), later["policy"][key])
 
 
+def test_the_room_done_head_steps_at_its_own_learning_rate(tmp_path):
+    """stop_lr_scale: Adam's first step moves every parameter by its group's learning rate (the
+    gradient of a plain sum is one everywhere): the "room done" head by ten times the rest, and the
+    groups' ``lr`` stays the schedule's (stable-baselines3 sets it each update). A run trained with
+    it saves both groups and resumes from them."""
+    pytest.importorskip("sb3_contrib")
+    pytest.importorskip("torch")
+    from train.ppo import _env_factory, _policy_class, resume_config, train
+
+    config = _tiny(stop_lr_scale=10.0)
+    env = _env_factory(config)()
+    policy = _policy_class()(
+        env.observation_space, env.action_space, lambda _: 1e-3, network=config.network, stop_lr_scale=10.0
+    )
+    before = {name: p.detach().clone() for name, p in policy.named_parameters()}
+    policy.optimizer.zero_grad()
+    sum(p.sum() for p in policy.parameters()).backward()
+    policy.optimizer.step()
+    moved = {name: (p.detach() - before[name]).abs().max().item() for name, p in policy.named_parameters()}
+    head = [name for name in moved if name.startswith("action_net.stop.")]
+    assert head and all(abs(moved[name] - 1e-2) < 1e-4 for name in head)
+    assert all(abs(moved[name] - 1e-3) < 1e-5 for name in moved if name not in head)
+    assert [group["lr"] for group in policy.optimizer.param_groups] == [1e-3, 1e-3]
+    with pytest.raises(ConfigError, match="completion='policy'"):
+        _tiny(stop_lr_scale=10.0, completion="gain")
+
+    out = tmp_path / "run"
+    train(config, out, progress=False)
+    groups = _state(out)["optimizer"]["param_groups"]
+    assert [group.get("lr_scale", 1.0) for group in groups] == [1.0, 10.0]
+    _, model = train(resume_config(out, timesteps=32), out, progress=False, resume=True)
+    assert model.num_timesteps == 32 and model.policy.optimizer.param_groups[1]["lr_scale"] == 10.0
+
+
 def test_a_resumed_run_extends_its_learning_curve(tmp_path):
     """The curve of a resumed run goes on from the state's timesteps: the clone's record once, at 0,
     and the greedy's and the teacher's figures the curve already holds, not evaluated again."""

@@ -176,6 +176,11 @@ class TrainConfig(Config):
         more than its teacher and fall while it maps less, so that PPO lowers scans and metres at the
         teacher's coverage (a Lagrangian multiplier on the costs, :class:`CostWeight`; the reward is
         divided by ``(1 + weight) / 2`` so that its scale stays the critic's). Needs ``bc_steps``.
+    stop_lr_scale : float
+        The "room done" head's learning rate as a multiple of ``learning_rate`` (1: the same). With
+        Adam a parameter's step is about the learning rate whatever its gradient, so a cloned
+        policy's room-ending choice moves this many times faster than where it scans.
+        Needs ``completion="policy"`` unless 1.
     """
 
     timesteps: int = 2048
@@ -200,6 +205,7 @@ class TrainConfig(Config):
     cell_size: tuple[float, float] = (2.0, 3.6)
     init: str = ""
     hold_coverage: float = 0.0
+    stop_lr_scale: float = 1.0
 
     def __post_init__(self) -> None:
         _plain_numbers(self)  # numpy numbers in rooms, cell_size: plain, as every configuration takes them
@@ -269,6 +275,12 @@ class TrainConfig(Config):
         _require(
             not self.hold_coverage or self.bc_steps > 0,
             "hold_coverage holds the behaviour-cloning teacher's coverage: it needs bc_steps > 0",
+        )
+        # Beyond 100 times a PPO learning rate Adam's steps on the head are the ones MAX_LEARNING_RATE bounds.
+        _within(self, "stop_lr_scale", 0.0, 100.0, open_low=True)
+        _require(
+            self.stop_lr_scale == 1.0 or self.completion == "policy",
+            "stop_lr_scale scales the 'room done' head's learning rate: it needs completion='policy'",
         )
         _require(
             self.completion in ("policy", "gain"), f"completion must be 'policy' or 'gain', got {self.completion!r}"
@@ -543,8 +555,9 @@ def _policy_class():
     class ScanNetPolicy(MaskableMultiInputActorCriticPolicy):
         """MaskablePPO's policy with :mod:`policies.learned`'s slot-independent candidate scorer."""
 
-        def __init__(self, *args, network: NetworkConfig, **kwargs) -> None:
+        def __init__(self, *args, network: NetworkConfig, stop_lr_scale: float = 1.0, **kwargs) -> None:
             self.network = network
+            self.stop_lr_scale = stop_lr_scale
             kwargs["features_extractor_class"] = Features
             kwargs["features_extractor_kwargs"] = {"network": network}
             kwargs["net_arch"] = {"pi": [], "vf": [128, 64]}
@@ -555,9 +568,39 @@ def _policy_class():
             super()._build(lr_schedule)
             _, self.action_net = build_network(self.network)
             self.action_net.to(self.device)
-            self.optimizer = self.optimizer_class(self.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)
+            params = list(self.parameters())
+            if self.stop_lr_scale != 1.0 and self.action_net.stop is not None:
+                head = {id(p) for p in self.action_net.stop.parameters()}
+                params = [
+                    {"params": [p for p in params if id(p) not in head]},
+                    {"params": list(self.action_net.stop.parameters()), "lr_scale": self.stop_lr_scale},
+                ]
+                self.optimizer_class = _scaled(self.optimizer_class)
+            self.optimizer = self.optimizer_class(params, lr=lr_schedule(1), **self.optimizer_kwargs)
 
     return ScanNetPolicy
+
+
+def _scaled(optimizer_class):
+    """``optimizer_class`` whose parameter groups step at ``lr × group["lr_scale"]``.
+
+    stable-baselines3 sets every group's ``lr`` to the schedule's value before each update, so the
+    scale is applied for the step only, not kept in ``lr``.
+    """
+
+    class Scaled(optimizer_class):
+        def step(self, closure=None):
+            base = [group["lr"] for group in self.param_groups]
+            for group in self.param_groups:
+                group["lr"] = group["lr"] * group.get("lr_scale", 1.0)
+            try:
+                return super().step(closure)
+            finally:
+                for group, lr in zip(self.param_groups, base, strict=True):
+                    group["lr"] = lr
+
+    Scaled.__name__ = Scaled.__qualname__ = f"Scaled{optimizer_class.__name__}"
+    return Scaled
 
 
 def _state_dict(model) -> dict:
@@ -946,7 +989,7 @@ def build_model(config: TrainConfig, venv, device: str = "cpu", tensorboard: str
         seed=config.seed,
         device=device,
         tensorboard_log=tensorboard,
-        policy_kwargs={"network": config.network},
+        policy_kwargs={"network": config.network, "stop_lr_scale": config.stop_lr_scale},
         verbose=0,
     )
 
@@ -1659,6 +1702,13 @@ def build_parser() -> argparse.ArgumentParser:
         "behaviour-cloning teacher's coverage (0, the default: fixed prices; needs --bc-steps)",
     )
     p.add_argument(
+        "--stop-lr-scale",
+        type=number,
+        default=1.0,
+        metavar="X",
+        help="the 'room done' head's learning rate as X times --learning-rate (default 1; needs --completion policy)",
+    )
+    p.add_argument(
         "--completion",
         choices=("policy", "gain"),
         default="gain",
@@ -1744,6 +1794,7 @@ def main(argv: list[str] | None = None) -> int:
             cell_size=cell_size,
             init=args.init,
             hold_coverage=args.hold_coverage,
+            stop_lr_scale=args.stop_lr_scale,
         )
     except ConfigError as exc:
         print(f"nbs train: error: {exc}", file=sys.stderr)
