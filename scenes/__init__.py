@@ -21,6 +21,7 @@ from scenes.corpus import PREFIX as CORPUS_PREFIX
 from scenes.corpus import load_corpus_scene
 from scenes.errors import (
     FloorPlanError,
+    GeneratorConfigError,
     IfcError,
     InvalidMeshError,
     MissingDependencyError,
@@ -49,6 +50,7 @@ __all__ = [
     "FloorPlan",
     "FloorPlanError",
     "GeneratorConfig",
+    "GeneratorConfigError",
     "IfcError",
     "InvalidMeshError",
     "MissingDependencyError",

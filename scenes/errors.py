@@ -54,6 +54,10 @@ class InvalidMeshError(SceneError, ValueError):
     """An empty mesh, non-finite vertices, or label arrays that do not match the faces."""
 
 
+class GeneratorConfigError(SceneError, ValueError):
+    """A generator option (:class:`scenes.generator.GeneratorConfig`) of the wrong kind or out of its range."""
+
+
 class StoreySizeError(SceneError, ValueError):
     """A storey beyond the limits of :mod:`scenes.limits`: too wide, too high, too many faces, too
     small, too low, too far from the origin, or two storeys in one. Most often a file drawn in

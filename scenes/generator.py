@@ -29,7 +29,7 @@ import shapely
 from shapely.geometry import Point, Polygon, box
 from shapely.geometry.polygon import orient
 
-from scenes.errors import SceneError, StoreyValidationError
+from scenes.errors import GeneratorConfigError, SceneError, StoreyValidationError
 from scenes.floorplan import (
     DOOR_CLEARANCE,
     ClutterPlan,
@@ -98,7 +98,9 @@ class GeneratorConfig:
         try:
             self._check()
         except RecursionError:  # a repr of a value nested thousands of levels deep, in a message
-            raise ValueError("GeneratorConfig: a value nested too deep to check") from None
+            raise GeneratorConfigError("GeneratorConfig", "a value nested too deep to check") from None
+        except ValueError as exc:
+            raise GeneratorConfigError("GeneratorConfig", str(exc)) from None
 
     def _check(self) -> None:
         import numbers

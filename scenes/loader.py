@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from scenes.errors import (
+    GeneratorConfigError,
     MissingStructureError,
     SceneError,
     SceneFileError,
@@ -191,9 +192,9 @@ def _load_source(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene
         try:
             _, scene = generate_storey(seed, GeneratorConfig(**opts))
         except ValueError as exc:
-            if isinstance(exc, SceneError):
+            if isinstance(exc, SceneError) and not isinstance(exc, GeneratorConfigError):
                 raise
-            raise UnknownSceneError(text, f"bad generator option: {exc}") from None
+            raise UnknownSceneError(text, f"bad generator option: {getattr(exc, 'problem', exc)}") from None
         scene.name = text  # as the user spelled it ("generated:05")
         return scene
     path = Path(text)

@@ -481,3 +481,34 @@ def test_an_oracle_being_planned_stops_at_the_next_candidate():
         oracle_plan(load_scene("l_room"), stop=stop)
     assert _oracle("l_room", "fast", {}, stop=lambda: True) is None  # nothing kept: --resume plans it again
     assert _oracle("no_such_scene", "fast", {}, stop=lambda: True)["ok"] is False  # errors stay records
+
+
+def test_the_twenty_sixth_probes_minor_findings(tmp_path, capsys):
+    """GeneratorConfig raised a bare ValueError; a scene path of parts within 255 bytes made a run
+    folder name of 300 and the comparison failed after its run; a PLY element without properties was
+    called a truncated file (trimesh fails on one inside)."""
+    import scenes
+    from scenes import GeneratorConfigError, InvalidMeshError
+
+    with pytest.raises(GeneratorConfigError, match=r"GeneratorConfig: rooms must be within 1\.\.8"):
+        scenes.GeneratorConfig(rooms="x")
+    with pytest.raises(scenes.SceneError, match="generated:1: bad generator option: rooms must be"):
+        load_scene("generated:1", rooms="x")
+
+    deep = tmp_path / ("a" * 120) / ("b" * 120)
+    deep.mkdir(parents=True)
+    plan = deep / "l_room.json"
+    shutil.copy(Path(scenes.__file__).parent / "data" / "l_room.json", plan)
+    out = tmp_path / "c"
+    argv = ["compare", "--scenes", str(plan), "--policies", "greedy", "--preset", "fast", "--max-scans", "1"]
+    assert nbs([*argv, "--out", str(out), "--quiet"]) == 0, capsys.readouterr().err
+    (folder,) = (out / "runs").iterdir()
+    assert len(folder.name) <= 120 and folder.name.split("-")[0].endswith("l_room.json")
+
+    head = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+    body = "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"
+    path = tmp_path / "m.ply"
+    face = "element face 1\nproperty list uchar int vertex_indices\n"
+    path.write_text(head + face + "element junk 0\nend_header\n" + body)
+    with pytest.raises(InvalidMeshError, match="the PLY element 'junk' has no properties"):
+        load_scene(str(path))

@@ -1121,12 +1121,20 @@ def folder_name(name: str) -> str:
     so that two names never share a folder (``ppo:a/b`` and ``ppo:a_b``). Plain names keep their
     folders (``greedy``, ``ppo_reference``, ``generated_7``); a name with a second ``:`` is changed
     (``ppo:ck_x:y`` and ``ppo:ck_x_y`` shared a folder, and each run overwrote the other's records).
+    A name of more than 100 characters keeps its last 100 and the hash.
     """
     plain = name.replace(":", "_")
     safe = re.sub(r"[^A-Za-z0-9._-]", "_", plain)
-    if safe == plain and safe not in (".", "..") and name.count(":") <= 1:
+    if safe == plain and safe not in (".", "..") and name.count(":") <= 1 and len(safe) <= _MAX_FOLDER:
         return safe
-    return f"{safe.strip('.')}-{hashlib.sha256(name.encode()).hexdigest()[:8]}"
+    # A long path (each part within the system's 255 bytes) made one part of 300: its end, which
+    # names the file, is kept, and the hash keeps the names apart.
+    kept = safe if len(safe) <= _MAX_FOLDER else safe[-_MAX_FOLDER:]
+    return f"{kept.strip('.')}-{hashlib.sha256(name.encode()).hexdigest()[:8]}"
+
+
+#: The longest scene or policy folder name kept whole (a file system's part is at most 255 bytes).
+_MAX_FOLDER = 100
 
 
 def _run_folder(out: Path, spec: dict[str, Any]) -> Path:

@@ -22,6 +22,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from nbs_env.errors import ConfigError
+from scenes.errors import SceneError
 from scenes.jsonio import MAX_JSON_DEPTH
 from scenes.limits import is_finite
 
@@ -328,7 +329,9 @@ def _build(cls: type, data: Any, where: str) -> Any:
     except (TypeError, ValueError, OverflowError) as exc:  # a value of a kind the class's checks did not expect
         if isinstance(exc, ConfigError) and not where:
             raise
-        raise ConfigError(_qualified(str(exc), where or cls.__name__, fields)) from None
+        # A scenes error's message leads with its source ("GeneratorConfig: ..."): the field path says where.
+        message = exc.problem if isinstance(exc, SceneError) else str(exc)
+        raise ConfigError(_qualified(message, where or cls.__name__, fields)) from None
 
 
 def _qualified(message: str, where: str, fields: Any) -> str:
