@@ -407,7 +407,7 @@ def _json_kind(value: Any) -> str:
     """What JSON calls ``value``'s type, for messages about a file: null, a list, a string."""
     if value is None:
         return "null"
-    names = {bool: "a boolean", list: "a list", str: "a string", int: "a number", float: "a number"}
+    names = {bool: "a boolean", dict: "an object", list: "a list", str: "a string", int: "a number", float: "a number"}
     return names.get(type(value), type(value).__name__)
 
 
@@ -624,7 +624,8 @@ def load_checkpoint(path: str | Path):
         # make the tool read any file of theirs (checksummed, then refused, but read).
         if not isinstance(name, str) or Path(name).name != name or name in ("", ".", "..") or len(name) > 255:
             # 255 bytes: no file system holds a longer name (a bare OSError from is_file below).
-            raise TypeError(f"weights must name a file beside {path.name}, got {name[:40]!r}")
+            shown = repr(name[:40]) if isinstance(name, str) else _json_kind(name)
+            raise TypeError(f"weights must name a file beside {path.name}, got {shown}")
         weights = path.parent / name
         layout = str(document.get("input_layout", "xyz"))
     except (KeyError, TypeError, ConfigError) as exc:

@@ -68,7 +68,7 @@ from scenes.geometry import STOREY_CLEARANCE
 from scenes.jsonio import JSONSizeError, read_json_file
 from scenes.limits import MIN_STOREY_HEIGHT
 from scenes.model import Door, Room, Scene, SurfaceClass
-from scenes.validation import validate_plan_scene
+from scenes.validation import start_within_check, validate_plan_scene
 
 __all__ = [
     "CLUTTER_KINDS",
@@ -813,6 +813,8 @@ def extrude(plan: FloorPlan, *, source: str | None = None, validate: bool = True
         metadata={"source": "floorplan", "format_version": FORMAT_VERSION, "plan": plan.name},
     )
     if validate:
+        if plan.start is None:
+            start_within_check(plan, scene)  # (the generator's storeys, drawn unvalidated, keep theirs)
         validate_plan_scene(plan, scene)
     return scene
 

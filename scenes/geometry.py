@@ -22,6 +22,7 @@ __all__ = [
     "CrossingPolygonError",
     "auto_start",
     "free_region",
+    "inner_point",
     "obstacle_footprint",
     "point_is_free",
     "split_long_faces",
@@ -197,10 +198,15 @@ def auto_start(scene: SceneLike, clearance: float = STOREY_CLEARANCE) -> np.ndar
         raise StoreyValidationError(
             scene.name, f"cannot choose a start: {label} has no point {clearance} m clear of obstacles"
         )
-    p = polylabel(free, tolerance=0.01)
-    if not free.contains(p):
-        p = free.representative_point()
+    p = inner_point(free)
     return np.array([p.x, p.y, floor_z])
+
+
+def inner_point(region: Polygon) -> Point:
+    """The point of ``region`` farthest from its edges (its pole of inaccessibility, to 1 cm), or a
+    point inside it where that lies outside (a pole of a thin region may)."""
+    p = polylabel(region, tolerance=0.01)
+    return p if region.contains(p) else region.representative_point()
 
 
 def point_is_free(scene: SceneLike, xy: np.ndarray, floor_z: float, clearance: float) -> bool:

@@ -21,10 +21,17 @@ from shapely.geometry import Point, Polygon
 
 from scenes._open3d import open3d
 from scenes.errors import StoreyValidationError
-from scenes.geometry import STOREY_CLEARANCE
+from scenes.geometry import STOREY_CLEARANCE, inner_point
 from scenes.model import Scene
 
-__all__ = ["MIN_DOOR_WIDTH", "count_escaping_rays", "fibonacci_sphere", "room_free_space", "validate_plan_scene"]
+__all__ = [
+    "MIN_DOOR_WIDTH",
+    "count_escaping_rays",
+    "fibonacci_sphere",
+    "room_free_space",
+    "start_within_check",
+    "validate_plan_scene",
+]
 
 #: The narrowest door a valid storey may have, metres.
 MIN_DOOR_WIDTH = 0.60
@@ -94,6 +101,24 @@ def room_free_space(plan: PlanLike, scene: Scene, room: int, clearance: float = 
     if feet:
         free = free.difference(shapely.union_all(feet).buffer(clearance))
     return free
+
+
+def start_within_check(plan: PlanLike, scene: Scene) -> None:
+    """Move a plan scene's chosen start into the free space :func:`validate_plan_scene` checks.
+
+    :func:`scenes.geometry.auto_start` keeps a disc clear of the mesh; the check keeps the room's
+    outline offset with mitred corners, which reaches farther into a concave corner. In a narrow
+    room the first's point can lie outside the second (a plan with 1 m corridors refused its own
+    start): the start then moves to the inside of the largest room's checked free space.
+    """
+    if not scene.rooms:
+        return
+    room = max(range(len(scene.rooms)), key=lambda i: scene.rooms[i].area)
+    free = room_free_space(plan, scene, room)
+    parts = [g for g in getattr(free, "geoms", [free]) if isinstance(g, Polygon) and not g.is_empty]
+    if parts and not free.covers(Point(float(scene.start[0]), float(scene.start[1]))):
+        p = inner_point(max(parts, key=lambda g: g.area))
+        scene.start = (p.x, p.y)
 
 
 def validate_plan_scene(plan: PlanLike, scene: Scene) -> None:

@@ -512,3 +512,47 @@ def test_the_twenty_sixth_probes_minor_findings(tmp_path, capsys):
     path.write_text(head + face + "element junk 0\nend_header\n" + body)
     with pytest.raises(InvalidMeshError, match="the PLY element 'junk' has no properties"):
         load_scene(str(path))
+
+
+def test_the_twenty_seventh_probes_findings(run, tmp_path, capsys):
+    """A non-string weights name lost its message to a slice; an override keyed by a number named
+    no key; a plan of 1 m corridors refused the start it chose itself; a resumed run whose state file
+    had become a folder trained all its steps before saying so; a record's seed ``false`` was shown
+    as a spelling of seed 0."""
+    import scenes
+    from nbs_env.errors import ConfigError, ModelFileError
+    from policies.learned import load_checkpoint
+    from train.ppo import TrainConfig
+
+    document = json.loads((run / "policy.json").read_text())
+    for weights, kind in ((123, "a number"), ({"a": 1}, "an object")):
+        (run / "policy.json").write_text(json.dumps({**document, "weights": weights}))
+        with pytest.raises(ModelFileError, match=f"weights must name a file beside policy.json, got {kind}"):
+            load_checkpoint(run)
+    (run / "policy.json").write_text(json.dumps(document))
+    with pytest.raises(ConfigError, match="overrides' keys are field names"):
+        TrainConfig(overrides={1: 3})
+
+    plan = json.loads((Path(scenes.__file__).parent / "data" / "l_room.json").read_text())
+    plan.update(wall_thickness=3, windows=[], clutter=[])
+    plan.pop("start", None)
+    (tmp_path / "narrow.json").write_text(json.dumps(plan))
+    scene = load_scene(str(tmp_path / "narrow.json"))  # the L's arms are 1 m wide inside 3 m walls
+    assert 1.95 <= scene.start[0] <= 2.05 and 1.95 <= scene.start[1] <= 2.05
+
+    (run / "training_state.json").unlink()
+    (run / "training_state.json").mkdir()
+    before = sorted(p.name for p in run.iterdir())
+    assert nbs(["train", "--resume", str(run), "--timesteps", "32", "--quiet"]) == EXIT_USAGE
+    assert "training_state.json is a folder where the run writes its file" in _err(capsys)
+    assert sorted(p.name for p in run.iterdir()) == before
+
+    out = tmp_path / "c"
+    argv = ["compare", "--scenes", "l_room", "--policies", "greedy", "--preset", "fast", "--max-scans", "1"]
+    assert nbs([*argv, "--out", str(out), "--quiet"]) == 0
+    record = out / "runs" / "l_room" / "greedy" / "seed0" / "run.json"
+    stored = json.loads(record.read_text())
+    stored["spec"]["seed"] = False
+    record.write_text(json.dumps(stored))
+    assert nbs([*argv, "--out", str(out), "--quiet", "--resume"]) == EXIT_USAGE
+    assert "records seed false, not an integer (its folder says seed0)" in _err(capsys)

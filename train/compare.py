@@ -1269,6 +1269,11 @@ def _check_same_comparison(out: Path, specs: Sequence[RunSpec]) -> None:
             key = RunSpec(stored["scene"], stored["policy"], stored["seed"]).key
         except (KeyError, TypeError):
             continue
+        if type(stored["seed"]) is not int:  # false or 0.0 equal 0 in Python, not in a key
+            raise CompareError(
+                f"{path}: records seed {json.dumps(stored['seed'])[:40]}, not an integer (its folder says "
+                f"{path.parent.name}): restore the record, or pass --force to replace the comparison's runs"
+            )
         if key not in wanted:
             spelled = _spelled_otherwise(stored, specs)
             if spelled is not None:  # ppo:./run for ppo:run, generated:01 for generated:1

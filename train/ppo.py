@@ -286,6 +286,8 @@ class TrainConfig(Config):
             self.completion in ("policy", "gain"), f"completion must be 'policy' or 'gain', got {self.completion!r}"
         )
         _require(isinstance(self.overrides, dict), f"overrides must be a dict, got {type(self.overrides).__name__}")
+        odd = next((key for key in self.overrides if not isinstance(key, str)), None)
+        _require(odd is None, f"overrides' keys are field names (str, dotted), got {str(odd)[:40]!r}")
         # Numpy numbers the env's configuration takes; the run's records write them as JSON.
         object.__setattr__(self, "overrides", _plain_values(self.overrides))
         # A run trains on generated storeys, which read no scene_options ({"rooms": 8} was taken
@@ -1112,8 +1114,8 @@ def _train(
         raise ConfigError(f"backend must be 'local' or 'ray', got {backend!r}")
     network = config.network
     out = Path(out)
-    if resume and (problem := checkpoint_problem(out)) is not None:
-        raise ModelFileError(problem)
+    if resume and (problem := checkpoint_problem(out) or resume_folder_problem(out)) is not None:
+        raise ModelFileError(problem)  # the second found at the run's end, after all its steps
     if not resume and (problem := run_folder_problem(out)) is not None:
         raise FileExistsError(problem)
     state = latest_state(out) if resume else None
@@ -1845,6 +1847,20 @@ def run_folder_problem(out: str | Path) -> str | None:
             f"{out} holds {shown} (a checkpoint's or a run's files), which this run would write over; "
             "name a new or empty folder"
         )
+    return None
+
+
+def resume_folder_problem(run: Path) -> str | None:
+    """Why a resumed run could not write its files into its folder (None when it can): a file it
+    writes there that is a folder, or a ``checkpoint_N`` that is a file. Found before the work: the
+    run wrote them at its end, after all its steps."""
+    for name in RUN_FILES:
+        path = run / name
+        if name != "tb" and path.is_dir():
+            return f"{path} is a folder where the run writes its file: remove it or restore the file"
+    for path in sorted(run.glob("checkpoint_*")):
+        if re.fullmatch(r"checkpoint_\d+", path.name) and not path.is_dir():
+            return f"{path} is a file where the run keeps a checkpoint folder: remove it or restore the folder"
     return None
 
 
