@@ -197,8 +197,8 @@ def check_ply_header(source: str, data: bytes) -> PlyHeader:
             elements[-1][2].append(PlyProperty(words[-1], words[3] if listed else kind, kind if listed else None))
     if encoding is None:
         raise InvalidMeshError(source, "the PLY header has no 'format' line")
-    for name, _, props in elements:
-        if not props:
+    for name, count, props in elements:
+        if not props and count:
             # Its records hold nothing (no bytes, or blank lines): readers disagree on it (trimesh
             # fails inside with "data type '' not understood"), and it holds nothing to read.
             raise InvalidMeshError(

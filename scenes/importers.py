@@ -570,6 +570,13 @@ def _read_gltf(source: str, path: Path, ext: str) -> tuple[np.ndarray, np.ndarra
         labels.append(np.full(len(geom.faces), cls.value, dtype=np.int64))
         rooms.append(np.full(len(geom.faces), room, dtype=np.int64))
         offset += len(v)
+    if not faces and surfaceless:
+        shown = ", ".join(repr(n) for n in surfaceless[:5]) + (" ..." if len(surfaceless) > 5 else "")
+        raise InvalidMeshError(
+            source,
+            f"every part is drawn as points or lines (glTF primitive modes 0-3), not triangles: no surface to "
+            f"scan ({shown}); export the meshes as triangles",
+        )
     if surfaceless:
         warnings.warn(SurfacelessPartsWarning(source, surfaceless), stacklevel=3)
     if not faces:

@@ -56,6 +56,9 @@ class PlanLike(Protocol):
     @property
     def clutter(self) -> Sequence[ClutterLike]: ...
 
+    @property
+    def start(self) -> tuple[float, float] | None: ...
+
 
 def fibonacci_sphere(n: int) -> np.ndarray:
     """(n, 3) float: unit vectors spread evenly over the sphere."""
@@ -185,8 +188,18 @@ def validate_plan_scene(plan: PlanLike, scene: Scene) -> None:
     for i, room_parts in enumerate(parts):
         main = max(range(len(room_parts)), key=lambda k: room_parts[k].area)
         if (i, main) not in seen:
+            split = ""
+            if len(room_parts) > 1:
+                # Its free space is in parts (clutter or a narrow waist cuts it): its largest is not reached.
+                split = (
+                    f" (clutter or a narrow waist cuts its free space into {len(room_parts)} parts, and its largest, "
+                    f"{room_parts[main].area:.1f} m², is not the start's or a door's)"
+                )
+            where = ", ".join(f"{float(v):g}" for v in np.round(start[:2], 2))
+            chosen = "; chosen, as the plan gives none" if plan.start is None else ""
             raise StoreyValidationError(
-                name, f"room {scene.rooms[i].name!r} cannot be reached from the start through doors"
+                name,
+                f"room {scene.rooms[i].name!r} cannot be reached from the start ({where}{chosen}) through doors{split}",
             )
 
     origins = []

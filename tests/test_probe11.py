@@ -556,3 +556,78 @@ def test_the_twenty_seventh_probes_findings(run, tmp_path, capsys):
     record.write_text(json.dumps(stored))
     assert nbs([*argv, "--out", str(out), "--quiet", "--resume"]) == EXIT_USAGE
     assert "records seed false, not an integer (its folder says seed0)" in _err(capsys)
+
+
+def test_the_twenty_eighth_probes_findings(run, tmp_path, capsys):
+    """A run's stop_lr_scale edited in its record trained at the tensors' old scale; 1e-320 froze the
+    head; an override keyed None named no key; a PLY element of no records and no properties was
+    refused; a record's seed other than its folder's was "a run left out"; a ``tb`` file failed the
+    resume after the model was built; a glTF of lines was "empty"; --init of another completion
+    dumped two networks."""
+    import scenes
+    from nbs_env.errors import ConfigError
+    from scenes import InvalidMeshError
+    from train.ppo import TrainConfig, load_model, train
+
+    out = tmp_path / "r"
+    train(TrainConfig(**{**_TINY, "stop_lr_scale": 3.0}), out, progress=False)
+    path = out / "training_state.json"
+    document = json.loads(path.read_text())
+    document["run"]["stop_lr_scale"] = 5.0
+    path.write_text(json.dumps(document))
+    assert load_model(out).policy.optimizer.param_groups[1]["lr_scale"] == 5.0  # the record is what runs
+    with pytest.raises(ConfigError, match=r"stop_lr_scale must be within \[0\.001, 100\]"):
+        TrainConfig(completion="policy", stop_lr_scale=1e-320)
+    with pytest.raises(ConfigError, match="completion must be 'policy' or 'gain'"):
+        TrainConfig(completion="x", stop_lr_scale=2.0)
+    with pytest.raises(ConfigError, match="got None"):
+        TrainConfig(overrides={None: 3})
+
+    head = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+    face = "element face 1\nproperty list uchar int vertex_indices\nproperty uchar label\n"
+    (tmp_path / "e.ply").write_text(head + "element empty 0\n" + face + "end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2 1\n")
+    with pytest.raises(scenes.SceneError) as caught:
+        load_scene(str(tmp_path / "e.ply"))
+    assert not isinstance(caught.value, InvalidMeshError), caught.value  # read: only the lone floor is wrong
+
+    import base64
+
+    points = base64.b64encode(np.array([0, 0, 0, 1, 0, 0, 0, 1, 0], "<f4").tobytes()).decode()
+    lines = {
+        "asset": {"version": "2.0"},
+        "buffers": [{"byteLength": 36, "uri": f"data:application/octet-stream;base64,{points}"}],
+        "bufferViews": [{"buffer": 0, "byteLength": 36}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "max": [1, 1, 0], "min": [0, 0, 0]}
+        ],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "mode": 1}]}],
+        "nodes": [{"mesh": 0}],
+        "scenes": [{"nodes": [0]}],
+        "scene": 0,
+    }
+    (tmp_path / "lines.gltf").write_text(json.dumps(lines))
+    with pytest.raises(InvalidMeshError, match="every part is drawn as points or lines"):
+        load_scene(str(tmp_path / "lines.gltf"))
+
+    compare = tmp_path / "c"
+    argv = ["compare", "--scenes", "l_room", "--policies", "greedy", "--preset", "fast", "--max-scans", "1"]
+    assert nbs([*argv, "--out", str(compare), "--quiet"]) == 0
+    record = compare / "runs" / "l_room" / "greedy" / "seed0" / "run.json"
+    stored = json.loads(record.read_text())
+    stored["spec"]["seed"] = 1
+    record.write_text(json.dumps(stored))
+    assert nbs([*argv, "--out", str(compare), "--quiet", "--resume"]) == EXIT_USAGE
+    assert "records seed 1, not its folder's (its folder says seed0)" in _err(capsys)
+
+    if (run / "tb").is_dir():
+        shutil.rmtree(run / "tb")
+    (run / "tb").write_text("")
+    assert nbs(["train", "--resume", str(run), "--timesteps", "32", "--quiet"]) == EXIT_USAGE
+    assert "tb is a file where the run keeps its TensorBoard folder" in _err(capsys)
+
+    argv = ["train", "--init", str(out), "--timesteps", "8", "--n-steps", "8", "--envs", "1"]
+    assert nbs([*argv, "--out", str(tmp_path / "t"), "--quiet"]) == EXIT_USAGE
+    assert _err(capsys).endswith("it was trained with --completion policy")
+
+
+_TINY = {"timesteps": 8, "envs": 1, "rooms": (1, 1), "n_steps": 8, "batch_size": 8, "completion": "policy"}

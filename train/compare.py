@@ -1269,9 +1269,11 @@ def _check_same_comparison(out: Path, specs: Sequence[RunSpec]) -> None:
             key = RunSpec(stored["scene"], stored["policy"], stored["seed"]).key
         except (KeyError, TypeError):
             continue
-        if type(stored["seed"]) is not int:  # false or 0.0 equal 0 in Python, not in a key
+        if type(stored["seed"]) is not int or path.parent.name != f"seed{stored['seed']}":
+            # false or 0.0 equal 0 in Python, not in a key; a record's seed is its folder's
+            kind = "not an integer" if type(stored["seed"]) is not int else "not its folder's"
             raise CompareError(
-                f"{path}: records seed {json.dumps(stored['seed'])[:40]}, not an integer (its folder says "
+                f"{path}: records seed {json.dumps(stored['seed'])[:40]}, {kind} (its folder says "
                 f"{path.parent.name}): restore the record, or pass --force to replace the comparison's runs"
             )
         if key not in wanted:

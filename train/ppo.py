@@ -276,18 +276,19 @@ class TrainConfig(Config):
             not self.hold_coverage or self.bc_steps > 0,
             "hold_coverage holds the behaviour-cloning teacher's coverage: it needs bc_steps > 0",
         )
-        # Beyond 100 times a PPO learning rate Adam's steps on the head are the ones MAX_LEARNING_RATE bounds.
-        _within(self, "stop_lr_scale", 0.0, 100.0, open_low=True)
+        _require(
+            self.completion in ("policy", "gain"), f"completion must be 'policy' or 'gain', got {self.completion!r}"
+        )
+        # Below 1/1000 the head hardly moves (1e-320: frozen, without a word); beyond 100 times a PPO
+        # learning rate its steps are those MAX_LEARNING_RATE bounds.
+        _within(self, "stop_lr_scale", 1e-3, 100.0)
         _require(
             self.stop_lr_scale == 1.0 or self.completion == "policy",
             "stop_lr_scale scales the 'room done' head's learning rate: it needs completion='policy'",
         )
-        _require(
-            self.completion in ("policy", "gain"), f"completion must be 'policy' or 'gain', got {self.completion!r}"
-        )
         _require(isinstance(self.overrides, dict), f"overrides must be a dict, got {type(self.overrides).__name__}")
-        odd = next((key for key in self.overrides if not isinstance(key, str)), None)
-        _require(odd is None, f"overrides' keys are field names (str, dotted), got {str(odd)[:40]!r}")
+        odd = [key for key in self.overrides if not isinstance(key, str)]
+        _require(not odd, f"overrides' keys are field names (str, dotted), got {str(odd[:1])[1:-1][:40]}")
         # Numpy numbers the env's configuration takes; the run's records write them as JSON.
         object.__setattr__(self, "overrides", _plain_values(self.overrides))
         # A run trains on generated storeys, which read no scene_options ({"rooms": 8} was taken
@@ -969,6 +970,9 @@ def _load_state(model, folder: Path, document: dict) -> None:
         model.policy.optimizer.load_state_dict(state["optimizer"])
     except (RuntimeError, KeyError, ValueError, TypeError, IndexError) as exc:
         raise ModelFileError(f"{tensors}: does not fit this run's network ({_one_line(exc)})") from None
+    for group in model.policy.optimizer.param_groups:
+        if "lr_scale" in group:  # the run's setting, as its record says, not the one the tensors kept
+            group["lr_scale"] = model.policy.stop_lr_scale
     model.num_timesteps = int(document["timesteps"])
 
 
@@ -1425,7 +1429,12 @@ def _load_init(path: str, network: NetworkConfig):
 
     theirs, encoder, scorer, _, _ = load_checkpoint(resolve_checkpoint(path))
     if theirs != network:
-        raise ModelFileError(f"{path}: its network {theirs.to_dict()} is not this run's {network.to_dict()}")
+        mine, other = network.to_dict(), theirs.to_dict()
+        apart = ", ".join(f"{k} {other.get(k)!r} against {mine.get(k)!r}" for k in mine if other.get(k) != mine.get(k))
+        hint = ""
+        if (theirs.actions > theirs.candidates) != (network.actions > network.candidates):
+            hint = f": it was trained with --completion {'policy' if theirs.actions > theirs.candidates else 'gain'}"
+        raise ModelFileError(f"{path}: its network is not this run's ({apart}){hint}")
     return encoder, scorer
 
 
@@ -1708,7 +1717,8 @@ def build_parser() -> argparse.ArgumentParser:
         type=number,
         default=1.0,
         metavar="X",
-        help="the 'room done' head's learning rate as X times --learning-rate (default 1; needs --completion policy)",
+        help="the 'room done' head's learning rate as X times --learning-rate (default 1, within 0.001-100; needs "
+        "--completion policy)",
     )
     p.add_argument(
         "--completion",
@@ -1858,6 +1868,8 @@ def resume_folder_problem(run: Path) -> str | None:
         path = run / name
         if name != "tb" and path.is_dir():
             return f"{path} is a folder where the run writes its file: remove it or restore the file"
+        if name == "tb" and os.path.lexists(path) and not path.is_dir():
+            return f"{path} is a file where the run keeps its TensorBoard folder: remove it or restore the folder"
     for path in sorted(run.glob("checkpoint_*")):
         if re.fullmatch(r"checkpoint_\d+", path.name) and not path.is_dir():
             return f"{path} is a file where the run keeps a checkpoint folder: remove it or restore the folder"
