@@ -167,6 +167,12 @@ def check_ply_header(source: str, data: bytes) -> PlyHeader:
             encoding = words[1] if len(words) > 1 else ""
             if encoding not in _PLY_FORMATS:
                 raise InvalidMeshError(source, f"PLY header line {lineno}: unknown format {encoding!r}")
+            if words[2:] != ["1.0"]:
+                # The format defines version 1.0 only: trimesh reads past another, plyfile refuses it.
+                shown = line.strip()[:60]
+                raise InvalidMeshError(
+                    source, f"PLY header line {lineno}: {shown!r}, where PLY has 'format {encoding} 1.0' only"
+                )
         elif words[:1] == ["element"]:
             if encoding is None:
                 raise InvalidMeshError(source, f"PLY header line {lineno}: an element before the 'format' line")

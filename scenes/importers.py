@@ -545,6 +545,7 @@ def _read_gltf(source: str, path: Path, ext: str) -> tuple[np.ndarray, np.ndarra
     parents = scene.graph.transforms.parents
     verts, faces, labels, rooms, unlabelled = [], [], [], [], []
     surfaceless: list[str] = []
+    drawn_otherwise = False  # a part of points or lines, not a triangle mesh of no faces
     offset = 0
     for node in sorted(scene.graph.nodes_geometry):
         transform, geom_name = scene.graph[node]
@@ -554,6 +555,7 @@ def _read_gltf(source: str, path: Path, ext: str) -> tuple[np.ndarray, np.ndarra
             # said, since a part drawn so vanishes from the storey.
             if geom is not None:
                 surfaceless.append(str(node))
+                drawn_otherwise |= not isinstance(geom, trimesh.Trimesh)
             continue
         names = [node, geom_name]
         parent = parents.get(node)
@@ -570,7 +572,7 @@ def _read_gltf(source: str, path: Path, ext: str) -> tuple[np.ndarray, np.ndarra
         labels.append(np.full(len(geom.faces), cls.value, dtype=np.int64))
         rooms.append(np.full(len(geom.faces), room, dtype=np.int64))
         offset += len(v)
-    if not faces and surfaceless:
+    if not faces and drawn_otherwise:
         shown = ", ".join(repr(n) for n in surfaceless[:5]) + (" ..." if len(surfaceless) > 5 else "")
         raise InvalidMeshError(
             source,

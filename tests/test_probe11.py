@@ -509,7 +509,7 @@ def test_the_twenty_sixth_probes_minor_findings(tmp_path, capsys):
     body = "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"
     path = tmp_path / "m.ply"
     face = "element face 1\nproperty list uchar int vertex_indices\n"
-    path.write_text(head + face + "element junk 0\nend_header\n" + body)
+    path.write_text(head + face + "element junk 2\nend_header\n" + body)
     with pytest.raises(InvalidMeshError, match="the PLY element 'junk' has no properties"):
         load_scene(str(path))
 
@@ -554,8 +554,9 @@ def test_the_twenty_seventh_probes_findings(run, tmp_path, capsys):
     stored = json.loads(record.read_text())
     stored["spec"]["seed"] = False
     record.write_text(json.dumps(stored))
-    assert nbs([*argv, "--out", str(out), "--quiet", "--resume"]) == EXIT_USAGE
-    assert "records seed false, not an integer (its folder says seed0)" in _err(capsys)
+    assert nbs([*argv, "--out", str(out), "--quiet", "--resume"]) == 0  # not seed 0's record: run again
+    assert "it is the record of scene 'l_room', policy 'greedy', seed False, not of the run" in _err(capsys)
+    assert json.loads(record.read_text())["spec"]["seed"] == 0
 
 
 def test_the_twenty_eighth_probes_findings(run, tmp_path, capsys):
@@ -589,6 +590,9 @@ def test_the_twenty_eighth_probes_findings(run, tmp_path, capsys):
     with pytest.raises(scenes.SceneError) as caught:
         load_scene(str(tmp_path / "e.ply"))
     assert not isinstance(caught.value, InvalidMeshError), caught.value  # read: only the lone floor is wrong
+    (tmp_path / "v.ply").write_text(head.replace("1.0", "2.0") + face + "end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2 1\n")
+    with pytest.raises(InvalidMeshError, match=r"where PLY has 'format ascii 1\.0' only"):
+        load_scene(str(tmp_path / "v.ply"))  # plyfile refuses another version; trimesh read it as 1.0
 
     import base64
 
@@ -616,8 +620,8 @@ def test_the_twenty_eighth_probes_findings(run, tmp_path, capsys):
     stored = json.loads(record.read_text())
     stored["spec"]["seed"] = 1
     record.write_text(json.dumps(stored))
-    assert nbs([*argv, "--out", str(compare), "--quiet", "--resume"]) == EXIT_USAGE
-    assert "records seed 1, not its folder's (its folder says seed0)" in _err(capsys)
+    assert nbs([*argv, "--out", str(compare), "--quiet", "--resume"]) == 0  # (not "a run left out")
+    assert "it is the record of scene 'l_room', policy 'greedy', seed 1, not of the run" in _err(capsys)
 
     if (run / "tb").is_dir():
         shutil.rmtree(run / "tb")
