@@ -58,6 +58,11 @@ class GeneratorConfigError(SceneError, ValueError):
     """A generator option (:class:`scenes.generator.GeneratorConfig`) of the wrong kind or out of its range."""
 
 
+class SceneOptionError(SceneError, TypeError):
+    """An option ``load_scene`` was given that the source's kind does not take (a TypeError, as
+    Python's own for an unexpected keyword)."""
+
+
 class StoreySizeError(SceneError, ValueError):
     """A storey beyond the limits of :mod:`scenes.limits`: too wide, too high, too many faces, too
     small, too low, too far from the origin, or two storeys in one. Most often a file drawn in

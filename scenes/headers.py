@@ -515,6 +515,7 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
             )
     # Instances multiply a mesh's faces: 100,000 nodes of one small mesh, a 7.7 MB file, were built
     # into 31 million faces before the face bound was met (and the memory ran out first).
+    _check_triangle_lists(source, doc)
     check_face_count(source, drawn)
 
 
@@ -912,6 +913,26 @@ def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> int:
             if isinstance(count, int) and mode in (4, 5):  # triangles, or a strip's count - 2
                 faces[m] += count // 3 if mode == 4 else max(count - 2, 0)
     return sum(faces[node["mesh"]] for node in nodes if "mesh" in node)
+
+
+def _check_triangle_lists(source: str, doc: dict) -> None:
+    """glTF 2.0: a triangle list's index (or vertex) count is a multiple of three; trimesh failed
+    inside on another ("cannot reshape array of size 35"). On primitives and accessors checked."""
+    accessors = doc.get("accessors", [])
+    for m, mesh in enumerate(doc.get("meshes", [])):
+        for p, primitive in enumerate(mesh["primitives"]):
+            if primitive.get("mode", 4) != 4:
+                continue
+            role = "indices" if "indices" in primitive else "attributes.POSITION"
+            count = accessors[primitive["indices"] if "indices" in primitive else primitive["attributes"]["POSITION"]][
+                "count"
+            ]
+            if count % 3:
+                raise InvalidMeshError(
+                    source,
+                    f"meshes[{m}].primitives[{p}].{role}'s accessor counts {count:,}, not a multiple of 3 as a "
+                    "triangle list's (mode 4)",
+                )
 
 
 #: A node's transform: its properties and their number of components (glTF 2.0).

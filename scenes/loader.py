@@ -21,6 +21,7 @@ from scenes.errors import (
     MissingStructureError,
     SceneError,
     SceneFileError,
+    SceneOptionError,
     StoreySizeError,
     StoreyValidationError,
     UnknownSceneError,
@@ -194,7 +195,7 @@ def _load_source(spec: str | Path | FloorPlan, options: dict[str, Any]) -> Scene
         except ValueError as exc:
             if isinstance(exc, SceneError) and not isinstance(exc, GeneratorConfigError):
                 raise
-            raise UnknownSceneError(text, f"bad generator option: {getattr(exc, 'problem', exc)}") from None
+            raise GeneratorConfigError(text, f"bad generator option: {getattr(exc, 'problem', exc)}") from None
         scene.name = text  # as the user spelled it ("generated:05")
         return scene
     path = Path(text)
@@ -263,5 +264,5 @@ def check_source(text: str) -> None:
 def _take(options: dict[str, Any], allowed: tuple[str, ...], kind: str) -> dict[str, Any]:
     unknown = sorted(set(options) - set(allowed))
     if unknown:
-        raise TypeError(f"load_scene got options {unknown} that a {kind} does not take; it takes {list(allowed)}")
+        raise SceneOptionError("load_scene", f"options {unknown} are not a {kind}'s; it takes {list(allowed)}")
     return options

@@ -635,3 +635,36 @@ def test_the_twenty_eighth_probes_findings(run, tmp_path, capsys):
 
 
 _TINY = {"timesteps": 8, "envs": 1, "rooms": (1, 1), "n_steps": 8, "batch_size": 8, "completion": "policy"}
+
+
+def test_the_twenty_ninth_probes_findings(tmp_path):
+    """A triangle list of 35 indices failed inside trimesh; a bad generator option through
+    ``load_scene`` was an UnknownSceneError (a LookupError), an unknown option a bare TypeError."""
+    import base64
+
+    import scenes
+
+    with pytest.raises(scenes.GeneratorConfigError, match="generated:3: bad generator option: rooms must be"):
+        load_scene("generated:3", rooms=0)
+    with pytest.raises(scenes.SceneOptionError, match=r"options \['nope'\] are not a generated storey's"):
+        load_scene("generated:3", nope=1)
+
+    corners = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], "<f4").tobytes()
+    indices = np.array([0, 1, 2, 1, 3], "<u2").tobytes() + b"\0\0"  # five indices: no triangle list
+    data = base64.b64encode(corners + indices).decode()
+    document = {
+        "asset": {"version": "2.0"},
+        "buffers": [{"byteLength": 60, "uri": f"data:application/octet-stream;base64,{data}"}],
+        "bufferViews": [{"buffer": 0, "byteLength": 48}, {"buffer": 0, "byteOffset": 48, "byteLength": 10}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "max": [1, 1, 0], "min": [0, 0, 0]},
+            {"bufferView": 1, "componentType": 5123, "count": 5, "type": "SCALAR"},
+        ],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "nodes": [{"mesh": 0, "name": "floor"}],
+        "scenes": [{"nodes": [0]}],
+        "scene": 0,
+    }
+    (tmp_path / "five.gltf").write_text(json.dumps(document))
+    with pytest.raises(scenes.InvalidMeshError, match=r"indices's accessor counts 5, not a multiple of 3"):
+        load_scene(str(tmp_path / "five.gltf"))
