@@ -612,8 +612,9 @@ def load_checkpoint(path: str | Path):
         raise ModelFileError(f"{path}: not a JSON checkpoint description ({exc})") from None
     if not isinstance(document, dict) or document.get("format") != CHECKPOINT_FORMAT:
         raise ModelFileError(f"{path}: not an {CHECKPOINT_FORMAT!r} file")
-    if document.get("version") != CHECKPOINT_VERSION:
-        raise ModelFileError(f"{path}: version {document.get('version')!r}, this nbs-env reads {CHECKPOINT_VERSION}")
+    version = document.get("version")
+    if type(version) is not int or version != CHECKPOINT_VERSION:  # true equals 1 in Python, not in JSON
+        raise ModelFileError(f"{path}: version {json.dumps(version)[:40]}, this nbs-env reads {CHECKPOINT_VERSION}")
     try:
         network = document["network"]
         if not isinstance(network, dict):
@@ -627,11 +628,11 @@ def load_checkpoint(path: str | Path):
             shown = repr(name[:40]) if isinstance(name, str) else _json_kind(name)
             raise TypeError(f"weights must name a file beside {path.name}, got {shown}")
         weights = path.parent / name
-        layout = str(document.get("input_layout", "xyz"))
+        layout = document.get("input_layout", "xyz")
     except (KeyError, TypeError, ConfigError) as exc:
         raise ModelFileError(f"{path}: malformed checkpoint description ({exc})") from None
-    if layout not in ("xyz", "zxy"):
-        raise ModelFileError(f"{path}: input_layout must be 'xyz' or 'zxy', got {layout!r}")
+    if layout not in ("xyz", "zxy") or not isinstance(layout, str):
+        raise ModelFileError(f"{path}: input_layout must be 'xyz' or 'zxy', got {json.dumps(layout)[:40]}")
     if not weights.is_file():
         missing = not os.path.lexists(weights)
         raise ModelFileError(f"{weights}: {'weights file missing' if missing else 'not a regular file'}")

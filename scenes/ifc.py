@@ -308,6 +308,28 @@ def _has_body(element: Any) -> bool:
     )
 
 
+#: IfcDimensionalExponents' attributes, in order (a length is 1, 0, 0, 0, 0, 0, 0).
+_EXPONENTS = (
+    "LengthExponent",
+    "MassExponent",
+    "TimeExponent",
+    "ElectricCurrentExponent",
+    "ThermodynamicTemperatureExponent",
+    "AmountOfSubstanceExponent",
+    "LuminousIntensityExponent",
+)
+#: What a length unit's conversion factor may be measured in (Revit writes a ratio, ArchiCAD a length).
+_LENGTH_FACTORS = (
+    "IfcLengthMeasure",
+    "IfcPositiveLengthMeasure",
+    "IfcRatioMeasure",
+    "IfcPositiveRatioMeasure",
+    "IfcNormalisedRatioMeasure",
+    "IfcReal",
+    "IfcNumericMeasure",
+)
+
+
 def _check_units(source: str, model: Any) -> None:
     """Every conversion-based unit converts by a positive number to a unit that does not lead back
     to it: ifcopenshell follows the chain without a cycle check (a unit converting to itself ran for
@@ -322,6 +344,26 @@ def _check_units(source: str, model: Any) -> None:
             factor = getattr(node, "ConversionFactor", None)
             if factor is None or not factor.is_a("IfcMeasureWithUnit"):
                 raise IfcError(source, f"the unit #{node.id()} has no conversion factor")
+            if node.UnitType == "LENGTHUNIT":
+                # A length converts by a length or a ratio to another length: an area's factor or
+                # exponents were read as metres without a word.
+                dims = getattr(node, "Dimensions", None)
+                exponents = None if dims is None else [getattr(dims, n, 0) for n in _EXPONENTS]
+                measure = factor.ValueComponent.is_a() if hasattr(factor.ValueComponent, "is_a") else None
+                target = getattr(factor, "UnitComponent", None)
+                if exponents is not None and exponents != [1, 0, 0, 0, 0, 0, 0]:
+                    raise IfcError(
+                        source, f"the length unit #{node.id()} has the dimensions {exponents}, not a length's"
+                    )
+                if measure is not None and measure not in _LENGTH_FACTORS:
+                    raise IfcError(
+                        source, f"the length unit #{node.id()} converts by an {measure}, not a length or a ratio"
+                    )
+                if target is not None and getattr(target, "UnitType", "LENGTHUNIT") != "LENGTHUNIT":
+                    raise IfcError(
+                        source,
+                        f"the length unit #{node.id()} converts to #{target.id()} ({target.UnitType}), no length unit",
+                    )
             value = getattr(factor.ValueComponent, "wrappedValue", factor.ValueComponent)
             if (
                 isinstance(value, bool)
@@ -330,6 +372,16 @@ def _check_units(source: str, model: Any) -> None:
             ):
                 raise IfcError(source, f"the unit #{node.id()} converts by {repr(value)[:40]}, not a positive number")
             node = factor.UnitComponent
+    for unit in model.by_type("IfcSIUnit"):
+        # ifcopenshell's unit scale failed inside on another name ("'NoneType' object has no attribute").
+        name = getattr(unit, "Name", None)
+        if getattr(unit, "UnitType", None) == "LENGTHUNIT" and name != "METRE":
+            shown = f"named {name[:40]}" if isinstance(name, str) else "not named by an SI name"
+            raise IfcError(
+                source,
+                f"the SI length unit #{unit.id()} is {shown}, where IFC's is METRE (feet and inches are an "
+                "IfcConversionBasedUnit)",
+            )
     # The project's own assignment: a project library (IFC4) may hold one of areas alone.
     projects = model.by_type("IfcProject")
     assignments = [p.UnitsInContext for p in projects if getattr(p, "UnitsInContext", None) is not None]

@@ -416,6 +416,14 @@ def _read_obj(source: str, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
             obj, group = rest.strip() or None, None
         elif key == "g":
             group = rest.strip() or None
+            names = split(rest)
+            if len({parse_part_name(n) for n in names}) > 1:
+                # OBJ puts the faces in every group the line names: which part they are is not one answer.
+                raise InvalidMeshError(
+                    source,
+                    f"line {lineno}: 'g {' '.join(names)[:60]}' puts its faces in {len(names)} groups that name "
+                    "different parts: name one group per part",
+                )
         # Everything else (vt, vn, usemtl, mtllib, s, l, ...) does not matter for labelled geometry.
 
     joined = "\n".join(coords)

@@ -264,5 +264,7 @@ def check_source(text: str) -> None:
 def _take(options: dict[str, Any], allowed: tuple[str, ...], kind: str) -> dict[str, Any]:
     unknown = sorted(set(options) - set(allowed))
     if unknown:
-        raise SceneOptionError("load_scene", f"options {unknown} are not a {kind}'s; it takes {list(allowed)}")
+        raise SceneOptionError(
+            "load_scene", f"options {unknown} do not apply to this source ({kind}); it takes {list(allowed)}"
+        )
     return options

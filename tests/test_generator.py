@@ -117,7 +117,7 @@ def test_bad_generator_options():
         GeneratorConfig(rooms=9)
     with pytest.raises(ValueError, match="clutter_density"):
         GeneratorConfig(clutter_density=-1)
-    with pytest.raises(TypeError, match="are not a generated storey's"):
+    with pytest.raises(TypeError, match=r"do not apply to this source \(generated storey\)"):
         load_scene("generated:1", colour="red")
 
 

@@ -646,7 +646,7 @@ def test_the_twenty_ninth_probes_findings(tmp_path):
 
     with pytest.raises(scenes.GeneratorConfigError, match="generated:3: bad generator option: rooms must be"):
         load_scene("generated:3", rooms=0)
-    with pytest.raises(scenes.SceneOptionError, match=r"options \['nope'\] are not a generated storey's"):
+    with pytest.raises(scenes.SceneOptionError, match=r"\['nope'\] do not apply to this source \(generated storey\)"):
         load_scene("generated:3", nope=1)
 
     corners = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], "<f4").tobytes()
@@ -668,3 +668,54 @@ def test_the_twenty_ninth_probes_findings(tmp_path):
     (tmp_path / "five.gltf").write_text(json.dumps(document))
     with pytest.raises(scenes.InvalidMeshError, match=r"indices's accessor counts 5, not a multiple of 3"):
         load_scene(str(tmp_path / "five.gltf"))
+
+
+def test_the_thirtieth_probes_findings(run, tmp_path):
+    """A checkpoint of version true (== 1 in Python) was read, an input_layout of 1 shown as '1'; an
+    IFC SI length unit named FOOT failed inside ifcopenshell; ``g wall_0 floor_9`` was read as the
+    wall alone (OBJ puts the faces in both groups)."""
+    import scenes
+    from nbs_env.errors import ModelFileError
+    from policies.learned import load_checkpoint
+
+    document = json.loads((run / "policy.json").read_text())
+    for change, message in (({"version": True}, "version true"), ({"input_layout": 1}, "'zxy', got 1$")):
+        (run / "policy.json").write_text(json.dumps({**document, **change}))
+        with pytest.raises(ModelFileError, match=message):
+            load_checkpoint(run)
+
+    ifc = (Path(scenes.__file__).parent / "data" / "corpus" / "ifc" / "split_level.ifc").read_text()
+    (tmp_path / "feet.ifc").write_text(ifc.replace(".LENGTHUNIT.,$,.METRE.)", ".LENGTHUNIT.,$,.FOOT.)"))
+    with pytest.raises(scenes.IfcError, match="the SI length unit #2 is not named by an SI name, where IFC's is METRE"):
+        load_scene(str(tmp_path / "feet.ifc"))
+
+    obj = "v 0 0 0\nv 4 0 0\nv 0 4 0\nv 0 0 3\ng floor\nf 1 2 3\ng wall_0 floor_9\nf 1 2 4\n"
+    (tmp_path / "two.obj").write_text(obj)
+    with pytest.raises(scenes.InvalidMeshError, match="line 7: 'g wall_0 floor_9' puts its faces in 2 groups"):
+        load_scene(str(tmp_path / "two.obj"))
+
+
+def test_an_ifc_length_unit_of_an_area_is_named(tmp_path):
+    """Probe 30 T4: a foot converting by an IfcAreaMeasure, with an area's exponents or to an area
+    unit was read as metres without a word."""
+    import scenes
+
+    ifc = (Path(scenes.__file__).parent / "data" / "corpus" / "ifc" / "split_level.ifc").read_text()
+    foot = "#2=IFCCONVERSIONBASEDUNIT(#9901,.LENGTHUNIT.,'FOOT',#9902);#9901=IFCDIMENSIONALEXPONENTS({});"
+    foot += "#9902=IFCMEASUREWITHUNIT({}(0.3048),#9903);#9903=IFCSIUNIT(*,{},$,{});"
+    metre = "#2=IFCSIUNIT(*,.LENGTHUNIT.,$,.METRE.);"
+    assert metre in ifc
+    for values, message in (
+        (("2,0,0,0,0,0,0", "IFCLENGTHMEASURE", ".LENGTHUNIT.", ".METRE."), r"dimensions \[2, 0, 0, 0, 0, 0, 0\]"),
+        (("1,0,0,0,0,0,0", "IFCAREAMEASURE", ".LENGTHUNIT.", ".METRE."), "converts by an IfcAreaMeasure"),
+        (("1,0,0,0,0,0,0", "IFCRATIOMEASURE", ".AREAUNIT.", ".SQUARE_METRE."), r"#9903 \(AREAUNIT\), no length unit"),
+    ):
+        (tmp_path / "f.ifc").write_text(ifc.replace(metre, foot.format(*values)))
+        with pytest.raises(scenes.IfcError, match=message):
+            load_scene(str(tmp_path / "f.ifc"))
+    # A foot converting by a length to metres passes the check (the storey, now 0.3048 of its size, is too low).
+    (tmp_path / "f.ifc").write_text(
+        ifc.replace(metre, foot.format("1,0,0,0,0,0,0", "IFCRATIOMEASURE", ".LENGTHUNIT.", ".METRE."))
+    )
+    with pytest.raises(scenes.StoreySizeError, match="is the file's unit right"):
+        load_scene(str(tmp_path / "f.ifc"))

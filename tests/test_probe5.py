@@ -287,7 +287,7 @@ def test_a_scene_option_the_source_does_not_take_is_a_config_error_when_made_or_
     assert make_config("fast", scene="a/b.ifc", scene_options={"storey": 0}).scene_options == {"storey": 0}
     # A scene a reset names: refused at that reset.
     env = NBSEnv(make_config("fast", scene_options={"units": "mm"}))
-    with pytest.raises(ConfigError, match=r"scene_options: load_scene got options \['units'\] that a bundled scene"):
+    with pytest.raises(ConfigError, match=r"scene_options: load_scene: options \['units'\] do not apply to this"):
         env.reset(seed=0, options={"scene": "l_room"})
 
 
