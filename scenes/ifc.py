@@ -344,6 +344,13 @@ def _check_units(source: str, model: Any) -> None:
             factor = getattr(node, "ConversionFactor", None)
             if factor is None or not factor.is_a("IfcMeasureWithUnit"):
                 raise IfcError(source, f"the unit #{node.id()} has no conversion factor")
+            value = getattr(factor.ValueComponent, "wrappedValue", factor.ValueComponent)
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not (math.isfinite(value) and value > 0)
+            ):
+                raise IfcError(source, f"the unit #{node.id()} converts by {repr(value)[:40]}, not a positive number")
             if node.UnitType == "LENGTHUNIT":
                 # A length converts by a length or a ratio to another length: an area's factor or
                 # exponents were read as metres without a word.
@@ -351,7 +358,8 @@ def _check_units(source: str, model: Any) -> None:
                 exponents = None if dims is None else [getattr(dims, n, 0) for n in _EXPONENTS]
                 measure = factor.ValueComponent.is_a() if hasattr(factor.ValueComponent, "is_a") else None
                 target = getattr(factor, "UnitComponent", None)
-                if exponents is not None and exponents != [1, 0, 0, 0, 0, 0, 0]:
+                # (All zero, as exporters copy an angle's, says nothing: ifcopenshell reads past it.)
+                if exponents is not None and exponents not in ([1, 0, 0, 0, 0, 0, 0], [0] * 7):
                     raise IfcError(
                         source, f"the length unit #{node.id()} has the dimensions {exponents}, not a length's"
                     )
@@ -364,13 +372,6 @@ def _check_units(source: str, model: Any) -> None:
                         source,
                         f"the length unit #{node.id()} converts to #{target.id()} ({target.UnitType}), no length unit",
                     )
-            value = getattr(factor.ValueComponent, "wrappedValue", factor.ValueComponent)
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, (int, float))
-                or not (math.isfinite(value) and value > 0)
-            ):
-                raise IfcError(source, f"the unit #{node.id()} converts by {repr(value)[:40]}, not a positive number")
             node = factor.UnitComponent
     for unit in model.by_type("IfcSIUnit"):
         # ifcopenshell's unit scale failed inside on another name ("'NoneType' object has no attribute").
