@@ -385,6 +385,11 @@ def _check_units(source: str, model: Any) -> None:
             )
     # The project's own assignment: a project library (IFC4) may hold one of areas alone.
     projects = model.by_type("IfcProject")
+    if len(projects) > 1:  # IFC has one; which one's units a reader takes is its own choice
+        raise IfcError(
+            source,
+            f"the file holds {len(projects)} IfcProject ({', '.join(f'#{p.id()}' for p in projects)}); IFC has one",
+        )
     assignments = [p.UnitsInContext for p in projects if getattr(p, "UnitsInContext", None) is not None]
     for assignment in assignments:
         lengths = [u for u in assignment.Units or () if getattr(u, "UnitType", None) == "LENGTHUNIT"]

@@ -719,3 +719,42 @@ def test_an_ifc_length_unit_of_an_area_is_named(tmp_path):
     )
     with pytest.raises(scenes.StoreySizeError, match="is the file's unit right"):
         load_scene(str(tmp_path / "f.ifc"))
+
+
+def test_the_thirty_first_probes_records_are_compared_as_json(run, tmp_path, capsys):
+    """A training state of version true, a comparison record of max_scans true and an oracle whose
+    ok was 1 (or whose scene was another) were taken: equal in Python, not in the record; a second
+    IfcProject's units were dropped without a word."""
+    import scenes
+    from nbs_env.errors import ModelFileError
+    from train.ppo import latest_state
+
+    path = run / "training_state.json"
+    path.write_text(path.read_text().replace('"version": 1', '"version": true', 1))
+    with pytest.raises(ModelFileError, match="not an 'nbs-env-training-state' file of version 1"):
+        latest_state(run)
+
+    out = tmp_path / "c"
+    argv = ["compare", "--scenes", "l_room", "--policies", "greedy", "--preset", "fast", "--max-scans", "1"]
+    assert nbs([*argv, "--out", str(out), "--quiet"]) == 0
+    record = out / "runs" / "l_room" / "greedy" / "seed0" / "run.json"
+    stored = json.loads(record.read_text())
+    stored["spec"]["overrides"]["max_scans"] = True
+    record.write_text(json.dumps(stored))
+    assert nbs([*argv, "--out", str(out), "--quiet", "--resume"]) == EXIT_USAGE
+    assert "holds a finished run with" in _err(capsys)
+    stored["spec"]["overrides"]["max_scans"] = 1
+    record.write_text(json.dumps(stored))
+    oracle = json.loads((out / "oracle.json").read_text())
+    oracle["l_room"]["scene"] = "office"
+    (out / "oracle.json").write_text(json.dumps(oracle))
+    from train.compare import RunSpec, load_finished
+
+    assert "l_room" not in load_finished(out, [RunSpec("l_room", "greedy", 0, "fast", {"max_scans": 1})])["oracles"]
+
+    ifc = (Path(scenes.__file__).parent / "data" / "corpus" / "ifc" / "split_level.ifc").read_text()
+    project = next(line for line in ifc.splitlines() if "IFCPROJECT(" in line)
+    number = project.split("=", 1)[0]
+    (tmp_path / "two.ifc").write_text(ifc.replace(project, project + "\n" + project.replace(number, "#99999", 1), 1))
+    with pytest.raises(scenes.IfcError, match="holds 2 IfcProject"):
+        load_scene(str(tmp_path / "two.ifc"))

@@ -1213,7 +1213,8 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
     for scene, plan in stored.items() if isinstance(stored, dict) else ():
         if (
             isinstance(plan, dict)
-            and plan.get("ok")
+            and plan.get("ok") is True  # (1 and "no" are true in Python: a record's own word)
+            and plan.get("scene") == scene
             and _oracle_matches(scene, plan, specs)
             and plan.get("source_sha256") == digests.get(scene)
             and _oracle_usable(plan)
@@ -1345,14 +1346,22 @@ def same_spec(stored: dict[str, Any], wanted: dict[str, Any]) -> bool:
     stored, wanted : dict
         ``RunSpec`` as JSON reads it (``json_form(asdict(spec))``); ``stored`` from a record.
     """
-    if stored == wanted:
+    if _typed(stored) == _typed(wanted):
         return True
     if any(stored.get(k) != wanted.get(k) for k in ("scene", "policy", "seed")) or set(stored) != set(wanted):
         return False
+    if any(v == wanted.get(k) and _typed(v) != _typed(wanted.get(k)) for k, v in stored.items()):
+        return False  # true for 1, 1.0 for 1: equal in Python, another value in the record
     try:
         return RunSpec(**stored).config().to_dict() == RunSpec(**wanted).config().to_dict()
     except (ConfigError, TypeError):  # a record this version cannot build: not this run
         return False
+
+
+def _typed(value: Any) -> str:
+    """``value`` as JSON writes it, keys sorted: ``true``, ``1`` and ``1.0`` apart, as Python's ``==``
+    does not keep them."""
+    return json.dumps(value, sort_keys=True, default=str)
 
 
 def _settings_apart(stored: dict[str, Any], wanted: dict[str, Any]) -> tuple[str, str]:

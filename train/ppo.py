@@ -826,7 +826,12 @@ def latest_state(run_folder: str | Path) -> tuple[Path, dict]:
         if path.parent != run_folder and (path.parent / CURVE).exists():
             continue  # a run folder of its own named like a checkpoint (checkpoint_problem), not this run's
         document = _json_record(path, "a JSON training state")
-        if not isinstance(document, dict) or document.get("format") != STATE_FORMAT or document.get("version") != 1:
+        if (
+            not isinstance(document, dict)
+            or document.get("format") != STATE_FORMAT
+            or type(document.get("version")) is not int
+            or document.get("version") != 1
+        ):
             raise ModelFileError(f"{path}: not an {STATE_FORMAT!r} file of version 1")
         steps = document.get("timesteps")
         if type(steps) is not int or not isinstance(document.get("run"), dict):
