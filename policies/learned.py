@@ -35,6 +35,7 @@ import numpy as np
 
 from nbs_env.atomic import replacing
 from nbs_env.config import Config, _integer, _require, make_config
+from nbs_env.config.checks import same_json
 from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES, CandidateColumn, candidate_table_of
 from policies.base import mask_of
@@ -613,7 +614,7 @@ def load_checkpoint(path: str | Path):
     if not isinstance(document, dict) or document.get("format") != CHECKPOINT_FORMAT:
         raise ModelFileError(f"{path}: not an {CHECKPOINT_FORMAT!r} file")
     version = document.get("version")
-    if type(version) is not int or version != CHECKPOINT_VERSION:  # true equals 1 in Python, not in JSON
+    if not same_json(version, CHECKPOINT_VERSION):
         raise ModelFileError(f"{path}: version {json.dumps(version)[:40]}, this nbs-env reads {CHECKPOINT_VERSION}")
     try:
         network = document["network"]

@@ -57,7 +57,7 @@ import numpy as np
 from nbs_env.atomic import replacing
 from nbs_env.atomic import write_text as _write_text
 from nbs_env.config import json_form
-from nbs_env.config.checks import parse_int
+from nbs_env.config.checks import parse_int, same_json
 from nbs_env.errors import ConfigError
 from scenes.jsonio import read_json_file
 from scenes.limits import MAX_SEED_DIGITS
@@ -1179,9 +1179,7 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
         stored = record.get("spec")
         identity = {"scene": spec.scene, "policy": spec.policy, "seed": spec.seed}
         # Typed: false and 0.0 equal a seed of 0 in Python, not in the record's JSON.
-        if isinstance(stored, dict) and any(
-            type(stored.get(k)) is not type(v) or stored.get(k) != v for k, v in identity.items()
-        ):
+        if isinstance(stored, dict) and any(not same_json(stored.get(k), v) for k, v in identity.items()):
             other = ", ".join(f"{k} {_shown(stored.get(k))}" for k in identity)
             damaged(folder / "run.json", f"it is the record of {other}, not of the run whose folder it is in")
             continue
@@ -1346,22 +1344,16 @@ def same_spec(stored: dict[str, Any], wanted: dict[str, Any]) -> bool:
     stored, wanted : dict
         ``RunSpec`` as JSON reads it (``json_form(asdict(spec))``); ``stored`` from a record.
     """
-    if _typed(stored) == _typed(wanted):
+    if same_json(stored, wanted):
         return True
     if any(stored.get(k) != wanted.get(k) for k in ("scene", "policy", "seed")) or set(stored) != set(wanted):
         return False
-    if any(v == wanted.get(k) and _typed(v) != _typed(wanted.get(k)) for k, v in stored.items()):
+    if any(v == wanted.get(k) and not same_json(v, wanted.get(k)) for k, v in stored.items()):
         return False  # true for 1, 1.0 for 1: equal in Python, another value in the record
     try:
         return RunSpec(**stored).config().to_dict() == RunSpec(**wanted).config().to_dict()
     except (ConfigError, TypeError):  # a record this version cannot build: not this run
         return False
-
-
-def _typed(value: Any) -> str:
-    """``value`` as JSON writes it, keys sorted: ``true``, ``1`` and ``1.0`` apart, as Python's ``==``
-    does not keep them."""
-    return json.dumps(value, sort_keys=True, default=str)
 
 
 def _settings_apart(stored: dict[str, Any], wanted: dict[str, Any]) -> tuple[str, str]:

@@ -32,7 +32,7 @@ import numpy as np
 from nbs_env import threads
 from nbs_env.atomic import replacing, write_text
 from nbs_env.config import Config, EnvConfig, _integer, _require
-from nbs_env.config.checks import _plain_numbers, _plain_values, _within, parse_float
+from nbs_env.config.checks import _plain_numbers, _plain_values, _within, parse_float, same_json
 from nbs_env.config.rooms import MAX_SCANS
 from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES
@@ -829,8 +829,7 @@ def latest_state(run_folder: str | Path) -> tuple[Path, dict]:
         if (
             not isinstance(document, dict)
             or document.get("format") != STATE_FORMAT
-            or type(document.get("version")) is not int
-            or document.get("version") != 1
+            or not same_json(document.get("version"), 1)
         ):
             raise ModelFileError(f"{path}: not an {STATE_FORMAT!r} file of version 1")
         steps = document.get("timesteps")

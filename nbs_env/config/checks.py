@@ -213,6 +213,12 @@ def json_form(value: Any) -> Any:
     return json.loads(json.dumps(value))
 
 
+def same_json(a: Any, b: Any) -> bool:
+    """Whether ``a`` and ``b`` are one value as JSON writes them: Python's ``==`` takes ``true`` and
+    ``1.0`` for ``1``, which a record holding them does not mean."""
+    return json.dumps(a, sort_keys=True, default=str) == json.dumps(b, sort_keys=True, default=str)
+
+
 class Config:
     """Base of the frozen configuration dataclasses: their JSON-safe tree and back.
 
