@@ -25,7 +25,7 @@ from typing import Any
 from urllib.parse import unquote, urlsplit
 
 from scenes.errors import InvalidMeshError
-from scenes.jsonio import read_json
+from scenes.jsonio import json_text, read_json
 from scenes.limits import MAX_FACES, check_face_count, is_finite
 
 __all__ = [
@@ -396,16 +396,20 @@ def check_gltf_layout(source: str, path: Path, data: bytes) -> None:
     asset = doc.get("asset")
     if not isinstance(asset, dict) or not isinstance(asset.get("version"), str):
         # glTF 2.0 requires asset.version, a string ("2.0"): a number 3 passed the check of strings.
-        shown = "missing" if not isinstance(asset, dict) or "version" not in asset else repr(asset["version"])[:20]
+        shown = "missing" if not isinstance(asset, dict) or "version" not in asset else json_text(asset["version"], 20)
         raise InvalidMeshError(source, f'asset.version is {shown}; a glTF 2.0 file names its version as "2.0"')
     version = asset["version"]
     if not re.fullmatch(r"2\.[0-9]+", version):  # ASCII digits, as the schema's pattern ("2.\u0660" passed \d)
         raise InvalidMeshError(source, f"asset.version is {version[:20]!r}: nbs-env reads glTF 2.0, export it so")
     least = asset.get("minVersion")
     if "minVersion" in asset and not (isinstance(least, str) and re.fullmatch(r"[0-9]+\.[0-9]+", least)):
-        raise InvalidMeshError(source, f'asset.minVersion is {repr(least)[:20]}, not a version string such as "2.0"')
+        raise InvalidMeshError(
+            source, f'asset.minVersion is {json_text(least, 20)}, not a version string such as "2.0"'
+        )
     if least is not None and tuple(int(n) for n in least.split(".")) < (2, 0):
-        raise InvalidMeshError(source, f"asset.minVersion is {least!r}, below 2.0, which glTF 2.0 does not allow")
+        raise InvalidMeshError(
+            source, f"asset.minVersion is {json_text(least)}, below 2.0, which glTF 2.0 does not allow"
+        )
     if least is not None and tuple(int(n) for n in least.split(".")) != (2, 0):
         # glTF 2.0 §3.2: a reader that does not support an asset's minVersion refuses it (Khronos's
         # glTF-Asset-Generator: a 2.1 minVersion "should fail to load on a 2.0 client").
@@ -546,12 +550,12 @@ def _check_primitives(source: str, doc: dict) -> None:
         primitives = mesh.get("primitives")
         if not isinstance(primitives, list) or not primitives:
             raise InvalidMeshError(
-                source, f"meshes[{m}].primitives is {repr(primitives)[:40]}, not a list of one or more primitives"
+                source, f"meshes[{m}].primitives is {json_text(primitives, 40)}, not a list of one or more primitives"
             )
         for p, primitive in enumerate(primitives):
             if not isinstance(primitive, dict):
                 raise InvalidMeshError(
-                    source, f"meshes[{m}].primitives[{p}] is {repr(primitive)[:40]}, not a primitive (an object)"
+                    source, f"meshes[{m}].primitives[{p}] is {json_text(primitive, 40)}, not a primitive (an object)"
                 )
 
 
@@ -617,7 +621,7 @@ def _check_morph_targets(source: str, doc: dict) -> None:
         if value is None:
             continue
         if not (isinstance(value, list) and all(type(w) in (int, float) and is_finite(w) for w in value)):
-            raise InvalidMeshError(source, f"{where} must be a list of finite numbers, got {repr(value)[:40]}")
+            raise InvalidMeshError(source, f"{where} must be a list of finite numbers, got {json_text(value, 40)}")
         if any(w != 0 for w in value):
             raise InvalidMeshError(
                 source,
@@ -835,7 +839,7 @@ def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> int:
     if "scene" in doc:
         k = doc["scene"]
         if not (isinstance(k, int) and not isinstance(k, bool) and 0 <= k < len(scenes)):
-            raise InvalidMeshError(source, f"scene is {repr(k)[:40]}, but the file has {len(scenes)} scene(s)")
+            raise InvalidMeshError(source, f"scene is {json_text(k, 40)}, but the file has {len(scenes)} scene(s)")
     children = {k for node in nodes for k in node.get("children", [])}  # once: a scene per node was quadratic
     if not scenes and _items(source, doc, "meshes"):
         # glTF 2.0 allows a file of no scene (a library of parts); the reader then draws nothing, and
@@ -870,7 +874,7 @@ def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> int:
         # The reader keys its geometry by these names: a list as a name was a TypeError from inside it.
         for i, item in enumerate(_items(source, doc, key)):
             if "name" in item and not isinstance(item["name"], str):
-                raise InvalidMeshError(source, f"{key}[{i}].name is {repr(item['name'])[:40]}, not a string")
+                raise InvalidMeshError(source, f"{key}[{i}].name is {json_text(item['name'], 40)}, not a string")
     for i, node in enumerate(nodes):
         if "mesh" in node and "camera" in node:
             raise InvalidMeshError(
@@ -890,7 +894,7 @@ def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> int:
             where = f"meshes[{m}].primitives[{p}]"
             mode = primitive.get("mode", 4)
             if not (isinstance(mode, int) and not isinstance(mode, bool) and 0 <= mode <= 6):
-                raise InvalidMeshError(source, f"{where}.mode is {repr(mode)[:40]}; glTF's modes are 0 to 6")
+                raise InvalidMeshError(source, f"{where}.mode is {json_text(mode, 40)}; glTF's modes are 0 to 6")
             if mode == 6:
                 # trimesh drops a fan whole, silently: the part vanished from the storey.
                 raise InvalidMeshError(
@@ -906,7 +910,7 @@ def _check_scenes_and_modes(source: str, doc: dict, nodes: list[dict]) -> int:
                 if not (isinstance(value, int) and not isinstance(value, bool) and 0 <= value < len(accessors)):
                     shown = f"{where}.{role}" if role == "indices" else f"{where}.attributes.{role}"
                     raise InvalidMeshError(
-                        source, f"{shown} is {repr(value)[:40]}, but the file has {len(accessors)} accessor(s)"
+                        source, f"{shown} is {json_text(value, 40)}, but the file has {len(accessors)} accessor(s)"
                     )
             counted = accessors[primitive["indices"] if "indices" in primitive else attributes["POSITION"]]
             count = counted.get("count", 0) if isinstance(counted, dict) else 0
@@ -972,7 +976,7 @@ def _check_node_tree(source: str, nodes: list[dict]) -> None:
                 and all(isinstance(v, (int, float)) and not isinstance(v, bool) and is_finite(v) for v in value)
             ):
                 raise InvalidMeshError(
-                    source, f"nodes[{i}].{key} must be {length} finite numbers, got {repr(value)[:60]}"
+                    source, f"nodes[{i}].{key} must be {length} finite numbers, got {json_text(value, 60)}"
                 )
         trs = [key for key in ("translation", "rotation", "scale") if key in node]
         if "matrix" in node and trs:

@@ -106,6 +106,27 @@ def _integer(literal: str) -> int:
     return value
 
 
+def json_text(value: Any, limit: int = 60) -> str:
+    """``value`` for a message, spelt as JSON spells it (``true``, ``null``, ``[1, 2]``, ``"text"``):
+    the values a message names were read from JSON, and Python's spelling (``True``, ``None``) is not
+    what the user's file says. Bounded to ``limit`` characters before it is made (a record may hold a
+    huge string, list or number); what JSON cannot spell (NaN, a numpy array) as Python does.
+    """
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 3000:
+        return f"an integer of about {int(value.bit_length() * 0.30103):,} digits"
+    if isinstance(value, str):
+        value = value[: limit + 1]
+    elif isinstance(value, (list, tuple)):
+        value = list(value[: limit + 1])
+    elif isinstance(value, dict):
+        value = dict(list(value.items())[: limit + 1])
+    try:
+        text = json.dumps(value, ensure_ascii=False, allow_nan=False)
+    except (TypeError, ValueError, RecursionError):
+        text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def read_json_file(path: str | os.PathLike[str], *, max_bytes: int = MAX_JSON_BYTES, **kwargs: Any) -> Any:
     """:func:`read_json` of a UTF-8 file, its size checked before it is read.
 
@@ -129,7 +150,8 @@ def read_json_file(path: str | os.PathLike[str], *, max_bytes: int = MAX_JSON_BY
             f"a file of {size:,} bytes, more than the {max_bytes:,} a JSON file of nbs-env may hold "
             "(is it the file you meant?)"
         )
-    with open(path, encoding="utf-8") as f:
+    # RFC 8259 lets a parser ignore a byte-order mark; editors on Windows write one.
+    with open(path, encoding="utf-8-sig") as f:
         text = f.read(max_bytes + 1)  # a file that grows (or a /proc file that claims 0 bytes) stops here
     if len(text) > max_bytes:
         raise JSONSizeError(f"a file of more than {max_bytes:,} bytes, the most a JSON file of nbs-env may hold")
@@ -180,4 +202,6 @@ def read_json(text: str, *, max_depth: int = MAX_JSON_DEPTH, **kwargs: Any) -> A
             raise  # bad JSON, or a caller's own refusal (parse_constant refusing NaN)
         # Python refuses to convert an integer of more than 4,300 digits (a ValueError that is no
         # JSONDecodeError): a number no honest document holds, reported as the bad JSON it is.
-        raise JSONNumberError("a number of more than 4,300 digits", text, 0) from None
+        masked = _STRING.sub(lambda m: " " * len(m.group()), text)  # a string of digits is no number
+        found = re.search(r"-?[0-9]{4301,}", masked)
+        raise JSONNumberError("a number of more than 4,300 digits", text, found.start() if found else 0) from None

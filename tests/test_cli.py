@@ -58,7 +58,7 @@ def test_scenes_info_prints_areas(capsys):
         (
             ["scenes", "generate", "--seed", "1", "--rooms", "12", "--out", "p.json"],
             EXIT_USAGE,
-            "rooms must be within 1..8",
+            "integers 1 <= A <= B <= 8",
         ),
         (
             ["scenes", "show", "office", "--colour", "red", "--out", "x.png"],

@@ -53,7 +53,7 @@ DAMAGES = [
     (0, lambda m: m.update(structure_sensed_pct=1e308, path_length_m=-5), "structure_sensed_pct is 1e+308"),
     (1, lambda m: m.update(structure_sensed_pct=math.nan), "structure_sensed_pct is nan"),
     (2, lambda m: m.update(path_length_m=-5), "path_length_m is -5"),
-    (3, lambda m: m.update(scene="office", seed=5), "scene 'office'"),
+    (3, lambda m: m.update(scene="office", seed=5), 'scene "office"'),
     (4, _broken_steps, "3 steps for 1 scans"),
     (5, _broken_step_entry, "steps[0].structure_sensed_pct is missing"),
 ]
@@ -121,7 +121,7 @@ def test_resume_names_a_run_json_of_another_run(base, tmp_path, capsys):
     finished = compare.load_finished(out, specs)
     assert "l_room|random|0" not in finished["runs"] and len(finished["runs"]) == 6
     assert capsys.readouterr().err == (
-        f"nbs compare: {run}: it is the record of scene 'l_room', policy 'random', seed 5, not of the run "
+        f'nbs compare: {run}: it is the record of scene "l_room", policy "random", seed 5, not of the run '
         "whose folder it is in; running it again\n"
     )
 
@@ -148,29 +148,29 @@ def _set(path: str, value):
 @pytest.mark.parametrize(
     ("edit", "reason"),
     [
-        (_set("scans", True), "scans is True, not an integer"),
+        (_set("scans", True), "scans is true, not an integer"),
         (_set("scans", 1.0), "scans is 1.0, not an integer"),
         (_set("processed_points", 10**400), "processed_points is 1000"),
         (_set("structure_sensed_pct", math.inf), "structure_sensed_pct is inf"),
-        (_set("structure_sensed_pct", "50"), "structure_sensed_pct is '50', not a number"),
+        (_set("structure_sensed_pct", "50"), 'structure_sensed_pct is "50", not a number'),
         (_set("travel_time_s", -1.0), "travel_time_s is -1.0"),
         (_set("acquisition_time_s", 1e300), "acquisition_time_s is 1e+300"),
         (_set("complete", 1), "complete is 1"),
-        (_set("policy", "greedy"), "policy 'greedy'"),
-        (_set("seed", "0"), "seed '0'"),
+        (_set("policy", "greedy"), 'policy "greedy"'),
+        (_set("seed", "0"), 'seed "0"'),
         (_set("rooms", {}), "rooms is {}, not a list"),
         (_set("rooms.0.structure_sensed_pct", 100.5), "rooms[0].structure_sensed_pct is 100.5"),
-        (_set("rooms.0.name", None), "rooms[0].name is None"),
+        (_set("rooms.0.name", None), "rooms[0].name is null"),
         (_set("steps.0", 3), "steps[0] is 3, not an object"),
         (_set("steps.0.dense_pct", -1), "steps[0].dense_pct is -1"),
-        (_set("registration_error", None), "registration_error is None"),
+        (_set("registration_error", None), "registration_error is null"),
         (_set("registration_error.max_m", math.nan), "registration_error.max_m is nan"),
-        (_set("quality.min_density_per_m2", "x"), "quality.min_density_per_m2 is 'x'"),
+        (_set("quality.min_density_per_m2", "x"), 'quality.min_density_per_m2 is "x"'),
         (_set("quality.quality_pct", 400), "quality.quality_pct is 400"),
         (_set("registrability.min_overlap", 2.0), "registrability.min_overlap is 2.0"),
-        (_set("registrability.refused", None), "registrability.refused is None"),
-        (_set("room_ends", [{"reason": "no NVP", "scans": 1, "standing_room": None}]), "standing_room is None"),
-        (_set("door_events", [{"event": "abandoned", "reason": ["x"]}]), "door_events[0].reason is ['x']"),
+        (_set("registrability.refused", None), "registrability.refused is null"),
+        (_set("room_ends", [{"reason": "no NVP", "scans": 1, "standing_room": None}]), "standing_room is null"),
+        (_set("door_events", [{"event": "abandoned", "reason": ["x"]}]), 'door_events[0].reason is ["x"]'),
         (_set("door_events", [7]), "door_events[0] is 7"),
     ],
 )

@@ -319,7 +319,7 @@ def test_a_network_description_is_sized_before_anything_is_built(tmp_path, monke
             r"holds 16,593 MiB of activations for one observation, at most 512 MiB \(channels \[4096, 1, 1\]",
         ),
         ({"candidates": 10**7, "actions": 10**7}, r"candidates must be an integer <= 4096"),
-        ({"hidden": "64"}, r"hidden must be an integer >= 1, got '64'"),
+        ({"hidden": "64"}, r'hidden must be an integer >= 1, got "64"'),
         ({"hidden": 64.0}, r"hidden must be an integer >= 1, got 64\.0"),
     ):
         path.write_text(json.dumps({**document, "network": {**document["network"], **changes}}))

@@ -208,9 +208,9 @@ def test_an_svm_file_says_what_its_json_reader_refused(tmp_path):
         (lambda doc: doc["meshes"][0].update(primitives={}), r"primitives is \{\}, not a list"),  # mesh dropped
         (lambda doc: doc["meshes"][0].update(primitives=[]), r"primitives is \[\], not a list"),
         (lambda doc: doc["meshes"][0].update(primitives=[5]), r"primitives\[0\] is 5, not a primitive"),
-        (lambda doc: doc["meshes"][0].pop("primitives"), "primitives is None"),
+        (lambda doc: doc["meshes"][0].pop("primitives"), "primitives is null"),
         (lambda doc: doc["nodes"][0].update(name=5), r"nodes\[0\]\.name is 5, not a string"),
-        (lambda doc: doc["meshes"][0].update(name=["floor"]), r"meshes\[0\]\.name is \['floor'\], not a string"),
+        (lambda doc: doc["meshes"][0].update(name=["floor"]), r'meshes\[0\]\.name is \["floor"\], not a string'),
     ],
 )
 def test_a_mesh_without_primitives_or_a_name_that_is_no_string_is_refused(edit, message, glb_parts, tmp_path):  # noqa: F811
@@ -390,8 +390,8 @@ def test_an_ifc_storey_at_survey_coordinates_is_moved_near_the_origin(easting, s
     [
         (lambda c: c.EnvConfig(observation=0), "observation must be a ObservationConfig, got 0"),
         (lambda c: c.EnvConfig(generator=5), "generator must be a GeneratorConfig, got 5"),
-        (lambda c: c.RobotConfig(scanner=None), "scanner must be a ScannerConfig, got None"),
-        (lambda c: c.EnvConfig(keep_scans="no"), r"keep_scans must be a bool \(true or false\), got 'no'"),
+        (lambda c: c.RobotConfig(scanner=None), "scanner must be a ScannerConfig, got null"),
+        (lambda c: c.EnvConfig(keep_scans="no"), r'keep_scans must be a bool \(true or false\), got "no"'),
         (lambda c: c.EnvConfig.from_dict({"keep_scans": 0.5}), "keep_scans must be a bool \\(true or false\\)"),
     ],
 )

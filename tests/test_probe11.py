@@ -758,3 +758,90 @@ def test_the_thirty_first_probes_records_are_compared_as_json(run, tmp_path, cap
     (tmp_path / "two.ifc").write_text(ifc.replace(project, project + "\n" + project.replace(number, "#99999", 1), 1))
     with pytest.raises(scenes.IfcError, match="holds 2 IfcProject"):
         load_scene(str(tmp_path / "two.ifc"))
+
+
+@pytest.mark.filterwarnings("error::pytest.PytestUnhandledThreadExceptionWarning")  # the writer thread's traceback
+def test_a_full_disk_under_tensorboard_is_one_line_naming_the_event_file(run, tmp_path, capsys, monkeypatch):
+    """TensorBoard writes from its own thread: a full disk printed that thread's traceback beside the
+    error, named no file, left an empty event file per try, and a new run was told to ``--resume``
+    a folder never made. A disk with no room for one saved state is refused before the work."""
+    pytest.importorskip("tensorboard")
+    from collections import namedtuple
+
+    from tensorboard.compat.tensorflow_stub.io import gfile
+
+    import train.ppo
+
+    def full(self, filename, content, mode):  # as a full disk: the file is made, its bytes are not written
+        open(filename, "ab").close()
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(gfile.LocalFileSystem, "_write", full)
+    events = sorted(p.name for p in run.rglob("events.out.tfevents.*"))
+    code = nbs(["train", "--resume", str(run), "--timesteps", "24", "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 1 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert err.startswith(f"nbs train: error: {run / 'tb'}") and "events.out.tfevents." in err, err
+    assert "No space left on device; the run keeps its last saved state (16 timesteps)" in err, err
+    assert sorted(p.name for p in run.rglob("events.out.tfevents.*")) == events, "an empty event file was left"
+
+    fresh = tmp_path / "fresh"
+    code = nbs(["train", "--out", str(fresh), "--timesteps", "8", "--n-steps", "8", "--envs", "1", "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 1 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert "nothing was saved to continue from: make room and run the command again" in err, err
+    assert "--resume" not in err and not fresh.exists(), err
+    monkeypatch.undo()
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(train.ppo.shutil, "disk_usage", lambda folder: usage(4 << 20, 3 << 20, 1 << 20))
+    code = nbs(["train", "--resume", str(run), "--timesteps", "24", "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 1 and err.startswith(f"nbs train: error: {run}: No space left on device: 1.0 MiB free"), err
+    assert "continue it with nbs train --resume" in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_the_thirty_first_probes_minor_findings(tmp_path, capsys):
+    """A run record's odd ``wall_s`` or field was kept and its ``ok: 1`` run again without a word;
+    messages spelt JSON values as Python does; ``--rooms 3-2`` was told of 0 <= A; a plan saved with
+    a byte-order mark was refused with Python's advice; a 5,001-digit number was placed at line 1."""
+    import scenes
+    from nbs_env.errors import ConfigError
+    from scenes.jsonio import JSONNumberError, read_json
+    from train.compare import RunSpec, load_finished
+    from train.ppo import TrainConfig
+
+    out = tmp_path / "c"
+    argv = ["compare", "--scenes", "l_room", "--policies", "greedy", "--preset", "fast", "--max-scans", "1"]
+    assert nbs([*argv, "--out", str(out), "--quiet"]) == 0
+    capsys.readouterr()
+    record = out / "runs" / "l_room" / "greedy" / "seed0" / "run.json"
+    whole = json.loads(record.read_text())
+    spec = [RunSpec("l_room", "greedy", 0, "fast", {"max_scans": 1})]
+    assert spec[0].key in load_finished(out, spec)["runs"]
+    for edit, said in [
+        ({"wall_s": "1.4"}, 'wall_s is "1.4", not a run\'s seconds'),
+        ({"wall_s": -5}, "wall_s is -5, not a run's seconds"),
+        ({"zzz": 1}, 'holds the field "zzz", which no run writes'),
+        ({"ok": 1}, "ok is 1, not true or false"),
+    ]:
+        record.write_text(json.dumps({**whole, **edit}))
+        assert spec[0].key not in load_finished(out, spec)["runs"], edit
+        assert capsys.readouterr().err == f"nbs compare: {record}: {said}; running it again\n", edit
+
+    with pytest.raises(ConfigError, match=r"got \[true, 5\]"):
+        TrainConfig(rooms=(True, 5))
+    with pytest.raises(ConfigError, match=r"max_scans must be an integer .*, got true$"):
+        from nbs_env.config import make_config
+
+        make_config("fast", max_scans=True)
+    with pytest.raises(SystemExit) as refused:  # argparse's own exit, as every refused option
+        nbs(["scenes", "generate", "--seed", "1", "--rooms", "3-2", "--out", str(tmp_path / "g.json")])
+    assert refused.value.code == EXIT_USAGE
+    assert "rooms must be N or A-B with integers 1 <= A <= B <= 8, got '3-2'" in _err(capsys)
+
+    plan = (Path(scenes.__file__).parent / "data" / "l_room.json").read_bytes()
+    (tmp_path / "bom.json").write_bytes(b"\xef\xbb\xbf" + plan)
+    assert len(load_scene(str(tmp_path / "bom.json")).mesh.faces) == len(load_scene("l_room").mesh.faces)
+    with pytest.raises(JSONNumberError, match="line 3 column 7"):
+        read_json('{\n "a": 1,\n "b": ' + "2" * 5001 + "\n}")

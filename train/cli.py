@@ -46,10 +46,10 @@ def _rooms(text: str) -> int | tuple[int, int]:
 
     try:
         lo, hi = parse_range(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+    except ValueError:  # its message says 0 <= A <= B: the rooms' own bounds are the ones to give
+        lo, hi = 0, -1
     if not 1 <= lo <= hi <= 8:
-        raise argparse.ArgumentTypeError(f"rooms must be within 1..8, got {text!r}")
+        raise argparse.ArgumentTypeError(f"rooms must be N or A-B with integers 1 <= A <= B <= 8, got {text!r}")
     return lo if "-" not in text else (lo, hi)
 
 

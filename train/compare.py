@@ -59,7 +59,7 @@ from nbs_env.atomic import write_text as _write_text
 from nbs_env.config import json_form
 from nbs_env.config.checks import parse_int, same_json
 from nbs_env.errors import ConfigError
-from scenes.jsonio import read_json_file
+from scenes.jsonio import json_text, read_json_file
 from scenes.limits import MAX_SEED_DIGITS
 from train.arguments import MAX_RUNS, parse_range
 
@@ -1183,6 +1183,10 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
             other = ", ".join(f"{k} {_shown(stored.get(k))}" for k in identity)
             damaged(folder / "run.json", f"it is the record of {other}, not of the run whose folder it is in")
             continue
+        problem = _run_record_problem(record)
+        if problem is not None:
+            damaged(folder / "run.json", problem)
+            continue
         wanted = json_form(asdict(spec))
         if not (record.get("ok") is True and isinstance(stored, dict) and same_spec(stored, wanted) and same_file):
             continue  # a failed run, or a run of an edited file: run it again
@@ -1387,10 +1391,28 @@ def _apart(old: dict[Any, Any], new: dict[Any, Any], prefix: str, apart: list[tu
             apart.append((f"{prefix}{key}", a, b))
 
 
+#: The fields :func:`_run` writes into a run's ``run.json`` (a failed run's ``error`` and ``traceback`` too).
+RUN_FIELDS = ("spec", "ok", "wall_s", "source_sha256", "policy_sha256", "error", "traceback")
+
+
+def _run_record_problem(record: dict[str, Any]) -> str | None:
+    """What makes ``record`` (a ``run.json``) no record :func:`_run` wrote, or None: checked whole,
+    fields the table never reads included, so that a resumed comparison keeps no edited record."""
+    if not isinstance(record.get("ok"), bool):
+        return f"ok is {_shown(record.get('ok'))}, not true or false"
+    odd = [k for k in record if k not in RUN_FIELDS]
+    if odd:
+        return f"holds the field {_shown(odd[0])}, which no run writes"
+    wall = record.get("wall_s")
+    if not (isinstance(wall, (int, float)) and not isinstance(wall, bool) and 0 <= wall <= MAX_FIGURE):
+        return f"wall_s is {_shown(wall)}, not a run's seconds"
+    return None
+
+
 def _shown(value: Any) -> str:
-    """``value`` for a message, bounded: a record may hold a 300-digit number or a huge string."""
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
+    """``value`` for a message, as the record's JSON spells it, bounded: a record may hold a
+    300-digit number or a huge string."""
+    return json_text(value, 40)
 
 
 def _number(record: dict[str, Any], key: str, where: str, *, high: float = MAX_FIGURE, **kind: bool) -> None:
@@ -1441,7 +1463,7 @@ def _check_metrics(m: Any, spec: dict[str, Any]) -> None:
     for key in ("scene", "policy", "seed"):  # the record of another run, copied or edited in
         want, have = spec[key], m.get(key)
         if type(have) is not type(want) or have != want:
-            raise _BadRecordError(f"it is the record of {key} {_shown(have)}, but it sits in the run of {key} {want!r}")
+            raise _BadRecordError(f"it is the record of {key} {_shown(have)}, but it sits in the run of {key} {_shown(want)}")
     pct = {"high": 100.0}
     _number(m, "scans", "", integer=True)
     _number(m, "structure_sensed_pct", "", **pct)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import errno
 import json
 import math
 import os
@@ -22,6 +23,7 @@ import re
 import shutil
 import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,14 +32,14 @@ from typing import Any
 import numpy as np
 
 from nbs_env import threads
-from nbs_env.atomic import replacing, write_text
+from nbs_env.atomic import NEARLY_FULL, replacing, write_text
 from nbs_env.config import Config, EnvConfig, _integer, _require
 from nbs_env.config.checks import _plain_numbers, _plain_values, _within, parse_float, same_json
 from nbs_env.config.rooms import MAX_SCANS
 from nbs_env.errors import ConfigError, ModelFileError
 from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES
 from policies.learned import NetworkConfig, build_network, save_checkpoint
-from scenes.jsonio import MAX_JSON_BYTES, read_json, read_json_file
+from scenes.jsonio import MAX_JSON_BYTES, json_text, read_json, read_json_file
 from train.arguments import (
     add_robot_arguments,
     config_from_arguments,
@@ -260,9 +262,9 @@ class TrainConfig(Config):
         )
         _require(
             len(self.rooms) == 2
-            and all(isinstance(r, int) for r in self.rooms)
+            and all(isinstance(r, int) and not isinstance(r, bool) for r in self.rooms)
             and 1 <= self.rooms[0] <= self.rooms[1] <= 8,
-            f"rooms must be (A, B) with 1 <= A <= B <= 8, got {self.rooms!r}",
+            f"rooms must be (A, B) with 1 <= A <= B <= 8, got {json_text(self.rooms)}",
         )
         # Adam's step and the entropy bonus beyond these turn the network's weights to inf or NaN within
         # an update (a traceback from torch after the first rollout); PPO runs use 1e-5 to 1e-3 and 0 to 0.05.
@@ -445,6 +447,39 @@ def check_memory(config: TrainConfig, backend: str = "local", behaviour_cloning:
         f"{options} asks for {what}{in_all}, more than {MEMORY_SHARE:.0%} of this machine's "
         f"{_bytes(machine_memory())} of memory: lower {lower}"
     )
+
+
+#: Copies of the network's float32 parameters one saved state writes: the policy's own file, and the
+#: training state's policy (value head included, about 1.2 x) with Adam's two moments of each.
+STATE_COPIES = 6
+
+
+def check_disk(config: TrainConfig, out: str | Path) -> None:
+    """Refuse a run where the disk that will hold ``out`` has no room for one saved state (a
+    checkpoint and its training state, :data:`STATE_COPIES` copies of the network) and
+    :data:`~nbs_env.atomic.NEARLY_FULL` more for the curve and logs: on a full disk it failed at its
+    first save, after the workers started and behaviour cloning ran.
+
+    Raises
+    ------
+    OSError
+        ``errno.ENOSPC`` naming the folder, with the free and the needed bytes.
+    """
+    folder = Path(out).absolute()
+    while not folder.exists() and folder.parent != folder:
+        folder = folder.parent
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError:  # a folder whose disk cannot be asked: its first write will say what is wrong
+        return
+    need = STATE_COPIES * 4 * config.network.parameters + NEARLY_FULL
+    if free < need:
+        raise OSError(
+            errno.ENOSPC,
+            f"{os.strerror(errno.ENOSPC)}: {_bytes(free)} free, where a saved state of this network and the "
+            f"run's logs take about {_bytes(need)}",
+            str(folder),
+        )
 
 
 def check_workers(config: TrainConfig, backend: str = "local", address: str | None = None) -> None:
@@ -1079,7 +1114,8 @@ def train(
     made = not os.path.lexists(out)
     before = set() if resume or made or not out.is_dir() else {p.name for p in out.iterdir()}
     try:
-        final, model = _train(config, out, progress, resume, backend, address)
+        with _tensorboard_failures(out / "tb"):
+            final, model = _train(config, out, progress, resume, backend, address)
     except BaseException:
         if not resume:
             _discard_unstarted(out, before, made)
@@ -1087,6 +1123,52 @@ def train(
     if final is None and not resume:  # stopped while cloning: no state a resume could use
         _discard_unstarted(out, before, made)
     return final, model
+
+
+#: The start of the names of TensorBoard's event files.
+EVENTS = "events.out.tfevents."
+
+
+@contextlib.contextmanager
+def _tensorboard_failures(folder: Path):
+    """A failed write of TensorBoard's event file (a full disk) reported once, naming the file.
+
+    TensorBoard writes from a thread of its own: its error was printed there as a traceback, then
+    raised again at the next flush in the training's thread, as an OSError naming no file. Here the
+    thread's copy is not printed, the training's names the event file, and an event file the run
+    made and left empty is removed (each failed try left one).
+    """
+    hook = threading.excepthook
+
+    def quiet(args) -> None:
+        if type(args.thread).__name__ != "_AsyncWriterThread":  # tensorboard's writer thread
+            hook(args)
+
+    before = set(folder.rglob(f"{EVENTS}*")) if folder.is_dir() else set()
+    threading.excepthook = quiet
+    try:
+        yield
+    except BaseException as exc:
+        made = sorted(set(folder.rglob(f"{EVENTS}*")) - before) if folder.is_dir() else []
+        for path in made:
+            with contextlib.suppress(OSError):
+                if path.stat().st_size == 0:
+                    path.unlink()
+        if isinstance(exc, OSError) and not exc.filename and _raised_in_tensorboard(exc):
+            named = made[-1] if made else folder
+            raise OSError(exc.errno, exc.strerror or str(exc), str(named)) from exc
+        raise
+    finally:
+        threading.excepthook = hook
+
+
+def _raised_in_tensorboard(exc: BaseException) -> bool:
+    frame = exc.__traceback__
+    while frame is not None:
+        if f"{os.sep}tensorboard{os.sep}" in frame.tb_frame.f_code.co_filename:
+            return True
+        frame = frame.tb_next
+    return False
 
 
 def _discard_unstarted(out: Path, before: set[str], made: bool) -> None:
@@ -1132,6 +1214,7 @@ def _train(
     # Checked before anything is built or written: what the options claim, and where Ray would run.
     check_memory(config, backend, behaviour_cloning=bool(config.bc_steps) and state is None)
     check_workers(config, backend, address)
+    check_disk(config, out)
     if backend == "ray":
         _check_ray(address)
     # Checked before any worker starts: a bad checkpoint fails at once, not after the envs are up.
@@ -1326,6 +1409,8 @@ def _train(
     final = save_checkpoint(out, network, _state_dict(model), _layout(model), training=training)
     save_training_state(model, out, config, weight())
     plot_learning_curve(log, out / "learning_curve.png")
+    # TensorBoard's last events written now, where a failure is reported (it flushed in a thread, at exit).
+    model.logger.close()
     model.interrupted = stop.signal
     return final, model
 
@@ -1974,6 +2059,18 @@ def _resume(args, given: set[str]) -> int:
     return _run(config, args.resume, args, resume=True)
 
 
+def _kept(out: Path, first: str) -> str:
+    """What a run that ended early leaves to continue from, and what to do (``first``, then continue)."""
+    try:
+        _, saved = latest_state(out)
+    except ModelFileError:
+        return f"nothing was saved to continue from: {first}run the command again"
+    return (
+        f"the run keeps its last saved state ({saved['timesteps']} timesteps): {first}continue it with "
+        f"nbs train --resume {out}"
+    )
+
+
 def _run(config: TrainConfig, out: Path, args, resume: bool) -> int:
     from train.stopping import exit_code
 
@@ -1988,36 +2085,24 @@ def _run(config: TrainConfig, out: Path, args, resume: bool) -> int:
         print(f"nbs train: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:  # before the run's steps began, a second signal, or the first escalated
-        try:
-            _, saved = latest_state(out)
-            kept = (
-                f"the run keeps its last saved state ({saved['timesteps']} timesteps): continue it with "
-                f"nbs train --resume {out}"
-            )
-        except ModelFileError:
-            kept = "nothing was saved to continue from"
+        kept = _kept(out, "")
         received = getattr(exc, "signal", None) or signal.SIGINT
         print(f"nbs train: stopped by {signal.Signals(received).name}; {kept}", file=sys.stderr)
         return exit_code(received)
     except (EOFError, BrokenPipeError, ConnectionResetError) as exc:  # a rollout worker that ended
         print(
-            f"nbs train: error: a rollout worker process ended ({type(exc).__name__}); the run keeps its last "
-            f"saved state: continue it with nbs train --resume {out}",
+            f"nbs train: error: a rollout worker process ended ({type(exc).__name__}); {_kept(out, '')}",
             file=sys.stderr,
         )
         return 1
     except OSError as exc:  # a file of the run that could not be written (a full disk): the last whole state stays
         where = f"{exc.filename}: " if exc.filename else ""
-        print(
-            f"nbs train: error: {where}{exc.strerror or exc}; the run keeps its last saved state: make room and "
-            f"continue it with nbs train --resume {out}",
-            file=sys.stderr,
-        )
+        print(f"nbs train: error: {where}{exc.strerror or exc}; {_kept(out, 'make room and ')}", file=sys.stderr)
         return 1
     if model.interrupted is not None and path is None:
         print(
-            f"nbs train: stopped by {signal.Signals(model.interrupted).name} during behaviour cloning, before the run "
-            "had a state to continue from: run the command again",
+            f"nbs train: stopped by {signal.Signals(model.interrupted).name} during behaviour cloning; "
+            f"{_kept(out, '')}",
             file=sys.stderr,
         )
         return exit_code(model.interrupted)

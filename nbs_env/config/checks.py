@@ -23,7 +23,7 @@ import numpy as np
 
 from nbs_env.errors import ConfigError
 from scenes.errors import SceneError
-from scenes.jsonio import MAX_JSON_DEPTH
+from scenes.jsonio import MAX_JSON_DEPTH, json_text
 from scenes.limits import is_finite
 
 __all__ = ["Config", "json_form", "parse_float", "parse_int"]
@@ -74,7 +74,7 @@ def _finite(**values: float) -> None:
     for name, value in values.items():
         _require(
             isinstance(value, (int, float)) and not isinstance(value, bool) and is_finite(value),
-            f"{name} must be a finite number, got {repr(value)[:60]}",
+            f"{name} must be a finite number, got {json_text(value, 60)}",
         )
 
 
@@ -93,7 +93,7 @@ def _integer(config: Any, name: str, least: int, most: int | None = None) -> Non
     within = f">= {least}" if most is None else f"within [{least:,}, {most:,}]"
     _require(
         isinstance(value, int) and not isinstance(value, bool) and value >= least and (most is None or value <= most),
-        f"{name} must be an integer {within}, got {value!r}",
+        f"{name} must be an integer {within}, got {json_text(value)}",
     )
 
 
@@ -304,12 +304,12 @@ def _check_field_kinds(config: Any) -> None:
             continue
         configs = [k for k in kinds if isinstance(k, type) and (issubclass(k, Config) or dataclasses.is_dataclass(k))]
         if configs and not isinstance(value, tuple(configs)):
-            raise ConfigError(f"{name} must be a {configs[0].__name__}, got {repr(value)[:60]}")
+            raise ConfigError(f"{name} must be a {configs[0].__name__}, got {json_text(value, 60)}")
         if bool in kinds and len(kinds) == 1:
             if isinstance(value, np.bool_):  # numpy's bool: stored as Python's, JSON-safe
                 object.__setattr__(config, name, bool(value))
             elif not isinstance(value, bool):
-                raise ConfigError(f"{name} must be a bool (true or false), got {repr(value)[:60]}")
+                raise ConfigError(f"{name} must be a bool (true or false), got {json_text(value, 60)}")
 
 
 @functools.cache
@@ -321,7 +321,7 @@ def _field_hints(cls: type) -> dict[str, Any]:
 def _build(cls: type, data: Any, where: str) -> Any:
     """A dataclass ``cls`` from a JSON object, each value read as its field's type declares."""
     if not isinstance(data, dict):
-        raise ConfigError(f"{where or cls.__name__} must be a JSON object of fields, got {data!r}")
+        raise ConfigError(f"{where or cls.__name__} must be a JSON object of fields, got {json_text(data)}")
     fields = {f.name: f for f in dataclasses.fields(cls)}
     unknown = sorted(set(data) - set(fields))
     if unknown:
@@ -370,8 +370,8 @@ def _from_json(value: Any, hint: Any, where: str) -> Any:
             inner = args[0] if args else Any
             return tuple(_from_json(v, inner, where) if inner is not Any else v for v in value)
     if all(isinstance(o, type) and dataclasses.is_dataclass(o) for o in options):
-        raise ConfigError(f"{where} must be a JSON object of fields, got {value!r}")
+        raise ConfigError(f"{where} must be a JSON object of fields, got {json_text(value)}")
     lists = [o for o in options if typing.get_origin(o) is tuple]
     if lists and value is not None and len(lists) == len([o for o in options if o is not type(None)]):
-        raise ConfigError(f"{where} must be a list, got {repr(value)[:60]}")
+        raise ConfigError(f"{where} must be a list, got {json_text(value, 60)}")
     return _plain_number(value, int in options, float in options)

@@ -15,6 +15,7 @@ from nbs_env.config.robot import RobotConfig
 from nbs_env.config.rooms import MAX_SCANS, RoomRules
 from nbs_env.config.scanners import SCANNERS, datasheet_differences
 from scenes.generator import GeneratorConfig
+from scenes.jsonio import json_text
 from scenes.limits import UNITS
 from scenes.loader import source_options
 
@@ -174,7 +175,7 @@ def _check_scene_options(options: Any) -> None:
     _require(
         isinstance(options, dict) and all(isinstance(k, str) for k in options),
         f"scene_options must be a dict of scenes.load_scene's options (e.g. {{'storey': 'Erdgeschoss'}}), "
-        f"got {repr(options)[:80]}",
+        f"got {json_text(options, 80)}",
     )
     # A generated:SEED storey takes the generator's fields (checked by GeneratorConfig when it loads).
     generator = tuple(GeneratorConfig.__dataclass_fields__)
@@ -202,7 +203,7 @@ def _check_scene_options(options: Any) -> None:
         if key not in checks:
             continue
         valid, what = checks[key]
-        _require(valid(value), f"scene_options['{key}'] must be {what}, got {repr(value)[:80]}")
+        _require(valid(value), f"scene_options['{key}'] must be {what}, got {json_text(value, 80)}")
 
 
 @dataclass(frozen=True)
@@ -308,7 +309,7 @@ class EnvConfig(Config):
             _require(
                 preset in presets,
                 f"robot.scanner.preset must be None or a datasheet scanner's NAME:SETTING ({', '.join(presets)}), "
-                f"got {repr(preset)[:60]}",
+                f"got {json_text(preset, 60)}",
             )
             odd = datasheet_differences(self.robot.scanner)
             _require(

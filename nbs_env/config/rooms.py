@@ -17,6 +17,7 @@ from nbs_env.config.checks import (
     _within,
 )
 from nbs_env.config.robot import MAX_RAYS
+from scenes.jsonio import json_text
 from scenes.limits import is_finite
 
 __all__ = ["COMPLETIONS", "MAX_SCANS", "MAX_SEARCH_SCANS", "RoomRules", "WallSearchConfig"]
@@ -109,7 +110,7 @@ class WallSearchConfig(Config):
         _plain_numbers(self)
         for name in ("narrow", "doors"):
             value = getattr(self, name)
-            _require(isinstance(value, bool), f"{name} must be a bool, got {value!r}")
+            _require(isinstance(value, bool), f"{name} must be a bool, got {json_text(value)}")
         _finite_fields(
             self,
             "step",
