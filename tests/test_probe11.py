@@ -150,7 +150,7 @@ def test_a_resumed_comparison_of_another_scanner_names_the_field_that_differs():
         return {"preset": "fast", "overrides": {"robot.scanner": scanner_config(name).to_dict(), "max_scans": 3}}
 
     theirs, mine = _settings_apart(spec("rtc360:12mm"), spec("rtc360:3mm"))
-    assert "robot.scanner.preset 'rtc360:12mm'" in theirs and "robot.scanner.preset 'rtc360:3mm'" in mine
+    assert 'robot.scanner.preset "rtc360:12mm"' in theirs and 'robot.scanner.preset "rtc360:3mm"' in mine
     assert "robot.scanner.station_time 5.8" in theirs and "max_scans" not in theirs
 
 
@@ -285,7 +285,7 @@ def test_a_resumed_comparison_of_the_same_configuration_is_the_same_run():
         "robot.scanner.angular_step not given",
         "robot.scanner.angular_step 2.0",
     )
-    assert _settings_apart({**spec(), "seed": "0"}, spec()) == ("seed '0'", "seed 0")
+    assert _settings_apart({**spec(), "seed": "0"}, spec()) == ('seed "0"', "seed 0")
 
 
 # ---------------------------------------------------------------------- the twenty-fifth probe
@@ -555,7 +555,7 @@ def test_the_twenty_seventh_probes_findings(run, tmp_path, capsys):
     stored["spec"]["seed"] = False
     record.write_text(json.dumps(stored))
     assert nbs([*argv, "--out", str(out), "--quiet", "--resume"]) == 0  # not seed 0's record: run again
-    assert "it is the record of scene 'l_room', policy 'greedy', seed False, not of the run" in _err(capsys)
+    assert 'it is the record of scene "l_room", policy "greedy", seed false, not of the run' in _err(capsys)
     assert json.loads(record.read_text())["spec"]["seed"] == 0
 
 
@@ -621,7 +621,7 @@ def test_the_twenty_eighth_probes_findings(run, tmp_path, capsys):
     stored["spec"]["seed"] = 1
     record.write_text(json.dumps(stored))
     assert nbs([*argv, "--out", str(compare), "--quiet", "--resume"]) == 0  # (not "a run left out")
-    assert "it is the record of scene 'l_room', policy 'greedy', seed 1, not of the run" in _err(capsys)
+    assert 'it is the record of scene "l_room", policy "greedy", seed 1, not of the run' in _err(capsys)
 
     if (run / "tb").is_dir():
         shutil.rmtree(run / "tb")

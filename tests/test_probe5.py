@@ -261,7 +261,7 @@ def test_a_report_folder_that_is_a_dangling_link_is_refused_before_the_scans(tmp
     "options, message",
     [
         (5, r"scene_options must be a dict of scenes\.load_scene's options"),
-        ({"units": "km"}, r"scene_options\['units'\] must be one of m, cm, mm, ft, in, got 'km'"),
+        ({"units": "km"}, r"scene_options\['units'\] must be one of m, cm, mm, ft, in, got \"km\""),
         ({"storey": True}, r"scene_options\['storey'\] must be a storey's name or index"),
         ({"zz": 3}, r"scene_options \['zz'\] are not options of scenes\.load_scene"),
     ],

@@ -499,7 +499,7 @@ def test_a_numpy_integer_seed_is_a_seed():
     "asset, message",
     [
         ({"version": "2.\u0660"}, r"asset\.version is"),
-        ({"version": "2.0", "minVersion": None}, r"asset\.minVersion is None"),
+        ({"version": "2.0", "minVersion": None}, r"asset\.minVersion is null"),
         ({"version": "2.0", "minVersion": "1.0"}, r"below 2\.0"),
         ({"version": "2.0", "minVersion": "2.00"}, None),  # 2.0, as the schema's pattern allows it
     ],

@@ -205,9 +205,6 @@ def test_a_full_disk_during_training_keeps_the_last_state_and_resume_goes_on(tmp
     description, no temporary file), and ``--resume`` continues from it once there is room."""
     pytest.importorskip("sb3_contrib")
     torch = pytest.importorskip("torch")
-    import shutil
-    from collections import namedtuple
-
     import nbs_env.atomic
     from train.ppo import latest_state, main, train
 
@@ -220,9 +217,10 @@ def test_a_full_disk_during_training_keeps_the_last_state_and_resume_goes_on(tmp
         Path(f).write_bytes(b"PK\x03\x04 half a zip")
         raise RuntimeError("[enforce fail at inline_container.cc:672] . PytorchStreamWriter failed writing file")
 
-    usage = namedtuple("usage", "total used free")
+    nearly_full = nbs_env.atomic._nearly_full
     monkeypatch.setattr(torch, "save", full)
-    monkeypatch.setattr(nbs_env.atomic.shutil, "disk_usage", lambda folder: usage(10**9, 10**9, 0))
+    # The disk is full by the time of the save (train.ppo.check_disk found room at the start).
+    monkeypatch.setattr(nbs_env.atomic, "_nearly_full", lambda folder: True)
     code = main(["--resume", str(out), "--timesteps", "16", "--quiet"])
     err = capsys.readouterr().err
     assert code == 1, err
@@ -234,7 +232,7 @@ def test_a_full_disk_during_training_keeps_the_last_state_and_resume_goes_on(tmp
     assert not [c for c in changed if c.endswith((".pt", "policy.json", "training_state.json"))], changed
     assert not [p for p in out.rglob(".*.tmp*")], "a temporary file was left"
     monkeypatch.setattr(torch, "save", save)
-    monkeypatch.setattr(nbs_env.atomic.shutil, "disk_usage", shutil.disk_usage)
+    monkeypatch.setattr(nbs_env.atomic, "_nearly_full", nearly_full)
     assert latest_state(out)[1]["timesteps"] == 8
     assert main(["--resume", str(out), "--timesteps", "16", "--quiet"]) == 0
     assert latest_state(out)[1]["timesteps"] == 16

@@ -1463,7 +1463,9 @@ def _check_metrics(m: Any, spec: dict[str, Any]) -> None:
     for key in ("scene", "policy", "seed"):  # the record of another run, copied or edited in
         want, have = spec[key], m.get(key)
         if type(have) is not type(want) or have != want:
-            raise _BadRecordError(f"it is the record of {key} {_shown(have)}, but it sits in the run of {key} {_shown(want)}")
+            raise _BadRecordError(
+                f"it is the record of {key} {_shown(have)}, but it sits in the run of {key} {_shown(want)}"
+            )
     pct = {"high": 100.0}
     _number(m, "scans", "", integer=True)
     _number(m, "structure_sensed_pct", "", **pct)
