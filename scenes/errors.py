@@ -33,7 +33,7 @@ class SceneError(Exception):
         self.path = path
         # A source of thousands of characters (a name too long for any file system, the very cause)
         # is cut in the message so that the problem after it is read; .source keeps it whole.
-        shown = short_name(self.source)
+        shown = short_name(self.source) if self.source.strip() else repr(self.source)  # '' rather than nothing
         where = f"{shown}: {path}" if path else shown
         super().__init__(f"{where}: {problem}")
 

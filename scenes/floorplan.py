@@ -65,7 +65,7 @@ from shapely.geometry.polygon import orient
 
 from scenes.errors import FloorPlanError, PlanGeometryError, SceneFileError
 from scenes.geometry import STOREY_CLEARANCE
-from scenes.jsonio import JSONSizeError, read_json_file
+from scenes.jsonio import JSONSizeError, json_text, read_json_file
 from scenes.limits import MIN_STOREY_HEIGHT
 from scenes.model import Door, Room, Scene, SurfaceClass
 from scenes.validation import start_within_check, validate_plan_scene
@@ -366,9 +366,13 @@ def _validate_schema(data: Any, source: str) -> None:
     err = jsonschema.exceptions.best_match(errors)
     path = _json_path(err.absolute_path) or "(top level)"
     if err.validator == "const" and list(err.absolute_path) == ["version"]:
-        message = f"unsupported format version {err.instance!r}; this nbs-env reads version {FORMAT_VERSION}"
+        message = f"unsupported format version {json_text(err.instance)}; this nbs-env reads version {FORMAT_VERSION}"
     else:
         message = err.message
+        # jsonschema's messages open with the value as Python spells it (None, True): the file's is JSON.
+        python = repr(err.instance)
+        if message.startswith(python):
+            message = json_text(err.instance) + message[len(python) :]
     raise FloorPlanError(source, message, path=path)
 
 

@@ -508,6 +508,10 @@ def _check_geometry_values(source: str, model: Any, scale: float) -> None:
             )
 
 
+#: The UTF-8 byte-order mark.
+BOM = b"\xef\xbb\xbf"
+
+
 def load_ifc_scene(
     path: str | Path,
     *,
@@ -580,9 +584,21 @@ def load_ifc_scene(
     except OSError as exc:
         raise SceneFileError(source, f"cannot read the file: {exc.strerror or exc}") from exc
     try:
-        model = ifcopenshell.open(str(path))
+        if data.startswith(BOM):
+            # Editors on Windows write a UTF-8 byte-order mark before "ISO-10303-21;"; ifcopenshell
+            # then found no schema ("No support for file schema encountered ()"). Read past it.
+            try:
+                text = data[len(BOM) :].decode("utf-8")
+            except UnicodeDecodeError as exc:
+                raise IfcError(source, f"starts with a UTF-8 byte-order mark but is not UTF-8 text ({exc})") from None
+            model = ifcopenshell.file.from_string(text)
+        else:
+            model = ifcopenshell.open(str(path))
+    except IfcError:
+        raise
     except Exception as exc:  # ifcopenshell raises its own error types, or OSError, for bad input
         raise IfcError(source, f"cannot read as IFC: {_parse_error(ifcopenshell, path, exc)}") from exc
+    del data
     _check_placements(source, model)
     _check_decomposition(source, model)
 

@@ -223,6 +223,8 @@ def check_source(text: str) -> None:
     UnknownSceneError, UnsupportedFormatError, SceneFileError
         As :func:`load_source` would, naming the source.
     """
+    if not text.strip():  # Path("") is the working folder: it was called "a folder, not a scene file"
+        raise UnknownSceneError(text, "the scene's name is empty: name a bundled scene, a scene file or generated:SEED")
     if text.startswith(_GENERATED):
         seed_text = text[len(_GENERATED) :]
         # ASCII digits: Python's int also reads " 1", "+1", "1_0" and Arabic-Indic digits, so one

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -845,3 +846,99 @@ def test_the_thirty_first_probes_minor_findings(tmp_path, capsys):
     assert len(load_scene(str(tmp_path / "bom.json")).mesh.faces) == len(load_scene("l_room").mesh.faces)
     with pytest.raises(JSONNumberError, match="line 3 column 7"):
         read_json('{\n "a": 1,\n "b": ' + "2" * 5001 + "\n}")
+
+
+def test_the_thirty_second_probes_findings(run, tmp_path):
+    """A learning curve's figures out of their meaning (250 %, -5 scans, steps out of order) were
+    taken and steered the resumed run's baseline; a comparison record's total that is not its last
+    step's, or its scans beyond the budget, were tabled; a byte-order mark before an IFC, an SVM or a
+    curve was refused; an empty scene name was "a folder"; values were spelt as Python does."""
+    import scenes
+    from nbs_env.errors import ConfigError, ModelFileError
+    from nbs_env.perception.roi import RoIError, RoIScan, compute_roi
+    from nbs_env.perception.structure import SEClassifier
+    from train.compare import record_problem
+    from train.ppo import TrainConfig, _curve
+
+    curve = tmp_path / "learning_curve.jsonl"
+    line = {"timesteps": 16, "learned": {"structure_sensed_pct": 50, "scans": 3, "path_length_m": 4}}
+    for edit, said in [
+        ({"timesteps": True}, "line 1 has timesteps true, not a count"),
+        ({"learned": {**line["learned"], "structure_sensed_pct": "50"}}, 'learned.structure_sensed_pct "50", not'),
+        (
+            {"learned": {**line["learned"], "structure_sensed_pct": 250.0}},
+            "structure_sensed_pct 250.0, outside [0, 100]",
+        ),
+        ({"greedy": {**line["learned"], "scans": -5}}, "greedy.scans -5, outside [0,"),
+    ]:
+        curve.write_text(json.dumps({**line, **edit}) + "\n")
+        with pytest.raises(ModelFileError, match=re.escape(said)):
+            _curve(curve)
+    curve.write_text(json.dumps(line) + "\n" + json.dumps({**line, "timesteps": 8}) + "\n")
+    with pytest.raises(ModelFileError, match="line 2 has timesteps 8, before the line above's 16"):
+        _curve(curve)
+    curve.write_bytes(b"\xef\xbb\xbf" + json.dumps(line).encode() + b"\n")
+    assert _curve(curve) == [line]
+
+    # Evaluations after the last saved state are taken again when the run resumes, not kept.
+    log = run / "learning_curve.jsonl"
+    log.write_text(log.read_text() + json.dumps({**line, "timesteps": 5000}) + "\n")
+    assert nbs(["train", "--resume", str(run), "--timesteps", "24", "--quiet"]) == 0
+    assert all(r["timesteps"] <= 24 for r in _curve(log)), log.read_text()
+
+    with pytest.raises(ConfigError, match=r"got \[true, 3\]"):
+        TrainConfig(cell_size=(True, 3))
+    svm = Path(__import__("nbs_env.perception.structure", fromlist=["x"]).__file__).parent / "data" / "se_svm.json"
+    (tmp_path / "svm.json").write_bytes(b"\xef\xbb\xbf" + svm.read_bytes())
+    SEClassifier.load(tmp_path / "svm.json")
+    document = json.loads(svm.read_text())
+    (tmp_path / "v.json").write_text(json.dumps({**document, "version": True}))
+    with pytest.raises(ModelFileError, match="got true"):
+        SEClassifier.load(tmp_path / "v.json")
+
+    plan = json.loads((Path(scenes.__file__).parent / "data" / "l_room.json").read_text())
+    for edit, said in [
+        ({"version": True}, "unsupported format version true"),
+        ({"start": None}, "null is not of type"),
+    ]:
+        (tmp_path / "p.json").write_text(json.dumps({**plan, **edit}))
+        with pytest.raises(scenes.FloorPlanError, match=said):
+            load_scene(str(tmp_path / "p.json"))
+    with pytest.raises(scenes.UnknownSceneError, match=r"^'': the scene's name is empty"):
+        load_scene("")
+
+    ifc = (Path(__file__).parent / "data" / "two_rooms.ifc").read_bytes()
+    (tmp_path / "bom.ifc").write_bytes(b"\xef\xbb\xbf" + ifc)
+    (tmp_path / "plain.ifc").write_bytes(ifc)
+    assert len(load_scene(str(tmp_path / "bom.ifc")).mesh.faces) == len(
+        load_scene(str(tmp_path / "plain.ifc")).mesh.faces
+    )
+
+    # Floor and ceiling seen, no wall within the outline's reach: the message says so and what to raise.
+    grid = np.stack(np.meshgrid(np.linspace(-5, 5, 60), np.linspace(-5, 5, 60)), -1).reshape(-1, 2)
+    points = np.vstack([np.c_[grid, np.zeros(len(grid))], np.c_[grid, np.full(len(grid), 2.6)]])
+    with pytest.raises(RoIError, match=r"reach of 30 m from every stop \(robot\.roi\.max_range\)"):
+        compute_roi([RoIScan(points=points, origin=np.array([0.0, 0.0, 1.5]))])
+
+    out = tmp_path / "c"
+    argv = ["compare", "--scenes", "l_room", "--policies", "greedy", "--preset", "fast", "--max-scans", "3"]
+    assert nbs([*argv, "--out", str(out), "--quiet"]) == 0
+    folder = out / "runs" / "l_room" / "greedy" / "seed0"
+    record = {
+        **json.loads((folder / "run.json").read_text()),
+        "metrics": json.loads((folder / "metrics.json").read_text()),
+    }
+    assert record_problem(record) is None
+    metrics = record["metrics"]
+    for edit, said in [
+        ({"structure_sensed_pct": 100.0}, "is not its last step's"),
+        (
+            {"scans": 30, "steps": [metrics["steps"][0]] * (30 - len(metrics["steps"])) + metrics["steps"]},
+            "30 scans, more than the run's budget of 3",
+        ),
+        (
+            {"steps": [*metrics["steps"][:-1], {**metrics["steps"][-1], "structure_sensed_pct": 0.0}]},
+            "below the step before's",
+        ),
+    ]:
+        assert said in (record_problem({**record, "metrics": {**metrics, **edit}}) or ""), edit

@@ -1451,6 +1451,14 @@ def _text(record: dict[str, Any], key: str, where: str) -> None:
         raise _BadRecordError(f"{where}{key} is {_shown(record.get(key))}, not a string")
 
 
+def _budget(spec: dict[str, Any]) -> int | None:
+    """The scan budget of the run ``spec`` describes (None where it describes no run)."""
+    try:
+        return int(RunSpec(**spec).config().max_scans)
+    except Exception:  # a spec of another version, or edited: the spec's own check names it
+        return None
+
+
 def _check_metrics(m: Any, spec: dict[str, Any]) -> None:
     """Raise :class:`_BadRecordError` unless ``m`` holds, of the right type and within its meaning, every
     figure the tables and plots read of a run, and says it is the run of ``spec``."""
@@ -1489,6 +1497,19 @@ def _check_metrics(m: Any, spec: dict[str, Any]) -> None:
         _number(step, "structure_sensed_pct", f"steps[{k}].", **pct)
         for key in ("dense_pct", "incidence_pct"):  # the quality curves: every step's, or none
             _number(step, key, f"steps[{k}].", nullable=steps[0].get(key) is None, **pct)
+    # Figures a run writes together agree (hand edits of one were reused and tabled): the sensed
+    # structure only grows, the total is the last step's, and the scans are within the budget.
+    curve = [step["structure_sensed_pct"] for step in steps]
+    for k in range(1, len(curve)):
+        if curve[k] < curve[k - 1] - 1e-6:
+            raise _BadRecordError(f"steps[{k}].structure_sensed_pct {curve[k]:g} is below the step before's")
+    if abs(m["structure_sensed_pct"] - curve[-1]) > 1e-6:
+        raise _BadRecordError(
+            f"structure_sensed_pct {m['structure_sensed_pct']:g} is not its last step's {curve[-1]:g}"
+        )
+    budget = _budget(spec)
+    if budget is not None and m["scans"] > budget:
+        raise _BadRecordError(f"it has {m['scans']} scans, more than the run's budget of {budget}")
     for k, end in enumerate(_entries(m, "room_ends", optional=True)):
         _text(end, "reason", f"room_ends[{k}].")
         _number(end, "scans", f"room_ends[{k}].", integer=True)

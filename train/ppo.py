@@ -217,7 +217,7 @@ class TrainConfig(Config):
             len(self.cell_size) == 2
             and all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in self.cell_size)
             and 1.8 <= self.cell_size[0] <= self.cell_size[1] <= 10.0,
-            f"cell_size must be (A, B) metres with 1.8 <= A <= B <= 10, got {self.cell_size!r}",
+            f"cell_size must be (A, B) metres with 1.8 <= A <= B <= 10, got {json_text(self.cell_size)}",
         )
         _require(isinstance(self.init, str), f"init must be a checkpoint path (str), got {self.init!r}")
         _require(isinstance(self.bc_teacher, str), f"bc_teacher must be a policy name, got {self.bc_teacher!r}")
@@ -875,7 +875,8 @@ def latest_state(run_folder: str | Path) -> tuple[Path, dict]:
         weight = document.get("cost_weight", 1.0)
         if type(weight) not in (int, float) or not CostWeight.LOW <= weight <= CostWeight.HIGH:
             raise ModelFileError(
-                f"{path}: cost_weight must be a number in [{CostWeight.LOW}, {CostWeight.HIGH}], got {str(weight)[:40]}"
+                f"{path}: cost_weight must be a number in [{CostWeight.LOW}, {CostWeight.HIGH}], "
+                f"got {json_text(weight, 40)}"
             )
         name = document.get("tensors", STATE_FILE)
         if not isinstance(name, str) or Path(name).name != name or name in ("", ".", ".."):
@@ -1243,6 +1244,11 @@ def _train(
     # A resumed run's curve is read whole before any step: a damaged one was found by the plot at the
     # end of the session, after the training it records had been done.
     earlier = _curve(log) if state is not None else []
+    if earlier and earlier[-1]["timesteps"] > done_before:
+        # Evaluations after the last saved state (a run killed before its next save): the steps they
+        # measured are taken again, and so are they.
+        earlier = [r for r in earlier if r["timesteps"] <= done_before]
+        write_text(log, "".join(json.dumps(r) + "\n" for r in earlier))
     if state is None:
         write_text(log, "")
     greedy = GreedyPolicy()
@@ -1417,6 +1423,8 @@ def _train(
 
 #: The figures of each policy in a learning-curve record, as :func:`evaluate` gives them.
 CURVE_FIGURES = ("structure_sensed_pct", "scans", "path_length_m")
+#: The most each figure can be: a percentage, a count of scans, metres of path (10 km).
+CURVE_BOUNDS = {"structure_sensed_pct": 100.0, "scans": float(MAX_SCANS), "path_length_m": 1e4}
 
 
 def _curve(log: Path) -> list[dict]:
@@ -1435,7 +1443,7 @@ def _curve(log: Path) -> list[dict]:
             raise ValueError("not a regular file")
         if log.stat().st_size > MAX_JSON_BYTES:
             raise ValueError(f"more than the {MAX_JSON_BYTES:,} bytes a curve of nbs-env may hold")
-        text = log.read_text(encoding="utf-8")
+        text = log.read_text(encoding="utf-8-sig")  # a byte-order mark, as RFC 8259 allows
     except (OSError, UnicodeDecodeError, ValueError) as exc:
         raise ModelFileError(f"{log}: cannot be read as a learning curve ({exc})") from None
     records = []
@@ -1447,6 +1455,8 @@ def _curve(log: Path) -> list[dict]:
         except json.JSONDecodeError as exc:
             raise ModelFileError(f"{log}: line {k} is not JSON ({exc}); remove it to continue") from None
         problem = _curve_record_problem(record)
+        if problem is None and records and record["timesteps"] < records[-1]["timesteps"]:
+            problem = f"has timesteps {record['timesteps']}, before the line above's {records[-1]['timesteps']}"
         if problem:
             raise ModelFileError(f"{log}: line {k} {problem}; remove it to continue")
         records.append(record)
@@ -1459,7 +1469,7 @@ def _curve_record_problem(record: Any) -> str | None:
         return "is not a record (a JSON object)"
     steps = record.get("timesteps")
     if type(steps) is not int or not 0 <= steps <= MAX_STATE_TIMESTEPS:
-        return f"has timesteps {str(steps)[:40]}, not a count of steps (0..{MAX_STATE_TIMESTEPS:,})"
+        return f"has timesteps {json_text(steps, 40)}, not a count of steps (0..{MAX_STATE_TIMESTEPS:,})"
     for policy in ("learned", "greedy", "teacher"):
         figures = record.get(policy)
         if figures is None and policy != "learned":
@@ -1469,7 +1479,10 @@ def _curve_record_problem(record: Any) -> str | None:
         for key in CURVE_FIGURES:
             value = figures.get(key)
             if type(value) not in (int, float) or not math.isfinite(value):
-                return f"has {policy}.{key} {str(value)[:40]}, not a finite number"
+                return f"has {policy}.{key} {json_text(value, 40)}, not a finite number"
+            high = CURVE_BOUNDS[key]
+            if not 0 <= value <= high:  # read back as the run's baseline: a figure out of its meaning steered it
+                return f"has {policy}.{key} {json_text(value, 40)}, outside [0, {high:g}]"
     return None
 
 

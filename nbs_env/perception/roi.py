@@ -357,7 +357,11 @@ def compute_roi(scans: Sequence[RoIScan], config: RoIConfig | None = None, exclu
         if radii is not None:
             stars.append((origin, radii))
     if not stars:
-        raise RoIError("no scan saw enough of the band under the ceiling to outline the room")
+        raise RoIError(
+            "no scan saw enough of the band under the ceiling to outline the room: its walls are farther "
+            f"than the outline's reach of {cfg.max_range:g} m from every stop (robot.roi.max_range), or so far "
+            "that few rays land in the band (a finer robot.scanner.angular_step sends more)"
+        )
     image, origin_xy = _rasterise_stars(stars, cfg.pixel)
     for outline in exclude:
         image &= ~_rasterise_polygon(outline, origin_xy, cfg.pixel, image.shape, shrink=0.10)

@@ -38,7 +38,7 @@ from shapely.geometry import Polygon
 from nbs_env.atomic import write_text
 from nbs_env.errors import ModelFileError
 from nbs_env.perception.faces import PointIndex, WallFace
-from scenes.jsonio import MAX_JSON_BYTES, read_json
+from scenes.jsonio import MAX_JSON_BYTES, json_text, read_json
 
 __all__ = [
     "DEFAULT_MODEL_RESOURCE",
@@ -550,7 +550,7 @@ class SEClassifier:
             size = path.stat().st_size
             if size > MAX_JSON_BYTES:  # read whole and decoded: sized first
                 raise ModelFileError(f"{path}: a file of {size:,} bytes; a model file holds at most {MAX_JSON_BYTES:,}")
-            text = path.read_text(encoding="utf-8")
+            text = path.read_text(encoding="utf-8-sig")  # a byte-order mark, as RFC 8259 allows
         except FileNotFoundError:
             raise ModelFileError(f"{path}: model file not found") from None
         except UnicodeDecodeError:
@@ -599,9 +599,9 @@ class SEClassifier:
             raise fail("<top level>", f"expected a JSON object, got {type(document).__name__}")
         # Format and version first: a wrong kind of file should be reported as such, not as a bad checksum.
         if document.get("format") != MODEL_FORMAT:
-            raise fail("format", f"expected {MODEL_FORMAT!r}, got {document.get('format')!r}")
+            raise fail("format", f"expected {json_text(MODEL_FORMAT)}, got {json_text(document.get('format'))}")
         if document.get("version") != MODEL_VERSION or isinstance(document.get("version"), bool):
-            raise fail("version", f"expected {MODEL_VERSION}, got {document.get('version')!r}")
+            raise fail("version", f"expected {MODEL_VERSION}, got {json_text(document.get('version'))}")
         missing = sorted(_TOP_KEYS - document.keys())
         if missing:
             raise fail(missing[0], f"missing (required keys: {sorted(_TOP_KEYS)})")
