@@ -83,7 +83,7 @@ def test_bad_plan_file_error_names_the_field(tmp_path, plan_dict):
     path.write_text(json.dumps(plan_dict))
     proc = nbs("scenes", "show", str(path), "--out", str(tmp_path / "x.png"))
     assert proc.returncode == EXIT_SCENE_ERROR
-    assert f"{path}: doors[0].width: 'wide' is not of type 'number'" in proc.stderr
+    assert f"{path}: doors[0].width: \"wide\" is not of type 'number'" in proc.stderr
     assert "Traceback" not in proc.stderr
 
 

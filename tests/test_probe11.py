@@ -942,3 +942,23 @@ def test_the_thirty_second_probes_findings(run, tmp_path):
         ),
     ]:
         assert said in (record_problem({**record, "metrics": {**metrics, **edit}}) or ""), edit
+
+
+def test_a_checkpoint_that_cannot_be_saved_whole_leaves_no_folder(run, capsys, monkeypatch):
+    """A full disk at a checkpoint's training state left ``checkpoint_N/`` with the policy alone (or
+    empty): a folder that looks like a checkpoint but cannot be resumed."""
+    import errno
+
+    import train.ppo
+
+    save = train.ppo.save_training_state
+
+    def full(model, folder, *args, **kwargs):
+        if Path(folder).name.startswith("checkpoint_"):
+            raise OSError(errno.ENOSPC, "No space left on device", str(Path(folder) / "training_state.pt"))
+        return save(model, folder, *args, **kwargs)
+
+    monkeypatch.setattr(train.ppo, "save_training_state", full)
+    assert nbs(["train", "--resume", str(run), "--timesteps", "24", "--quiet"]) == 1
+    assert "training_state.pt: No space left on device" in _err(capsys)
+    assert sorted(p.name for p in run.glob("checkpoint_*")) == ["checkpoint_16", "checkpoint_8"]

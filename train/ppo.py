@@ -1275,8 +1275,14 @@ def _train(
 
     def checkpoint(n: int) -> None:
         folder = out / f"checkpoint_{n}"
-        save_checkpoint(folder, network, _state_dict(model), _layout(model), recorded)
-        save_training_state(model, folder, config, weight())
+        made = not os.path.lexists(folder)
+        try:
+            save_checkpoint(folder, network, _state_dict(model), _layout(model), recorded)
+            save_training_state(model, folder, config, weight())
+        except BaseException:
+            if made:  # a checkpoint is whole or absent: a full disk left an empty or policy-only folder
+                shutil.rmtree(folder, ignore_errors=True)
+            raise
 
     class Progress(BaseCallback):
         def _on_training_start(self) -> None:
