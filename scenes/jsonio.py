@@ -110,7 +110,8 @@ def json_text(value: Any, limit: int = 60) -> str:
     """``value`` for a message, spelt as JSON spells it (``true``, ``null``, ``[1, 2]``, ``"text"``):
     the values a message names were read from JSON, and Python's spelling (``True``, ``None``) is not
     what the user's file says. Bounded to ``limit`` characters before it is made (a record may hold a
-    huge string, list or number); what JSON cannot spell (NaN, a numpy array) as Python does.
+    huge string, list or number); NaN and Infinity as JSON5 and ``--set`` spell them; what JSON
+    cannot spell (a numpy array) as Python does.
     """
     if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 3000:
         return f"an integer of about {int(value.bit_length() * 0.30103):,} digits"
@@ -121,7 +122,7 @@ def json_text(value: Any, limit: int = 60) -> str:
     elif isinstance(value, dict):
         value = dict(list(value.items())[: limit + 1])
     try:
-        text = json.dumps(value, ensure_ascii=False, allow_nan=False)
+        text = json.dumps(value, ensure_ascii=False)  # NaN and Infinity as a --set value spells them
     except (TypeError, ValueError, RecursionError):
         text = repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."

@@ -51,7 +51,7 @@ def _broken_step_entry(m):
 # (seed, edit, what the stderr line must say)
 DAMAGES = [
     (0, lambda m: m.update(structure_sensed_pct=1e308, path_length_m=-5), "structure_sensed_pct is 1e+308"),
-    (1, lambda m: m.update(structure_sensed_pct=math.nan), "structure_sensed_pct is nan"),
+    (1, lambda m: m.update(structure_sensed_pct=math.nan), "structure_sensed_pct is NaN"),
     (2, lambda m: m.update(path_length_m=-5), "path_length_m is -5"),
     (3, lambda m: m.update(scene="office", seed=5), 'scene "office"'),
     (4, _broken_steps, "3 steps for 1 scans"),
@@ -151,7 +151,7 @@ def _set(path: str, value):
         (_set("scans", True), "scans is true, not an integer"),
         (_set("scans", 1.0), "scans is 1.0, not an integer"),
         (_set("processed_points", 10**400), "processed_points is 1000"),
-        (_set("structure_sensed_pct", math.inf), "structure_sensed_pct is inf"),
+        (_set("structure_sensed_pct", math.inf), "structure_sensed_pct is Infinity"),
         (_set("structure_sensed_pct", "50"), 'structure_sensed_pct is "50", not a number'),
         (_set("travel_time_s", -1.0), "travel_time_s is -1.0"),
         (_set("acquisition_time_s", 1e300), "acquisition_time_s is 1e+300"),
@@ -164,7 +164,7 @@ def _set(path: str, value):
         (_set("steps.0", 3), "steps[0] is 3, not an object"),
         (_set("steps.0.dense_pct", -1), "steps[0].dense_pct is -1"),
         (_set("registration_error", None), "registration_error is null"),
-        (_set("registration_error.max_m", math.nan), "registration_error.max_m is nan"),
+        (_set("registration_error.max_m", math.nan), "registration_error.max_m is NaN"),
         (_set("quality.min_density_per_m2", "x"), 'quality.min_density_per_m2 is "x"'),
         (_set("quality.quality_pct", 400), "quality.quality_pct is 400"),
         (_set("registrability.min_overlap", 2.0), "registrability.min_overlap is 2.0"),

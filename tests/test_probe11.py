@@ -962,3 +962,26 @@ def test_a_checkpoint_that_cannot_be_saved_whole_leaves_no_folder(run, capsys, m
     assert nbs(["train", "--resume", str(run), "--timesteps", "24", "--quiet"]) == 1
     assert "training_state.pt: No space left on device" in _err(capsys)
     assert sorted(p.name for p in run.glob("checkpoint_*")) == ["checkpoint_16", "checkpoint_8"]
+
+
+def test_the_thirty_third_probes_findings(capsys, monkeypatch):
+    """A generated corpus entry (``corpus:edge_8rooms_1``, in ``suite:unseen``) made ``nbs compare``
+    a traceback: it has no file to resolve; in a working folder that was removed, every command said
+    ``[Errno 2] No such file or directory``; a NaN was spelt ``nan``."""
+    from nbs_env.config import make_config
+    from nbs_env.errors import ConfigError
+    from train.compare import grid
+
+    specs = grid("corpus:edge_8rooms_1,generated:3", "random", "0", "fast")
+    assert [s.scene for s in specs] == ["corpus:edge_8rooms_1", "generated:3"]
+    with pytest.raises(ConfigError, match="got NaN"):
+        make_config("fast", **{"robot.voxel_size": float("nan")})
+
+    import train.cli
+
+    def gone() -> str:
+        raise FileNotFoundError(2, "No such file or directory")
+
+    monkeypatch.setattr(train.cli.os, "getcwd", gone)
+    assert nbs(["scan", "--scene", "l_room", "--preset", "fast", "--max-scans", "1"]) == EXIT_USAGE
+    assert _err(capsys).startswith("nbs: error: the working folder no longer exists (removed or moved since")

@@ -778,11 +778,15 @@ def run_view(args: argparse.Namespace) -> int:
 
 
 def _environment_problem() -> str | None:
-    """What is wrong with the environment variables the commands read, before any work: the
-    kernels' ``NBS_THREADS``, libgomp's ``OMP_NUM_THREADS`` and matplotlib's ``MPLBACKEND`` (which
-    fails its import)."""
+    """What is wrong with the environment the commands run in, before any work: a working folder
+    that is gone, and the variables they read: the kernels' ``NBS_THREADS``, libgomp's
+    ``OMP_NUM_THREADS`` and matplotlib's ``MPLBACKEND`` (which fails its import)."""
     from nbs_env.threads import cores
 
+    try:
+        os.getcwd()
+    except OSError:  # every relative path (the default --out) fails, with no name to give
+        return "the working folder no longer exists (removed or moved since the shell entered it): cd into one"
     try:
         cores()
     except ValueError as exc:

@@ -1659,7 +1659,7 @@ def _refuse_repeats(flag: str, values: Sequence[Any], identities: Sequence[Any] 
 def _scene_identity(scene: str) -> Any:
     """What a scene spec names: a generated seed as its number, a file as its real path."""
     if scene.startswith("generated:") and scene[len("generated:") :].isdigit():
-        return ("generated", int(scene[len("generated:") :]))
+        return ("generated", int(scene[len("generated:") :]), None)
     if scene.startswith("corpus:"):  # an entry is its file, read with the entry's options
         try:
             from scenes.corpus import corpus_entry
@@ -1668,7 +1668,12 @@ def _scene_identity(scene: str) -> Any:
             path, options = entry.path(), dict(entry.options)
         except Exception:  # no such entry: the scene check says so
             return ("name", scene)
-        return ("file", path.resolve(), json.dumps(options, sort_keys=True, default=str) if options else None)
+        shown = json.dumps(options, sort_keys=True, default=str) if options else None
+        if entry.generated is not None:  # a generated storey at the generator's edges: its seed and options
+            return ("generated", entry.generated, shown)
+        if path is None:  # a local-only file that is absent: the scene check says so
+            return ("name", scene)
+        return ("file", path.resolve(), shown)
     path = Path(scene)
     if path.suffix and path.exists():
         return ("file", path.resolve(), None)
