@@ -604,6 +604,11 @@ def load_checkpoint(path: str | Path):
         path = path / "policy.json"
     if not path.is_file():
         raise ModelFileError(f"{path}: no such checkpoint (a folder with policy.json and policy.pt)")
+    if path.suffix.lower() != ".json" and (path.parent / "policy.json").is_file():
+        raise ModelFileError(
+            f"{path}: the checkpoint's weights, read through its description: name its folder "
+            f"({path.parent}) or {path.parent / 'policy.json'}"
+        )
     try:
         # Nesting is bounded: a thousand levels would end in a RecursionError in the decoder.
         document = read_json_file(path)

@@ -985,3 +985,35 @@ def test_the_thirty_third_probes_findings(capsys, monkeypatch):
     monkeypatch.setattr(train.cli.os, "getcwd", gone)
     assert nbs(["scan", "--scene", "l_room", "--preset", "fast", "--max-scans", "1"]) == EXIT_USAGE
     assert _err(capsys).startswith("nbs: error: the working folder no longer exists (removed or moved since")
+
+
+def test_a_training_runs_evaluation_keeps_its_scan_budget():
+    """``nbs train --max-scans 2`` trained with 2 scans and drew its learning curve with 40."""
+    from nbs_env.config import make_config
+    from policies import GreedyPolicy
+    from train.ppo import evaluate
+
+    config = make_config("fast", max_scans=2)
+    assert evaluate(GreedyPolicy().act, [3], 40, config)["scans"] <= 2
+
+
+def test_the_thirty_fourth_probes_minor_findings(run, tmp_path):
+    """``ppo:RUN/policy.pt`` was "not JSON" (a codec error); ``--y-up`` on a corpus mesh was "for
+    labelled meshes only"; ``--storey`` on a corpus IFC was refused as a bundled scene's option; a
+    curve's ``train_return`` of "abc" was kept."""
+    from nbs_env.config import make_config
+    from nbs_env.errors import ModelFileError
+    from policies.learned import load_checkpoint
+    from train.arguments import scene_option_error
+    from train.ppo import _curve
+
+    with pytest.raises(ModelFileError, match=r"the checkpoint.s weights, read through its description"):
+        load_checkpoint(run / "policy.pt")
+    said = scene_option_error("corpus:enfilade", None, True)
+    assert said is not None and said.startswith("--y-up: corpus:enfilade is read with its corpus entry's own options")
+    config = make_config("fast", scene="corpus:fzk_haus_eg", scene_options={"storey": "Dachgeschoss"})
+    assert config.scene_options == {"storey": "Dachgeschoss"}
+    line = {"timesteps": 16, "learned": {"structure_sensed_pct": 50, "scans": 3, "path_length_m": 4}}
+    (tmp_path / "c.jsonl").write_text(json.dumps({**line, "train_return": "abc"}) + "\n")
+    with pytest.raises(ModelFileError, match='line 1 has train_return "abc", not a finite number or null'):
+        _curve(tmp_path / "c.jsonl")

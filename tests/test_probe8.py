@@ -103,7 +103,7 @@ def test_a_json_object_naming_a_key_twice_is_refused_wherever_json_is_read(glb_p
         ('{"timesteps": "8", "learned": {}}', r'line 2 has timesteps "8", not a count of steps'),
         (
             '{"timesteps": 8, "learned": {"structure_sensed_pct": 1, "scans": 2, "path_length_m": NaN}}',
-            r"line 2 has learned\.path_length_m nan, not a finite number",
+            r"line 2 has learned\.path_length_m NaN, not a finite number",
         ),
         ("[1, 2]", r"line 2 is not a record"),
         ('{"timesteps": 8, "timesteps": 9}', r"line 2 is not JSON \(the key 'timesteps' appears twice"),

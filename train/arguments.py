@@ -429,6 +429,11 @@ def scene_option_error(
         return f"--storey applies to .ifc files only, not to scene {scene!r}"
     if ifc_doors is not None and not ifc:
         return f"--ifc-doors applies to .ifc files only, not to scene {scene!r}"
+    if (y_up or units is not None) and _corpus_suffix(scene) in MESH_SUFFIXES:
+        return (
+            f"{'--y-up' if y_up else '--units'}: {scene} is read with its corpus entry's own options "
+            "(scenes/data/corpus/corpus.json); to read its mesh otherwise, name the mesh file itself"
+        )
     if y_up and suffix not in MESH_SUFFIXES:
         return f"--y-up applies to labelled meshes ({', '.join(MESH_SUFFIXES)}) only, not to scene {scene!r}"
     if units is not None and suffix not in MESH_SUFFIXES:

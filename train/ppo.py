@@ -665,9 +665,9 @@ def evaluate(
     storeys : list of int
         Seeds of the generated storeys.
     max_episode_steps : int
-        Decisions per episode at the most, and its scan budget.
+        Decisions per episode at the most, and its scan budget where ``config``'s is larger.
     config : EnvConfig
-        The envs' configuration (:meth:`TrainConfig.env_config`); its scene and budget are replaced.
+        The envs' configuration (:meth:`TrainConfig.env_config`); its scene is replaced.
     room_rule : float, optional
         Where the env has a "room done" action: the completion fraction at which
         ``info["gain_rule_done"]`` says a room is done (a greedy teacher's ``stop``, as behaviour
@@ -678,7 +678,9 @@ def evaluate(
 
     scans, pct, path = [], [], []
     for seed in storeys:
-        env = NBSEnv(make_config(config, scene=f"generated:{seed}", max_scans=max_episode_steps))
+        # The run's own budget where it is the lower (`--max-scans 2` was evaluated with 40 scans).
+        budget = min(config.max_scans, max_episode_steps)
+        env = NBSEnv(make_config(config, scene=f"generated:{seed}", max_scans=budget))
         obs, info = env.reset(seed=seed)
         # At most max_episode_steps decisions, as training's TimeLimit, and as many scans: with the
         # gain rule a step takes at least one scan, with "room done" steps the decisions bind first.
@@ -1431,6 +1433,9 @@ def _train(
 CURVE_FIGURES = ("structure_sensed_pct", "scans", "path_length_m")
 #: The most each figure can be: a percentage, a count of scans, metres of path (10 km).
 CURVE_BOUNDS = {"structure_sensed_pct": 100.0, "scans": float(MAX_SCANS), "path_length_m": 1e4}
+#: The record's other figures: the mean training return, the prices' weight, the mapped structure
+#: of the last training episodes and the run's seconds.
+CURVE_NUMBERS = ("train_return", "cost_weight", "mapped", "seconds")
 
 
 def _curve(log: Path) -> list[dict]:
@@ -1489,6 +1494,10 @@ def _curve_record_problem(record: Any) -> str | None:
             high = CURVE_BOUNDS[key]
             if not 0 <= value <= high:  # read back as the run's baseline: a figure out of its meaning steered it
                 return f"has {policy}.{key} {json_text(value, 40)}, outside [0, {high:g}]"
+    for key in CURVE_NUMBERS:  # what the record adds when it has it (a number, or null where unknown)
+        value = record.get(key)
+        if value is not None and (type(value) not in (int, float) or not math.isfinite(value)):
+            return f"has {key} {json_text(value, 40)}, not a finite number or null"
     return None
 
 
