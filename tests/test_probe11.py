@@ -1017,3 +1017,21 @@ def test_the_thirty_fourth_probes_minor_findings(run, tmp_path):
     (tmp_path / "c.jsonl").write_text(json.dumps({**line, "train_return": "abc"}) + "\n")
     with pytest.raises(ModelFileError, match='line 1 has train_return "abc", not a finite number or null'):
         _curve(tmp_path / "c.jsonl")
+
+
+def test_the_thirty_fifth_probes_findings(run, capsys):
+    """A finished run resumed with ``--envs 2`` and no new total took no step but recorded 2 envs;
+    a checkpoint's required ``--set`` was advised as ``--set KEY VALUE``, which ``--set`` refuses."""
+    from nbs_env.errors import ConfigError
+    from train.arguments import adopt_requirements
+
+    before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+    assert nbs(["train", "--resume", str(run), "--envs", "2", "--quiet"]) == EXIT_USAGE
+    assert (
+        _err(capsys)
+        == f"nbs train: error: --resume {run}: the run has done its 16 steps; ask for more (e.g. --timesteps 32)"
+    )
+    assert {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()} == before
+
+    with pytest.raises(ConfigError, match=r"pass --set observation\.cell=0\.2 or leave it out"):
+        adopt_requirements({"observation.cell": 0.4}, {"observation.cell": (0.2, "ppo:x")})

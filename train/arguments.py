@@ -397,10 +397,11 @@ def adopt_requirements(overrides: dict[str, Any], requirements: dict[str, tuple[
     out = dict(overrides)
     for path, (value, who) in requirements.items():
         if path in out and json_form(out[path]) != json_form(value):
-            flag = FLAGS.get(path, f"--set {path}")
+            # A flag takes its value after a space; --set takes KEY=VALUE as one word.
+            given = f"{FLAGS[path]} {json.dumps(value)}" if path in FLAGS else f"--set {path}={json.dumps(value)}"
             raise ConfigError(
                 f"{who} requires {path}={json.dumps(value)} (it was trained so), but this run sets "
-                f"{json.dumps(out[path])}: pass {flag} {json.dumps(value)} or leave it out"
+                f"{json.dumps(out[path])}: pass {given} or leave it out"
             )
         out[path] = value
     return out

@@ -2064,6 +2064,15 @@ def _resume(args, given: set[str]) -> int:
     except ModelFileError as exc:
         print(f"nbs train: error: --resume: {exc}", file=sys.stderr)
         return 2
+    if args.timesteps is None and config.timesteps <= done and folder == Path(args.resume):
+        # A finished run, resumed to its own total: no step to take, yet its records were rewritten
+        # (with --envs 2 they said 2 envs for a run trained with 1).
+        print(
+            f"nbs train: error: --resume {args.resume}: the run has done its {done} steps; ask for more "
+            f"(e.g. --timesteps {done + max(done, 1)})",
+            file=sys.stderr,
+        )
+        return 2
     problem = _output_problem("--resume", args.resume)
     if problem is not None:  # a run folder that has become read-only since
         print(f"nbs train: error: {problem}", file=sys.stderr)
