@@ -25,8 +25,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from scenes.errors import SceneFileError, UnknownSceneError
-from scenes.loader import load_source
+from scenes.errors import SceneError, SceneFileError, UnknownSceneError
+from scenes.loader import load_source, source_options
 
 __all__ = [
     "PREFIX",
@@ -122,6 +122,18 @@ def suite(name: str) -> tuple[list[str], list[str]]:
     names = SUITES[name] or tuple(corpus())
     entries = [corpus_entry(n) for n in names]
     return [e.spec for e in entries if e.available], [e.name for e in entries if not e.available]
+
+
+def corpus_source_options(name: str) -> tuple[str, tuple[str, ...]]:
+    """:func:`scenes.loader.source_options` of corpus entry ``name``: those of its source, which
+    take the options given over the entry's own (:func:`load_corpus_scene`)."""
+    try:
+        entry = corpus_entry(name)
+    except SceneError:
+        return "corpus entry", ()
+    inner = f"generated:{entry.generated}" if entry.generated is not None else str(entry.file)
+    kind, allowed = source_options(inner)
+    return f"corpus entry, a {kind}", allowed
 
 
 def load_corpus_scene(name: str, **options: Any):

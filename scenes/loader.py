@@ -170,17 +170,6 @@ def source_options(text: str) -> tuple[str, tuple[str, ...]]:
     """
     if text.startswith(_GENERATED):
         return "generated storey", (*GeneratorConfig.__dataclass_fields__, "validate")
-    if text.startswith("corpus:"):  # its entry's source takes them, over the entry's own
-        from scenes.corpus import corpus_entry
-
-        try:
-            entry = corpus_entry(text[len("corpus:") :])
-        except SceneError:
-            return "corpus entry", ()
-        kind, allowed = source_options(
-            f"{_GENERATED}{entry.generated}" if entry.generated is not None else str(entry.file)
-        )
-        return f"corpus entry, a {kind}", allowed
     suffix = Path(text).suffix.lower()
     if not suffix and "/" not in text and "\\" not in text:
         return "bundled scene", ("validate",)

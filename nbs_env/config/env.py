@@ -14,6 +14,7 @@ from nbs_env.config.checks import Config, _at_most, _finite, _integer, _plain_nu
 from nbs_env.config.robot import RobotConfig
 from nbs_env.config.rooms import MAX_SCANS, RoomRules
 from nbs_env.config.scanners import SCANNERS, datasheet_differences
+from scenes.corpus import corpus_source_options
 from scenes.generator import GeneratorConfig
 from scenes.jsonio import json_text
 from scenes.limits import UNITS
@@ -295,7 +296,10 @@ class EnvConfig(Config):
         _check_scene_options(self.scene_options)
         if self.scene != "generated" and isinstance(self.scene, str):
             # Refused here, not at the first reset: whether a scene takes an option its name tells.
-            kind, allowed = source_options(self.scene)
+            if self.scene.startswith("corpus:"):
+                kind, allowed = corpus_source_options(self.scene[len("corpus:") :])
+            else:
+                kind, allowed = source_options(self.scene)
             odd = sorted(set(self.scene_options) - set(allowed))
             _require(
                 not odd,
