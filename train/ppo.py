@@ -1112,6 +1112,9 @@ def train(
     FileExistsError
         A new run's ``out`` holds a run, a checkpoint or a file a run writes
         (:func:`run_folder_problem`).
+    OSError
+        The disk holding ``out`` has no room for one saved state (:func:`check_disk`, before the
+        work), or a file of the run could not be written; either names the path.
     """
     out = Path(out)
     made = not os.path.lexists(out)
