@@ -63,6 +63,7 @@ leaves the whole element out.
 
 from __future__ import annotations
 
+import codecs
 import contextlib
 import math
 import os
@@ -508,10 +509,6 @@ def _check_geometry_values(source: str, model: Any, scale: float) -> None:
             )
 
 
-#: The UTF-8 byte-order mark.
-BOM = b"\xef\xbb\xbf"
-
-
 def load_ifc_scene(
     path: str | Path,
     *,
@@ -584,11 +581,11 @@ def load_ifc_scene(
     except OSError as exc:
         raise SceneFileError(source, f"cannot read the file: {exc.strerror or exc}") from exc
     try:
-        if data.startswith(BOM):
+        if data.startswith(codecs.BOM_UTF8):
             # Editors on Windows write a UTF-8 byte-order mark before "ISO-10303-21;"; ifcopenshell
             # then found no schema ("No support for file schema encountered ()"). Read past it.
             try:
-                text = data[len(BOM) :].decode("utf-8")
+                text = data[len(codecs.BOM_UTF8) :].decode("utf-8")
             except UnicodeDecodeError as exc:
                 raise IfcError(source, f"starts with a UTF-8 byte-order mark but is not UTF-8 text ({exc})") from None
             model = ifcopenshell.file.from_string(text)
