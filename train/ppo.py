@@ -552,7 +552,9 @@ def ray_rollouts(config: TrainConfig, address: str | None = None, seed: int = 0)
     network = config.network
 
     def make_policy(observation_space, action_space):
-        return _policy_class()(observation_space, action_space, lambda _: 0.0, network=network)
+        return _policy_class()(
+            observation_space, action_space, lambda _: 0.0, network=network, split_critic=bool(config.hold_coverage)
+        )
 
     return RayRollouts(_env_factory(config), make_policy, config.envs, address=address, seed=seed)
 
@@ -593,9 +595,12 @@ def _policy_class():
     class ScanNetPolicy(MaskableMultiInputActorCriticPolicy):
         """MaskablePPO's policy with :mod:`policies.learned`'s slot-independent candidate scorer."""
 
-        def __init__(self, *args, network: NetworkConfig, stop_lr_scale: float = 1.0, **kwargs) -> None:
+        def __init__(
+            self, *args, network: NetworkConfig, stop_lr_scale: float = 1.0, split_critic: bool = False, **kwargs
+        ) -> None:
             self.network = network
             self.stop_lr_scale = stop_lr_scale
+            self.split_critic = split_critic
             kwargs["features_extractor_class"] = Features
             kwargs["features_extractor_kwargs"] = {"network": network}
             kwargs["net_arch"] = {"pi": [], "vf": [128, 64]}
@@ -606,6 +611,10 @@ def _policy_class():
             super()._build(lr_schedule)
             _, self.action_net = build_network(self.network)
             self.action_net.to(self.device)
+            if self.split_critic:  # train.critic: the gain and the price apart, combined at the rollout's weight
+                from train.critic import PricedValue
+
+                self.value_net = PricedValue(self.mlp_extractor.latent_dim_vf).to(self.device)
             params = list(self.parameters())
             if self.stop_lr_scale != 1.0 and self.action_net.stop is not None:
                 head = {id(p) for p in self.action_net.stop.parameters()}
@@ -615,6 +624,21 @@ def _policy_class():
                 ]
                 self.optimizer_class = _scaled(self.optimizer_class)
             self.optimizer = self.optimizer_class(params, lr=lr_schedule(1), **self.optimizer_kwargs)
+
+        def value_heads(self, obs):
+            """A split critic's two values (B, 2): the discounted gain and the discounted price."""
+            return self.value_net.heads(self.mlp_extractor.forward_critic(self.extract_features(obs)))
+
+        def evaluate_actions(self, obs, actions, action_masks=None):
+            # PPO's update: a split critic's two heads, each fitted to its own return
+            # (train.critic.PricedRolloutBuffer gives the returns in the same order).
+            if not self.split_critic:
+                return super().evaluate_actions(obs, actions, action_masks=action_masks)
+            latent_pi, latent_vf = self.mlp_extractor(self.extract_features(obs))
+            distribution = self._get_action_dist_from_latent(latent_pi)
+            if action_masks is not None:
+                distribution.apply_masking(action_masks)
+            return self.value_net.heads(latent_vf), distribution.log_prob(actions), distribution.entropy()
 
     return ScanNetPolicy
 
@@ -784,7 +808,10 @@ class CostWeight:
         for i, info in enumerate(infos):
             terms = info.get("reward_terms")
             if terms is not None:
-                rewards[i] = scale * (rewards[i] + (1.0 - self.weight) * terms["cost"])
+                # What the reward holds beyond gain - cost (a Ray worker's bootstrap of a truncated
+                # episode, already a value at this weight) is kept as it is.
+                beyond = rewards[i] - (terms["gain"] - terms["cost"])
+                rewards[i] = scale * (terms["gain"] - self.weight * terms["cost"]) + beyond
             if dones[i] and "mapped_pct" in info:
                 self.finished.append(float(info["mapped_pct"]))
 
@@ -1027,6 +1054,9 @@ def build_model(config: TrainConfig, venv, device: str = "cpu", tensorboard: str
     # The rollout buffer is allocated here: sized from the options before numpy is asked for it.
     check_memory(dataclasses.replace(config, envs=venv.num_envs), behaviour_cloning=False)
     algorithm = getattr(venv, "ppo_class", MaskablePPO)  # Ray's rollouts bring their own collection
+    split = bool(config.hold_coverage)  # prices that move: train.critic's two heads
+    if split:
+        from train.critic import PricedRolloutBuffer
     return algorithm(
         _policy_class(),
         venv,
@@ -1037,7 +1067,8 @@ def build_model(config: TrainConfig, venv, device: str = "cpu", tensorboard: str
         seed=config.seed,
         device=device,
         tensorboard_log=tensorboard,
-        policy_kwargs={"network": config.network, "stop_lr_scale": config.stop_lr_scale},
+        policy_kwargs={"network": config.network, "stop_lr_scale": config.stop_lr_scale, "split_critic": split},
+        rollout_buffer_class=PricedRolloutBuffer if split else None,
         verbose=0,
     )
 
@@ -1274,6 +1305,9 @@ def _train(
             )
 
     dual: CostWeight | None = None
+    split = bool(config.hold_coverage)  # build_model gave the critic two heads
+    if split:
+        from train import critic
 
     def weight() -> float:
         return 1.0 if dual is None else dual.weight
@@ -1308,8 +1342,19 @@ def _train(
 
         def _on_rollout_end(self) -> None:
             self.rollout_start = None
+            if split:
+                buffer, policy = self.model.rollout_buffer, self.model.policy
+                explained = critic.finish_rollout(
+                    buffer, policy, self.model._last_obs, self.model._last_episode_starts, self.model.gamma,
+                    self.model.gae_lambda,
+                )  # fmt: skip
+                for name, value in explained.items():
+                    if value is not None:
+                        self.logger.record(f"train/{name}", value)
             if dual is not None:
                 dual.update()
+                if split:  # the next rollout's values at the new weight
+                    self.model.policy.value_net.price_weight.fill_(dual.weight)
                 self.logger.record("train/cost_weight", dual.weight)
                 if dual.last_mean is not None:
                     self.logger.record("train/mapped", dual.last_mean)
@@ -1318,6 +1363,11 @@ def _train(
             self.bar.update(self.training_env.num_envs)
             if dual is not None:  # before the rollout buffer holds the rewards
                 dual.reweigh(self.locals["rewards"], self.locals["infos"], self.locals["dones"])
+            if split:
+                critic.record_step(
+                    self.model.rollout_buffer, self.model.policy, self.locals["infos"], self.locals["dones"],
+                    self.model.gamma,
+                )  # fmt: skip
             for info in self.locals.get("infos", []):
                 if "episode" in info:
                     self.episodes.append(float(info["episode"]["r"]))
@@ -1384,6 +1434,7 @@ def _train(
                 dual = CostWeight(
                     config.hold_coverage, target, 1.0 if state is None else state[1].get("cost_weight", 1.0)
                 )
+                model.policy.value_net.price_weight.fill_(dual.weight)
             progress_callback = Progress()
             progress_callback.rollout_start = None
             model.learn(
@@ -1625,7 +1676,10 @@ def behaviour_clone(
         )
         samples.append(({k: v.copy() for k, v in obs.items()}, masks.copy(), actions))
         obs, reward, dones, infos = venv.step(actions)
-        rewards.append(np.asarray(reward, dtype=float))
+        if getattr(model.policy, "split_critic", False):  # each head fitted to its own term
+            rewards.append(np.array([[i["reward_terms"]["gain"], i["reward_terms"]["cost"]] for i in infos]))
+        else:
+            rewards.append(np.asarray(reward, dtype=float))
         ends.append(np.asarray(dones, dtype=bool))
         mapped.extend(float(info["mapped_pct"]) for info, done in zip(infos, dones, strict=True) if done)
     policy = model.policy
@@ -1714,13 +1768,22 @@ def fit_value(
     branch learns (the features are shared with the policy: fitting them would undo the clone).
     One sample in five is held out to measure the fit.
 
+    ``rewards`` (T, E) for a critic of one head, (T, E, 2) for a split one (:mod:`train.critic`):
+    the gain and the price of each step, each head fitted to its own return.
+
     Returns ``{"value_samples", "value_explained_variance"}``: the complete-episode samples and the
-    explained variance of the held-out returns (None when too few episodes ended).
+    explained variance of the held-out returns (None when too few episodes ended); for a split
+    critic, of the returns of the env's own reward (gain - price, the weight 1 a run starts at).
     """
     import torch
 
     policy = model.policy
-    returns, complete = discounted_returns(rewards, ends, model.gamma)
+    split = rewards.ndim == 3
+    if split:
+        (gains, complete), (prices, _) = (discounted_returns(rewards[..., k], ends, model.gamma) for k in range(2))
+        returns = np.stack([gains, prices], axis=1)
+    else:
+        returns, complete = discounted_returns(rewards, ends, model.gamma)
     index = np.flatnonzero(complete)
     if len(index) < 10:
         return {"value_samples": len(index), "value_explained_variance": None}
@@ -1738,7 +1801,8 @@ def fit_value(
     optimiser = torch.optim.Adam(branch, lr=1e-3)
 
     def values(rows: np.ndarray) -> torch.Tensor:
-        return policy.value_net(policy.mlp_extractor.forward_critic(features[rows])).flatten()
+        latent = policy.mlp_extractor.forward_critic(features[rows])
+        return policy.value_net.heads(latent) if split else policy.value_net(latent).flatten()
 
     policy.set_training_mode(True)
     # A small network on fixed features: cheap, and slower to fit than the clone; at least
@@ -1754,8 +1818,11 @@ def fit_value(
             optimiser.step()
     policy.set_training_mode(False)
     with torch.no_grad():
-        error = (values(held) - target[held]).cpu().numpy()
-    spread = float(target[held].var(unbiased=False))
+        predicted, actual = values(held), target[held]
+        if split:  # the env's own return: gain - price
+            predicted, actual = predicted[:, 0] - predicted[:, 1], actual[:, 0] - actual[:, 1]
+        error = (predicted - actual).cpu().numpy()
+    spread = float(actual.var(unbiased=False))
     explained = 1.0 - float(error.var()) / spread if spread > 0 else None
     return {"value_samples": len(index), "value_explained_variance": explained}
 

@@ -120,6 +120,8 @@ class _Worker:
                 with torch.no_grad():
                     terminal, _ = self.policy.obs_to_tensor(laid_out(info["terminal_observation"]))
                     reward += gamma * float(self.policy.predict_values(terminal)[0, 0])
+                    if getattr(self.policy, "split_critic", False):  # train.critic bootstraps each head
+                        info["terminal_heads"] = self.policy.value_heads(terminal)[0].tolist()
             info.pop("terminal_observation", None)
             out["actions"].append(a)
             out["rewards"].append(reward)
@@ -130,6 +132,7 @@ class _Worker:
         with torch.no_grad():
             tensor, _ = self.policy.obs_to_tensor(laid_out(self.obs))
             out["last_value"] = float(self.policy.predict_values(tensor)[0, 0])
+        out["last_obs"] = laid_out(self.obs)
         out["last_done"] = self.episode_start
         out["obs"] = {k: np.stack(v) for k, v in out["obs"].items()}
         for k in ("actions", "rewards", "starts", "values", "log_probs", "masks", "dones"):
@@ -287,6 +290,8 @@ class RayMaskablePPO(MaskablePPO):
         last_values = torch.as_tensor([[s["last_value"]] for s in segments], dtype=torch.float32)
         last_dones = np.array([s["last_done"] for s in segments])
         self._last_episode_starts = last_dones
+        # What the learner's own collection leaves: the observations after the rollout (train.critic reads them).
+        self._last_obs = {k: np.stack([s["last_obs"][k] for s in segments]) for k in segments[0]["last_obs"]}
         rollout_buffer.compute_returns_and_advantage(last_values=last_values, dones=last_dones)
         callback.update_locals({"infos": [], "dones": last_dones})
         callback.on_rollout_end()

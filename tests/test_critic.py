@@ -1,0 +1,174 @@
+"""The two-headed critic of a run whose prices move (train.critic)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("sb3_contrib")
+
+from train import critic
+
+
+def test_gae_per_head_is_stable_baselines3_s_own():
+    """Each head's advantages and returns are what stable-baselines3's buffer computes for one value."""
+    import torch
+    from gymnasium import spaces
+    from stable_baselines3.common.buffers import RolloutBuffer
+
+    rng = np.random.default_rng(3)
+    steps, envs = 7, 3
+    rewards, values = rng.normal(size=(steps, envs, 2)), rng.normal(size=(steps, envs, 2))
+    starts = rng.random((steps, envs)) < 0.3
+    last_values, last_dones = rng.normal(size=(envs, 2)), np.array([True, False, False])
+    advantages, returns = critic.gae(rewards, values, starts, last_values, last_dones, gamma=0.9, lam=0.8)
+    for k in range(2):
+        space, choice = spaces.Box(-1, 1, (1,)), spaces.Discrete(2)
+        buffer = RolloutBuffer(steps, space, choice, n_envs=envs, gamma=0.9, gae_lambda=0.8)
+        for t in range(steps):
+            buffer.add(
+                np.zeros((envs, 1)), np.zeros((envs, 1)), rewards[t, :, k], starts[t],
+                torch.as_tensor(values[t, :, k]), torch.zeros(envs),
+            )  # fmt: skip
+        buffer.compute_returns_and_advantage(torch.as_tensor(last_values[:, k]), last_dones)
+        np.testing.assert_allclose(advantages[..., k], buffer.advantages, rtol=1e-5, atol=1e-5)
+        np.testing.assert_allclose(returns[..., k], buffer.returns, rtol=1e-5, atol=1e-5)
+
+
+def test_a_minibatch_s_returns_are_its_samples_two_head_returns_in_order():
+    """PPO's value loss compares ``heads(latent).flatten()`` (gain, price, gain, price, ...) with the
+    minibatch's returns: they must be the same samples' two returns, in the same order."""
+    import torch
+    from gymnasium import spaces
+
+    steps, envs = 4, 2
+    space = spaces.Dict({"x": spaces.Box(0, 100, (1,))})
+    buffer = critic.PricedRolloutBuffer(steps, space, spaces.Discrete(3), n_envs=envs)
+    for t in range(steps):
+        index = np.arange(envs, dtype=np.float32) + t * envs
+        buffer.add(
+            {"x": index[:, None]}, np.zeros((envs, 1)), np.zeros(envs), np.zeros(envs),
+            torch.zeros(envs), torch.zeros(envs), action_masks=np.ones((envs, 3)),
+        )  # fmt: skip
+    index = np.arange(steps * envs, dtype=np.float32).reshape(steps, envs)
+    buffer.head_returns = np.stack([index, -10 * index], axis=-1)
+    seen = []
+    for batch in buffer.get(3):
+        x = batch.observations["x"].numpy().reshape(-1)
+        pairs = batch.returns.numpy().reshape(-1, 2)
+        np.testing.assert_array_equal(pairs, np.stack([x, -10 * x], axis=1))
+        seen.extend(x.tolist())
+    assert sorted(seen) == list(range(steps * envs))
+
+
+def _spy_on_rollouts(monkeypatch) -> list[tuple]:
+    """What each rollout's end sees: the weight, the heads' advantages combined at it, PPO's
+    advantages, the heads' rewards and the explained variances."""
+    seen = []
+    real = critic.finish_rollout
+
+    def spy(buffer, policy, last_obs, last_dones, gamma, lam):
+        explained = real(buffer, policy, last_obs, last_dones, gamma, lam)
+        steps, envs = buffer.buffer_size, buffer.n_envs
+        flat = {k: v.reshape(steps * envs, *v.shape[2:]) for k, v in buffer.observations.items()}
+        values = critic.head_values(policy, flat).reshape(steps, envs, 2)
+        weight = float(policy.value_net.price_weight)
+        combined = critic.combine(buffer.head_returns - values, weight)[..., 0]
+        seen.append((weight, combined, buffer.advantages.copy(), buffer.head_rewards.copy(), explained))
+        return explained
+
+    monkeypatch.setattr(critic, "finish_rollout", spy)
+    return seen
+
+
+def _check_rollouts(seen: list[tuple], rollouts: int) -> None:
+    assert len(seen) == rollouts
+    for _, combined, advantages, head_rewards, explained in seen:
+        np.testing.assert_allclose(combined, advantages, rtol=1e-4, atol=1e-4 * np.abs(advantages).max())
+        assert (head_rewards[..., 0] > 0).any() and (head_rewards[..., 1] > 0).any()  # gains and prices apart
+        assert set(explained) == {"gain_explained_variance", "cost_explained_variance"}
+    weights = [w for w, *_ in seen]
+    assert weights[0] == 1.0 and min(weights) < 0.99  # checked at a weight that moved, too
+
+
+def _config(**changes):
+    from train.ppo import TrainConfig
+
+    base = {
+        "timesteps": 48, "envs": 2, "seed": 1, "rooms": (1, 1), "n_steps": 8, "batch_size": 8,
+        "completion": "policy", "max_episode_steps": 3, "bc_steps": 12, "hold_coverage": 0.5,
+    }  # fmt: skip
+    return TrainConfig(**{**base, **changes})
+
+
+def test_the_two_heads_advantages_combine_into_ppo_s(tmp_path, monkeypatch):
+    """In a real run with moving prices, the heads' GAE advantages combined at the rollout's weight,
+    2 (A_g - w A_c) / (1 + w), are the advantages PPO's update uses (stable-baselines3's, from the
+    reweighed rewards and the combined values): episodes cut at 3 steps bootstrap each head, and two
+    envs keep their own columns. A head fitted to a return of the wrong step, env or bootstrap fails."""
+    import torch
+
+    from train.ppo import train
+
+    seen = _spy_on_rollouts(monkeypatch)
+    out = tmp_path / "run"
+    train(_config(), out, progress=False)
+    _check_rollouts(seen, 3)
+    # The saved state's critic combines at the weight the state records (what a resumed run goes on with).
+    state = torch.load(out / "training_state.pt", weights_only=True)["policy"]
+    recorded = json.loads((out / "training_state.json").read_text())["cost_weight"]
+    assert float(state["value_net.price_weight"]) == pytest.approx(recorded) and recorded != 1.0
+
+
+def test_the_two_heads_advantages_combine_on_ray_rollouts_too(tmp_path, monkeypatch):
+    """The same on Ray's actors: their truncated episodes bootstrap each head from the terminal
+    observation they keep (``terminal_heads``), and the learner reads their last observations."""
+    pytest.importorskip("ray")
+    from train.ppo import train
+
+    seen = _spy_on_rollouts(monkeypatch)
+    train(_config(), tmp_path / "ray", progress=False, backend="ray")
+    _check_rollouts(seen, 3)
+
+
+def test_a_split_critic_is_fitted_to_the_teacher_s_gain_and_price_apart():
+    """After cloning, each head learns its own discounted term; the policy is not touched."""
+    import torch
+    from sb3_contrib import MaskablePPO
+    from sb3_contrib.common.maskable.utils import get_action_masks
+
+    from train.ppo import TrainConfig, _policy_class, fit_value, make_training_envs
+
+    config = TrainConfig(envs=1, seed=0, rooms=(1, 2), completion="policy")
+    venv = make_training_envs(config)
+    model = MaskablePPO(
+        _policy_class(), venv, n_steps=32, batch_size=32, seed=0,
+        policy_kwargs={"network": config.network, "split_critic": True},
+    )  # fmt: skip
+    try:
+        obs, samples = venv.reset(), []
+        for _ in range(30):
+            samples.append({k: v.copy() for k, v in obs.items()})
+            obs, *_ = venv.step(np.array([int(np.flatnonzero(get_action_masks(venv)[0])[0])]))
+    finally:
+        venv.close()
+    all_obs = {k: np.concatenate([s[k] for s in samples]) for k in samples[0]}
+    to_go = 10 - np.arange(30) % 10  # episodes of 10 steps
+    rewards = np.stack([np.full(30, 3.0), 0.5 + 0.1 * (to_go == 1)], axis=1)[:, None, :]  # a dearer last step
+    ends = (to_go == 1)[:, None]
+    policy = model.policy
+    kept = {k: v.clone() for k, v in policy.state_dict().items() if not k.startswith(("value_net", "mlp_extractor"))}
+    fitted = fit_value(model, all_obs, rewards, ends)
+    assert fitted["value_samples"] == 30 and fitted["value_explained_variance"] is not None
+    gamma = model.gamma
+    gain = 3.0 * (1 - gamma**to_go) / (1 - gamma)
+    price = 0.5 * (1 - gamma**to_go) / (1 - gamma) + 0.1 * gamma ** (to_go - 1)
+    with torch.no_grad():
+        heads = policy.value_heads(policy.obs_to_tensor(all_obs)[0]).numpy()
+    # Each head nearer its own return than the other's, and than the best constant.
+    assert ((heads[:, 0] - gain) ** 2).mean() < 0.8 * gain.var()
+    assert ((heads[:, 1] - price) ** 2).mean() < 0.8 * price.var()
+    assert ((heads[:, 1] - gain) ** 2).mean() > 10 * ((heads[:, 1] - price) ** 2).mean()
+    assert all(torch.equal(v, policy.state_dict()[k]) for k, v in kept.items())
