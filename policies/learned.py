@@ -102,6 +102,34 @@ def _recorded(node: Any, key: str) -> dict[str, Any]:
     return value if isinstance(value, dict) else {}
 
 
+def _recording_problem(document: dict[str, Any]) -> str | None:
+    """What is wrong with the parts of a description that :func:`trained_rules` and
+    :func:`trained_inputs` read: each may be absent (a checkpoint of an older version), never of
+    another JSON type, which would drop the policy's requirements without a word."""
+    if "training" not in document:
+        return None
+    training = document["training"]
+    if not isinstance(training, dict):
+        return f"training must be a JSON object, got {_json_kind(training)}"
+    wall_search = training.get("wall_search", 0)
+    if not isinstance(wall_search, int) or isinstance(wall_search, bool):
+        return f"training.wall_search must be an integer, got {_json_kind(wall_search)}"
+    if "config" not in training:
+        return None
+    config = training["config"]
+    if not isinstance(config, dict):
+        return f"training.config must be a JSON object, got {_json_kind(config)}"
+    for part in ("rooms", "observation"):
+        if part in config and not isinstance(config[part], dict):
+            return f"training.config.{part} must be a JSON object, got {_json_kind(config[part])}"
+    for path in INPUT_FIELDS:
+        section, field = path.split(".")
+        value = config.get(section, {}).get(field, 0.0)
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            return f"training.config.{path} must be a number, got {_json_kind(value)}"
+    return None
+
+
 def trained_rules(document: dict[str, Any]) -> dict[str, Any]:
     """The room rules a checkpoint's network was trained with, as dotted configuration names.
 
@@ -635,6 +663,8 @@ def load_checkpoint(path: str | Path):
             raise TypeError(f"weights must name a file beside {path.name}, got {shown}")
         weights = path.parent / name
         layout = document.get("input_layout", "xyz")
+        if (problem := _recording_problem(document)) is not None:
+            raise TypeError(problem)
     except (KeyError, TypeError, ConfigError) as exc:
         raise ModelFileError(f"{path}: malformed checkpoint description ({exc})") from None
     if layout not in ("xyz", "zxy") or not isinstance(layout, str):

@@ -1035,3 +1035,33 @@ def test_the_thirty_fifth_probes_findings(run, capsys):
 
     with pytest.raises(ConfigError, match=r"pass --set observation\.cell=0\.2 or leave it out"):
         adopt_requirements({"observation.cell": 0.4}, {"observation.cell": (0.2, "ppo:x")})
+
+
+@pytest.mark.parametrize(
+    ("edit", "said"),
+    [
+        (lambda d: d.update(training=[]), "training must be a JSON object, got a list"),
+        (lambda d: d["training"].update(config=None), "training.config must be a JSON object, got null"),
+        (lambda d: d["training"].update(config="fast"), "training.config must be a JSON object, got a string"),
+        (lambda d: d["training"]["config"].update(rooms=[]), "training.config.rooms must be a JSON object"),
+        (lambda d: d["training"]["config"]["observation"].update(cell="0.2"), "training.config.observation.cell must"),
+        (lambda d: d["training"].update(wall_search=True), "training.wall_search must be an integer"),
+    ],
+)
+def test_a_description_whose_training_record_is_of_another_type_is_refused(run, tmp_path, edit, said):
+    """Probe 36: ``"training": []`` or ``training.config`` null or a string dropped the requirements
+    the policy was trained with (observation.cell, the room rules) without a word, so a network
+    trained on 0.2 m cells ran on 0.4 m ones. An absent record (an older checkpoint) is read as none."""
+    from nbs_env.errors import ModelFileError
+    from policies.learned import LearnedPolicy, load_checkpoint
+
+    assert LearnedPolicy(run).requires["observation.cell"] == 0.2  # the run as written
+    path = run / "policy.json"
+    document = json.loads(path.read_text())
+    edit(document)
+    path.write_text(json.dumps(document))
+    with pytest.raises(ModelFileError, match=rf"policy\.json: malformed checkpoint description \({re.escape(said)}"):
+        load_checkpoint(run)
+    document.pop("training")
+    path.write_text(json.dumps(document))
+    assert "observation.cell" not in LearnedPolicy(run).requires
