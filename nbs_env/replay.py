@@ -54,6 +54,7 @@ recorder is made or a recording is viewed.
 
 from __future__ import annotations
 
+import errno
 import os
 import subprocess
 import sys
@@ -66,7 +67,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from nbs_env.atomic import temporary_path
+from nbs_env.atomic import _nearly_full, temporary_path
 from nbs_env.labels import LABEL_COLOURS, VoxelLabel
 
 if TYPE_CHECKING:
@@ -153,8 +154,20 @@ _LIFT = 0.05
 CEILING_CUT = 0.25
 
 
+#: rerun's log filter (read when rerun is first imported): warnings, but not the writer's own
+#: lines about a failed write, which :meth:`RunRecorder.close` turns into an OSError.
+RERUN_LOG = "warn,re_log_encoding::rrd::file_sink=off,re_log_encoding::rrd::encoder=off,re_sdk::recording_stream=off"
+#: How long a flush may go without the recording growing before it is called failed (rerun's own
+#: flush waits forever on a full disk).
+FLUSH_WAIT_S = 30.0
+
+
 def require_rerun() -> tuple[ModuleType, ModuleType]:
     """``rerun`` and ``rerun.blueprint``, or an ImportError that says how to install them."""
+    # rerun's writer reports a failed write in log lines of its own (a full disk: an ERROR and a
+    # WARN per failure); RunRecorder.close says it in one line that names the file. The rest of
+    # rerun's log stays on at warnings; a RUST_LOG of the user's own is theirs.
+    os.environ.setdefault("RUST_LOG", RERUN_LOG)
     try:
         import rerun as rr
         import rerun.blueprint as rrb
@@ -367,13 +380,29 @@ class RunRecorder:
             return
         self._closed = True
         try:
-            self._rec.flush()
+            self._flush()
             self._rec.disconnect()
             if keep:
                 os.replace(self._partial, self.path)
         finally:
             if self._partial.exists():
                 self._partial.unlink()
+
+    def _flush(self) -> None:
+        """rerun's flush, waited on while the file grows; an OSError naming :attr:`path` if it fails."""
+        size = -1
+        while True:
+            try:
+                self._rec.flush(timeout_sec=FLUSH_WAIT_S)
+                return
+            except RuntimeError as exc:  # "Flush timed out", "File-writer thread shut down prematurely"
+                now = self._partial.stat().st_size if self._partial.exists() else 0
+                if "timed out" in str(exc) and now > size:  # still writing: a large recording, a slow disk
+                    size = now
+                    continue
+                if _nearly_full(self._partial.parent):
+                    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self.path)) from None
+                raise OSError(errno.EIO, f"the recording could not be written ({exc})", str(self.path)) from None
 
     # ------------------------------------------------------------------ inside
     def _at(self, t: int) -> None:

@@ -115,18 +115,26 @@ def _recording_problem(document: dict[str, Any]) -> str | None:
     if not isinstance(wall_search, int) or isinstance(wall_search, bool):
         return f"training.wall_search must be an integer, got {_json_kind(wall_search)}"
     if "config" not in training:
-        return None
+        # A training run's record holds its envs' configuration (every run of this version writes
+        # it); one without is a checkpoint saved by a user's own code, or of an older version.
+        return "training.config is missing from a training run's record" if "timesteps" in training else None
     config = training["config"]
     if not isinstance(config, dict):
         return f"training.config must be a JSON object, got {_json_kind(config)}"
     for part in ("rooms", "observation"):
-        if part in config and not isinstance(config[part], dict):
-            return f"training.config.{part} must be a JSON object, got {_json_kind(config[part])}"
+        if not isinstance(config.get(part), dict):
+            got = "missing" if part not in config else f"{_json_kind(config[part])}, not a JSON object"
+            return f"training.config.{part} is {got}"
+    # The room rules the policy requires are read from these: one left out would not be required.
+    for field in ("completion_fraction", "max_scans_per_room", "wall_search"):
+        if field not in config["rooms"]:
+            return f"training.config.rooms.{field} is missing"
     for path in INPUT_FIELDS:
         section, field = path.split(".")
-        value = config.get(section, {}).get(field, 0.0)
+        value = config[section].get(field)
         if not isinstance(value, (int, float)) or isinstance(value, bool):
-            return f"training.config.{path} must be a number, got {_json_kind(value)}"
+            shown = "missing" if field not in config[section] else f"{_json_kind(value)}, not a number"
+            return f"training.config.{path} is {shown}"
     return None
 
 

@@ -940,6 +940,14 @@ def test_the_thirty_second_probes_findings(run, tmp_path):
             {"steps": [*metrics["steps"][:-1], {**metrics["steps"][-1], "structure_sensed_pct": 0.0}]},
             "below the step before's",
         ),
+        # Probe 37: an emptied part was reused and its measured figures tabled as "-"; odd values kept.
+        ({"quality": {}}, "quality.min_density_per_m2 is missing"),
+        ({"quality": {**metrics["quality"], "dense_pct": "48"}}, 'quality.dense_pct is "48", not a number'),
+        ({"registrability": {}}, "registrability.scans is missing"),
+        ({"measured_points": -5}, "measured_points is -5, not within"),
+        ({"policy_time_s": 1e308}, "policy_time_s is 1e+308, not within"),
+        ({"config": {}}, "config lacks"),
+        ({"scene_offset_m": [1, 2]}, "scene_offset_m is [1, 2], not null or three finite numbers"),
     ]:
         assert said in (record_problem({**record, "metrics": {**metrics, **edit}}) or ""), edit
 
@@ -1043,15 +1051,21 @@ def test_the_thirty_fifth_probes_findings(run, capsys):
         (lambda d: d.update(training=[]), "training must be a JSON object, got a list"),
         (lambda d: d["training"].update(config=None), "training.config must be a JSON object, got null"),
         (lambda d: d["training"].update(config="fast"), "training.config must be a JSON object, got a string"),
-        (lambda d: d["training"]["config"].update(rooms=[]), "training.config.rooms must be a JSON object"),
-        (lambda d: d["training"]["config"]["observation"].update(cell="0.2"), "training.config.observation.cell must"),
+        (lambda d: d["training"]["config"].update(rooms=[]), "training.config.rooms is a list, not a JSON object"),
+        (lambda d: d["training"]["config"]["observation"].update(cell="0.2"), "training.config.observation.cell is a"),
         (lambda d: d["training"].update(wall_search=True), "training.wall_search must be an integer"),
+        # Probe 37: an empty or missing section dropped the requirements it records just the same.
+        (lambda d: d["training"]["config"].update(observation={}), "training.config.observation.cell is missing"),
+        (lambda d: d["training"]["config"].update(rooms={}), "training.config.rooms.completion_fraction is missing"),
+        (lambda d: d["training"]["config"].pop("rooms"), "training.config.rooms is missing"),
+        (lambda d: d["training"].pop("config"), "training.config is missing from a training run's record"),
     ],
 )
 def test_a_description_whose_training_record_is_of_another_type_is_refused(run, tmp_path, edit, said):
     """Probe 36: ``"training": []`` or ``training.config`` null or a string dropped the requirements
     the policy was trained with (observation.cell, the room rules) without a word, so a network
-    trained on 0.2 m cells ran on 0.4 m ones. An absent record (an older checkpoint) is read as none."""
+    trained on 0.2 m cells ran on 0.4 m ones; probe 37: so did an empty or missing section. A
+    checkpoint that records no training (saved by a user's own code) is read as one with none."""
     from nbs_env.errors import ModelFileError
     from policies.learned import LearnedPolicy, load_checkpoint
 
@@ -1065,3 +1079,116 @@ def test_a_description_whose_training_record_is_of_another_type_is_refused(run, 
     document.pop("training")
     path.write_text(json.dumps(document))
     assert "observation.cell" not in LearnedPolicy(run).requires
+
+
+def test_an_output_another_command_is_writing_is_refused(run, tmp_path, capsys):
+    """Probe 37: two commands given one ``--out`` at once both ran and both said they had written
+    it: one scan's report replaced the other's, a grid tabled another grid's runs as its own, and two
+    runs left one run's state with both runs' logs. The second is now refused before it looks at
+    the folder, naming the process that holds it; the claim ends with its holder, however it ends."""
+    import subprocess
+    import sys
+
+    from train.outputs import OutputBusyError, claimed
+    from train.ppo import resume_config, train
+
+    out = tmp_path / "busy"
+    out.mkdir()  # an empty folder, as a new output may be
+    hold = (
+        "import sys, time\nfrom pathlib import Path\nfrom train.outputs import claimed\n"
+        "with claimed([('--out', Path(sys.argv[1]))]):\n    print('held', flush=True)\n    time.sleep(120)\n"
+    )
+    root = Path(__file__).resolve().parents[1]
+    holders = []
+    try:
+        for path in (out, run):
+            holder = subprocess.Popen(
+                [sys.executable, "-c", hold, str(path)], stdout=subprocess.PIPE, text=True, cwd=root,
+                env={**__import__("os").environ, "PYTHONPATH": str(root)},
+            )  # fmt: skip
+            holders.append(holder)
+            assert holder.stdout.readline().strip() == "held"
+        said = f"{out}: another nbs command (process {holders[0].pid}) is writing it; wait for it to end, or choose"
+        scan = ["scan", "--scene", "l_room", "--preset", "fast", "--max-scans", "1", "--quiet", "--out", str(out)]
+        assert nbs(scan) == EXIT_USAGE
+        assert _err(capsys) == f"nbs scan: error: --out {said} another --out"
+        compare = ["compare", "--scenes", "l_room", "--policies", "greedy", "--max-scans", "1", "--out", str(out)]
+        assert nbs([*compare, "--quiet"]) == EXIT_USAGE
+        assert _err(capsys) == f"nbs compare: error: --out {said} another --out"
+        link = tmp_path / "link"
+        link.symlink_to(out, target_is_directory=True)  # the same folder by another name
+        assert nbs(["train", "--out", str(link), "--timesteps", "16", "--n-steps", "8", "--quiet"]) == EXIT_USAGE
+        assert f"another nbs command (process {holders[0].pid}) is writing it" in _err(capsys)
+        assert not any(out.iterdir()) and out.is_dir()  # nothing written, and nothing of the holder's removed
+        before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+        with pytest.raises(OutputBusyError, match=f"--resume {re.escape(str(run))}: another nbs command"):
+            train(resume_config(run, timesteps=32), run, progress=False, resume=True)
+        assert {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()} == before
+    finally:
+        for holder in holders:
+            holder.kill()
+            holder.wait()
+    with claimed([("--out", out)]), claimed([("--out", out)]):  # free again; a process may claim twice
+        pass
+
+
+def test_a_recording_the_disk_cannot_hold_is_one_line_and_the_report_stays(tmp_path, monkeypatch):
+    """Probe 37: ``--record`` onto a full disk ended in rerun's RuntimeError (a traceback and rerun's
+    own log lines), and rerun's flush can wait for ever there. The recorder waits while the file
+    grows, then raises an OSError naming the recording (a full disk called so); nothing is left."""
+    pytest.importorskip("rerun")
+    import errno
+
+    from nbs_env import replay
+
+    recorder = replay.RunRecorder(tmp_path / "x.rrd", "l_room")
+    real = recorder._rec
+
+    class Failing:
+        calls = 0
+
+        def flush(self, timeout_sec: float) -> None:
+            self.calls += 1
+            if self.calls < 3:  # growing: a large recording on a slow disk is waited for
+                recorder._partial.write_bytes(b"x" * (1000 * self.calls))
+                raise RuntimeError("Flush timed out - not all log messages were sent")
+            raise RuntimeError("File-writer thread shut down prematurely")
+
+        def disconnect(self) -> None:
+            pass
+
+    recorder._rec = failing = Failing()
+    monkeypatch.setattr(replay, "_nearly_full", lambda folder: True)
+    with pytest.raises(OSError) as caught:
+        recorder.close(keep=True)
+    assert caught.value.errno == errno.ENOSPC and caught.value.filename == str(tmp_path / "x.rrd")
+    assert failing.calls == 3 and not list(tmp_path.iterdir())
+    real.disconnect()
+
+    stuck = replay.RunRecorder(tmp_path / "y.rrd", "l_room")
+    real = stuck._rec
+
+    class Stuck(Failing):
+        def flush(self, timeout_sec: float) -> None:  # rerun's flush on a full disk: no progress
+            self.calls += 1
+            raise RuntimeError("Flush timed out - not all log messages were sent")
+
+    stuck._rec = Stuck()
+    monkeypatch.setattr(replay, "_nearly_full", lambda folder: False)
+    with pytest.raises(OSError, match="the recording could not be written"):
+        stuck.close(keep=True)
+    assert stuck._rec.calls <= 2 and not list(tmp_path.iterdir())
+    real.disconnect()
+
+
+def test_a_resumed_run_with_more_envs_than_the_machine_takes_names_its_file(run, capsys, monkeypatch):
+    """Probe 37: a state's ``run.envs`` of 1000 was refused as ``--envs 1000``, a flag never typed."""
+    from train.ppo import main
+
+    monkeypatch.setattr("os.cpu_count", lambda: 2)
+    _edit_run(run, lambda r: r.update(envs=1000, batch_size=8))
+    assert main(["--resume", str(run), "--timesteps", "32", "--quiet"]) == EXIT_USAGE
+    assert _err(capsys) == (
+        f"nbs train: error: --resume: {run / 'training_state.json'}: its run.envs is 1000, more env workers than "
+        "this machine takes (at most 4); continue with --envs 4 or fewer, or on a cluster with --backend ray --address"
+    )

@@ -29,7 +29,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from train.arguments import add_robot_arguments, add_scene_arguments, integer_from, scene_option_error, seed_number
-from train.outputs import NamedStream, Output, OutputError, check_outputs, output_path
+from train.outputs import NamedStream, Output, OutputBusyError, OutputError, check_outputs, claimed, output_path
 from train.stopping import STOP_SIGNALS, StopRequest, exit_code
 
 EXIT_SCENE_ERROR = 1
@@ -260,6 +260,11 @@ def _os_error(exc: OSError) -> str:
 
 def run_compare(args: argparse.Namespace) -> int:
     """``nbs compare``: the grid, its table and plots."""
+    with contextlib.ExitStack() as held:  # --out, claimed from its check to the tables' end
+        return _run_compare(args, held)
+
+
+def _run_compare(args: argparse.Namespace, held: contextlib.ExitStack) -> int:
     from nbs_env.errors import ConfigError
     from train.arguments import config_from_arguments
     from train.compare import (
@@ -300,9 +305,12 @@ def run_compare(args: argparse.Namespace) -> int:
             from train.ray_connect import resolve_address
 
             resolve_address(args.address)
+        # What --out holds is looked at only once no other command is writing it: two grids in one
+        # folder each tabled the other's runs as their own.
+        held.enter_context(claimed([("--out", args.out)]))
         out = check_out_dir(args.out, keep=args.resume or args.force, specs=specs)  # before anything runs
         finished = load_finished(out, specs) if args.resume else None
-    except (CompareError, ConfigError) as exc:
+    except (CompareError, ConfigError, OutputBusyError) as exc:
         return error(exc, EXIT_USAGE)
     if finished and not args.quiet:
         runs, oracles = len(finished["runs"]), len(finished["oracles"])
@@ -564,13 +572,12 @@ def scan_summary(metrics: dict, out: Path, files: Sequence[str], stopped_by: str
 
 def run_scan(args: argparse.Namespace) -> int:
     """``nbs scan``: run one episode with a policy and write its report."""
-    from scenes.errors import SceneError
 
     problem = scene_option_error(args.scene, args.storey, args.y_up, args.ifc_doors, args.units)
     if problem is not None:
         return _scan_error(problem, EXIT_USAGE)
     from nbs_env.config import make_config
-    from nbs_env.errors import ConfigError, ModelFileError, NBSError
+    from nbs_env.errors import ConfigError, ModelFileError
     from policies import POLICIES, UnknownPolicyError, agreed_requirements, config_for, make_policy
     from train.arguments import adopt_requirements, config_from_arguments
 
@@ -599,11 +606,26 @@ def run_scan(args: argparse.Namespace) -> int:
             return _scan_error(f"--record {args.record}: a rerun recording ends in .rrd", EXIT_USAGE)
     out = args.out if args.out is not None else _default_out(args.scene)
     replace = None if args.force else "pass --force to overwrite it"
-    from nbs_env.export import REPORT_FILES, report_path_problem
+    from nbs_env.export import REPORT_FILES
 
     outputs = [Output("--out", out, "folder", replace=replace, files=REPORT_FILES)]
     if args.record is not None:
         outputs.append(Output("--record", args.record, "file", replace=replace, example="run.rrd"))
+    try:
+        # Held until the report is written: what the outputs hold is looked at only once no other
+        # command is writing them (two scans into one --out each said it had written its report).
+        with claimed((o.flag, o.path) for o in outputs):
+            return _checked_scan(args, policy, out, config, outputs)
+    except OutputBusyError as exc:
+        return _scan_error(exc, EXIT_USAGE)
+
+
+def _checked_scan(args: argparse.Namespace, policy, out: Path, config, outputs: list[Output]) -> int:
+    """:func:`run_scan` from its output checks on, with its outputs claimed."""
+    from nbs_env.errors import ConfigError, NBSError
+    from nbs_env.export import report_path_problem
+    from scenes.errors import SceneError
+
     try:
         # Before the scan: a path found unwritable after it would lose it, and the scene must not be
         # one of the files the report writes (--force onto the scene's own folder overwrote it).
@@ -709,7 +731,11 @@ def _scan(args: argparse.Namespace, policy, out: Path, cfg, stop: StopRequest) -
             if recorder is not None:
                 # Renamed into place with the report, never without it: a run whose report failed
                 # (out of memory, a full disk) replaced the earlier recording with its own.
-                recorder.close(keep=True)
+                try:
+                    recorder.close(keep=True)
+                except OSError as exc:  # the report is whole; the recording is not kept
+                    exc.strerror = f"{exc.strerror}; the report was written to {out}/, without its recording"
+                    raise
     finally:
         if recorder is not None:
             recorder.close(keep=False)  # unless closed with the report above (idempotent)

@@ -48,7 +48,7 @@ import warnings
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -1518,23 +1518,55 @@ def _check_metrics(m: Any, spec: dict[str, Any]) -> None:
         _text(event, "event", f"door_events[{k}].")
         if event["event"] == "abandoned":
             _text(event, "reason", f"door_events[{k}].")
-    parts = {"registration_error": False, "quality": True, "registrability": True}  # part: may be null
-    for part, nullable in parts.items():
-        if part in m and not (isinstance(m[part], dict) or (nullable and m[part] is None)):
-            raise _BadRecordError(f"{part} is {_shown(m[part])}, not an object")
-    if "registration_error" in m:
-        for key in ("mean_m", "max_m"):
-            _number(m["registration_error"], key, "registration_error.")
-    quality = m.get("quality") or {}
-    if quality:  # the thresholds head quality.md and title the quality plot
-        for key in ("min_density_per_m2", "max_incidence_deg", "density_radius_m"):
-            _number(quality, key, "quality.")
-    for key in ("dense_pct", "incidence_pct", "quality_pct"):
+    # Every part a run of this schema writes is there whole: an emptied one ("quality": {}) was
+    # reused, and the tables showed "-" for figures the run had measured.
+    for part in ("registration_error", "quality", "registrability", "config"):
+        if not isinstance(m.get(part), dict):
+            raise _BadRecordError(f"{part} is {_shown(m.get(part)) if part in m else 'missing'}, not an object")
+    for key in ("mean_m", "max_m", "mean_deg", "max_deg"):
+        _number(m["registration_error"], key, "registration_error.")
+    quality = m["quality"]
+    for key in ("min_density_per_m2", "max_incidence_deg", "density_radius_m"):  # head quality.md
+        _number(quality, key, "quality.")
+    for key in ("dense_pct", "incidence_pct", "quality_pct"):  # null where no structure was measured
+        _present(quality, key, "quality.")
         _number(quality, key, "quality.", nullable=True, **pct)
-    registrability = m.get("registrability") or {}
-    for key in ("mean_overlap", "min_overlap", "min_fitness"):  # shares
+    for key in ("median_density_per_m2", "median_incidence_deg", "median_range_m"):
+        _present(quality, key, "quality.")
+        _number(quality, key, "quality.", nullable=True)
+    registrability = m["registrability"]
+    _number(registrability, "scans", "registrability.", integer=True)
+    for key in ("mean_overlap", "min_overlap", "mean_fitness", "min_fitness"):  # shares; null with one scan
+        _present(registrability, key, "registrability.")
         _number(registrability, key, "registrability.", high=1.0, nullable=True)
-    _number(registrability, "refused", "registrability.", integer=True, optional=True)  # read when there
+    _number(registrability, "refused", "registrability.", integer=True)
+    _number(m, "measured_points", "", integer=True)
+    _number(m, "policy_time_s", "")
+    offset = m.get("scene_offset_m")  # an IFC storey moved near the origin: where it was (older records lack it)
+    if not (offset is None or _is_point(offset)):
+        raise _BadRecordError(f"scene_offset_m is {_shown(offset)}, not null or three finite numbers")
+    from nbs_env.config import EnvConfig
+
+    # The configuration the run ran with: EnvConfig's fields (an older record may lack later ones).
+    names = {f.name for f in fields(EnvConfig)}
+    odd = sorted(set(m["config"]) - names) or sorted({"preset", "robot", "rooms", "observation"} - set(m["config"]))
+    if odd:
+        said = "holds" if odd[0] in m["config"] else "lacks"
+        raise _BadRecordError(f"config {said} {_shown(odd[0])}: not the configuration a run records")
+
+
+def _present(record: dict[str, Any], key: str, where: str) -> None:
+    if key not in record:
+        raise _BadRecordError(f"{where}{key} is missing")
+
+
+def _is_point(value: Any) -> bool:
+    """Three finite JSON numbers."""
+    return (
+        isinstance(value, list)
+        and len(value) == 3
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    )
 
 
 def record_problem(record: dict[str, Any], *, summary: bool = True) -> str | None:

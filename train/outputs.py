@@ -13,20 +13,36 @@ message names the flag and the path.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import hashlib
 import os
 import stat
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-__all__ = ["NamedStream", "Output", "OutputError", "check_outputs", "odd_entry", "output_path", "utf8_problem"]
+__all__ = [
+    "NamedStream",
+    "Output",
+    "OutputBusyError",
+    "OutputError",
+    "check_outputs",
+    "claimed",
+    "odd_entry",
+    "output_path",
+    "utf8_problem",
+]
 
 
 class OutputError(ValueError):
     """An output path that cannot be written, or holds what an earlier run left; the message says
     which flag, which path and why, on one line."""
+
+
+class OutputBusyError(OutputError):
+    """An output path another command is writing now (:func:`claimed`)."""
 
 
 @dataclass(frozen=True)
@@ -235,6 +251,86 @@ def check_outputs(outputs: Iterable[Output], reads: Iterable[tuple[str, Path]] =
             problem = "cannot be used (a loop of symbolic links)"
         if problem is not None:
             raise OutputError(f"{output.flag} {_shown(output.path)}: {problem}")
+
+
+#: This process's claims, by lock file: (the open lock file, how many times claimed).
+_HELD: dict[Path, tuple[int, int]] = {}
+
+
+def _lock_file(path: Path) -> Path:
+    """The lock file of an output path: named by a hash of the path as the file system finds it (a
+    link and its target, ``a/../b`` and ``b`` are one), in the temporary folder, so that nothing is
+    left in the user's folders and a lock file is never removed (removing one would let two
+    commands hold two locks of one path)."""
+    digest = hashlib.sha256(os.fsencode(_where(path))).hexdigest()[:32]
+    uid = os.getuid() if hasattr(os, "getuid") else 0
+    return Path(tempfile.gettempdir()) / f"nbs-env-{uid}-locks" / f"{digest}.lock"
+
+
+@contextlib.contextmanager
+def claimed(outputs: Iterable[tuple[str, Path]]) -> Iterator[None]:
+    """Hold each output path for this command while it runs: a second command (another process)
+    given the same path meanwhile is refused at once, before it looks at what the path holds.
+
+    Two commands writing one ``--out`` at once replaced each other's report, or mixed two grids'
+    runs in one table, each saying it had written its own. The claim is an advisory lock
+    (``fcntl.flock``) on a file named by the path (:func:`_lock_file`); the operating system lets
+    it go when the process ends, however it ends. A process may claim a path it holds again. Where
+    the platform has no ``flock``, or the temporary folder takes no file, nothing is claimed.
+
+    Parameters
+    ----------
+    outputs : iterable of (str, Path)
+        Each output by the option that named it (``("--out", Path("r"))``), for the message.
+
+    Raises
+    ------
+    OutputBusyError
+        Another process holds one of the paths: ``"--out r: another nbs command (process 4242) is
+        writing it; wait for it to end, or choose another --out"``.
+    """
+    try:
+        import fcntl
+    except ImportError:  # not a POSIX system
+        yield
+        return
+    taken: list[Path] = []
+    try:
+        for flag, path in outputs:
+            lock = _lock_file(Path(path))
+            if lock in _HELD:
+                fd, count = _HELD[lock]
+                _HELD[lock] = (fd, count + 1)
+                taken.append(lock)
+                continue
+            try:
+                lock.parent.mkdir(mode=0o700, exist_ok=True)
+                fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o600)
+            except OSError:  # no lock without a temporary folder; the command itself is not refused for it
+                continue
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+                os.close(fd)
+                who = f" (process {holder})" if holder.isdigit() else ""
+                other = "" if flag == "--resume" else f", or choose another {flag}"  # a run is resumed where it is
+                raise OutputBusyError(
+                    f"{flag} {_shown(Path(path))}: another nbs command{who} is writing it; wait for it to end{other}"
+                ) from None
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, str(os.getpid()).encode(), 0)
+            _HELD[lock] = (fd, 1)
+            taken.append(lock)
+        yield
+    finally:
+        for lock in taken:
+            fd, count = _HELD[lock]
+            if count > 1:
+                _HELD[lock] = (fd, count - 1)
+            else:
+                del _HELD[lock]
+                os.close(fd)  # the lock goes with the last descriptor
 
 
 class NamedStream:

@@ -1146,20 +1146,27 @@ def train(
     OSError
         The disk holding ``out`` has no room for one saved state (:func:`check_disk`, before the
         work), or a file of the run could not be written; either names the path.
+    train.outputs.OutputBusyError
+        Another process is training in ``out`` (or writing a comparison or a report there).
     """
+    from train.outputs import claimed
+
     out = Path(out)
-    made = not os.path.lexists(out)
-    before = set() if resume or made or not out.is_dir() else {p.name for p in out.iterdir()}
-    try:
-        with _tensorboard_failures(out / "tb"):
-            final, model = _train(config, out, progress, resume, backend, address)
-    except BaseException:
-        if not resume:
+    # Held for the run: a second run (or resume) of the same folder meanwhile is refused before it
+    # looks at the folder (two runs into one --out left one run and both runs' TensorBoard logs).
+    with claimed([("--resume" if resume else "--out", out)]):
+        made = not os.path.lexists(out)
+        before = set() if resume or made or not out.is_dir() else {p.name for p in out.iterdir()}
+        try:
+            with _tensorboard_failures(out / "tb"):
+                final, model = _train(config, out, progress, resume, backend, address)
+        except BaseException:
+            if not resume:
+                _discard_unstarted(out, before, made)
+            raise
+        if final is None and not resume:  # stopped while cloning: no state a resume could use
             _discard_unstarted(out, before, made)
-        raise
-    if final is None and not resume:  # stopped while cloning: no state a resume could use
-        _discard_unstarted(out, before, made)
-    return final, model
+        return final, model
 
 
 #: The start of the names of TensorBoard's event files.
@@ -2163,6 +2170,18 @@ def _resume(args, given: set[str]) -> int:
         except ConfigError as exc:  # the run's n_steps and batch size stay: only --envs can change
             print(f"nbs train: error: --resume {args.resume} --envs {args.envs}: {exc}", file=sys.stderr)
             return 2
+    else:
+        try:
+            check_workers(config, args.backend, args.address)
+        except ConfigError:  # the file's number, not an option the user typed
+            most = 2 * (os.cpu_count() or 1)
+            print(
+                f"nbs train: error: --resume: {folder / STATE_JSON}: its run.envs is {config.envs}, more env "
+                f"workers than this machine takes (at most {most}); continue with --envs {most} or fewer, or on a "
+                "cluster with --backend ray --address",
+                file=sys.stderr,
+            )
+            return 2
     return _run(config, args.resume, args, resume=True)
 
 
@@ -2179,6 +2198,7 @@ def _kept(out: Path, first: str) -> str:
 
 
 def _run(config: TrainConfig, out: Path, args, resume: bool) -> int:
+    from train.outputs import OutputBusyError
     from train.stopping import exit_code
 
     try:
@@ -2187,6 +2207,9 @@ def _run(config: TrainConfig, out: Path, args, resume: bool) -> int:
         )
     except ModelFileError as exc:
         print(f"nbs train: error: {'--resume' if resume else '--init'}: {exc}", file=sys.stderr)
+        return 2
+    except OutputBusyError as exc:
+        print(f"nbs train: error: {exc}", file=sys.stderr)
         return 2
     except ConfigError as exc:
         print(f"nbs train: error: {exc}", file=sys.stderr)
