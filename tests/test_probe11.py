@@ -1089,25 +1089,28 @@ def test_an_output_another_command_is_writing_is_refused(run, tmp_path, capsys):
     import subprocess
     import sys
 
-    from train.outputs import OutputBusyError, claimed
+    from train.outputs import Output, OutputBusyError, claimed
     from train.ppo import resume_config, train
 
     out = tmp_path / "busy"
-    out.mkdir()  # an empty folder, as a new output may be
     hold = (
-        "import sys, time\nfrom pathlib import Path\nfrom train.outputs import claimed\n"
-        "with claimed([('--out', Path(sys.argv[1]))]):\n    print('held', flush=True)\n    time.sleep(120)\n"
+        "import sys, time\nfrom train.outputs import Output, claimed\n"
+        "with claimed([Output('--out', sys.argv[1], sys.argv[2])]):\n    print('held', flush=True)\n"
+        "    time.sleep(120)\n"
     )
     root = Path(__file__).resolve().parents[1]
+    record = tmp_path / "r.rrd"
     holders = []
     try:
-        for path in (out, run):
+        for path, kind in ((out, "folder"), (run, "folder"), (record, "file")):
+            (tmp_path / f"tmp-{kind}").mkdir(exist_ok=True)  # a batch job's TMPDIR of its own: the same claim
             holder = subprocess.Popen(
-                [sys.executable, "-c", hold, str(path)], stdout=subprocess.PIPE, text=True, cwd=root,
-                env={**__import__("os").environ, "PYTHONPATH": str(root)},
+                [sys.executable, "-c", hold, str(path), kind], stdout=subprocess.PIPE, text=True, cwd=root,
+                env={**__import__("os").environ, "PYTHONPATH": str(root), "TMPDIR": str(tmp_path / f"tmp-{kind}")},
             )  # fmt: skip
             holders.append(holder)
             assert holder.stdout.readline().strip() == "held"
+        assert out.is_dir()  # made for the claim, as the command makes its --out
         said = f"{out}: another nbs command (process {holders[0].pid}) is writing it; wait for it to end, or choose"
         scan = ["scan", "--scene", "l_room", "--preset", "fast", "--max-scans", "1", "--quiet", "--out", str(out)]
         assert nbs(scan) == EXIT_USAGE
@@ -1124,12 +1127,17 @@ def test_an_output_another_command_is_writing_is_refused(run, tmp_path, capsys):
         with pytest.raises(OutputBusyError, match=f"--resume {re.escape(str(run))}: another nbs command"):
             train(resume_config(run, timesteps=32), run, progress=False, resume=True)
         assert {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()} == before
+        other = tmp_path / "other"
+        assert nbs([*scan[:-1], str(other), "--record", str(tmp_path / "." / "r.rrd")]) == EXIT_USAGE
+        assert f"--record {tmp_path / '.' / 'r.rrd'}: another nbs command (process {holders[2].pid})" in _err(capsys)
+        assert not other.exists()  # the folder made for its claim is gone with it
     finally:
         for holder in holders:
-            holder.kill()
+            holder.kill()  # as the kernel's out-of-memory killer would: the claims go with the process
             holder.wait()
-    with claimed([("--out", out)]), claimed([("--out", out)]):  # free again; a process may claim twice
+    with claimed([Output("--out", out)]), claimed([Output("--out", out)]):  # free again; claimed twice by one
         pass
+    assert out.is_dir() and not any(out.iterdir())  # a killed holder's folder stays, empty: a valid new --out
 
 
 def test_a_recording_the_disk_cannot_hold_is_one_line_and_the_report_stays(tmp_path, monkeypatch):
@@ -1192,3 +1200,50 @@ def test_a_resumed_run_with_more_envs_than_the_machine_takes_names_its_file(run,
         f"nbs train: error: --resume: {run / 'training_state.json'}: its run.envs is 1000, more env workers than "
         "this machine takes (at most 4); continue with --envs 4 or fewer, or on a cluster with --backend ray --address"
     )
+
+
+@pytest.mark.skipif(not __import__("sys").platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_a_grid_s_workers_end_when_their_parent_is_killed(tmp_path):
+    """Probe 38: ``nbs compare --jobs 2`` killed with SIGKILL (the out-of-memory killer) left its two
+    workers, 0.4 GB each, running on for minutes. A worker started as the grid starts them now ends
+    when its parent dies."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    parent = (
+        "import multiprocessing, os, time\n"
+        "from concurrent.futures import ProcessPoolExecutor\n"
+        "from train.stopping import ignore_interrupts\n"
+        "if __name__ == '__main__':\n"
+        "    spawn = multiprocessing.get_context('spawn')\n"
+        "    pool = ProcessPoolExecutor(1, mp_context=spawn, initializer=ignore_interrupts)\n"
+        "    print(pool.submit(os.getpid).result(), flush=True)\n"
+        "    pool.submit(time.sleep, 600)\n"
+        "    time.sleep(600)\n"
+    )
+    script = tmp_path / "grid.py"
+    script.write_text(parent)
+    root = Path(__file__).resolve().parents[1]
+    process = subprocess.Popen(
+        [sys.executable, str(script)], stdout=subprocess.PIPE, text=True, env={**os.environ, "PYTHONPATH": str(root)}
+    )
+    worker = int(process.stdout.readline())
+    os.kill(worker, 0)  # alive
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline:
+        try:
+            os.kill(worker, 0)
+        except ProcessLookupError:
+            break
+        # A zombie until its new parent reaps it: ended all the same.
+        if Path(f"/proc/{worker}/stat").read_text().split(")")[-1].split()[0] == "Z":
+            break
+        time.sleep(0.2)
+    else:
+        os.kill(worker, signal.SIGKILL)
+        pytest.fail("the worker outlived its killed parent by 20 s")

@@ -307,7 +307,7 @@ def _run_compare(args: argparse.Namespace, held: contextlib.ExitStack) -> int:
             resolve_address(args.address)
         # What --out holds is looked at only once no other command is writing it: two grids in one
         # folder each tabled the other's runs as their own.
-        held.enter_context(claimed([("--out", args.out)]))
+        held.enter_context(claimed([Output("--out", args.out)]))
         out = check_out_dir(args.out, keep=args.resume or args.force, specs=specs)  # before anything runs
         finished = load_finished(out, specs) if args.resume else None
     except (CompareError, ConfigError, OutputBusyError) as exc:
@@ -614,7 +614,7 @@ def run_scan(args: argparse.Namespace) -> int:
     try:
         # Held until the report is written: what the outputs hold is looked at only once no other
         # command is writing them (two scans into one --out each said it had written its report).
-        with claimed((o.flag, o.path) for o in outputs):
+        with claimed(outputs):
             return _checked_scan(args, policy, out, config, outputs)
     except OutputBusyError as exc:
         return _scan_error(exc, EXIT_USAGE)

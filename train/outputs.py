@@ -253,40 +253,86 @@ def check_outputs(outputs: Iterable[Output], reads: Iterable[tuple[str, Path]] =
             raise OutputError(f"{output.flag} {_shown(output.path)}: {problem}")
 
 
-#: This process's claims, by lock file: (the open lock file, how many times claimed).
-_HELD: dict[Path, tuple[int, int]] = {}
+#: This process's claims, by what is locked: (the open descriptor, how many times claimed).
+_HELD: dict[tuple, tuple[int, int]] = {}
 
 
-def _lock_file(path: Path) -> Path:
-    """The lock file of an output path: named by a hash of the path as the file system finds it (a
-    link and its target, ``a/../b`` and ``b`` are one), in the temporary folder, so that nothing is
-    left in the user's folders and a lock file is never removed (removing one would let two
-    commands hold two locks of one path)."""
-    digest = hashlib.sha256(os.fsencode(_where(path))).hexdigest()[:32]
-    uid = os.getuid() if hasattr(os, "getuid") else 0
-    return Path(tempfile.gettempdir()) / f"nbs-env-{uid}-locks" / f"{digest}.lock"
+def _lock_folder() -> Path:
+    """Where the lock files of file outputs live: ``/tmp`` itself where there is one, whatever
+    ``TMPDIR`` says (a batch job gets its own), shared by every user (sticky, like ``/tmp``)."""
+    base = Path("/tmp") if Path("/tmp").is_dir() else Path(tempfile.gettempdir())
+    folder = base / "nbs-env-locks"
+    if not folder.is_dir():
+        folder.mkdir(exist_ok=True)
+        with contextlib.suppress(OSError):
+            folder.chmod(0o1777)
+    return folder
+
+
+def _holder(st: os.stat_result) -> str:
+    """`` (process N)`` of the process holding a flock on the file ``st`` describes, from
+    ``/proc/locks`` (Linux); empty where it cannot be told."""
+    want = f"{os.major(st.st_dev):02x}:{os.minor(st.st_dev):02x}:{st.st_ino}"
+    with contextlib.suppress(OSError, ValueError):
+        for line in Path("/proc/locks").read_text().splitlines():
+            fields = line.split()
+            if len(fields) > 5 and fields[1] == "FLOCK" and fields[5] == want and fields[4].isdigit():
+                return f" (process {fields[4]})"
+    return ""
+
+
+def _open_claim(output: Output) -> tuple[tuple, int, Path | None] | None:
+    """What claiming ``output`` locks: ``(key, descriptor, folder made)``; None where nothing can
+    be (a path the output checks will refuse, or no lock file to be had).
+
+    A folder is locked itself (made when missing, as the command would make it), so that every name
+    of it, a link, ``a/../b`` or another mount of it, is the same lock. A file is replaced by a
+    rename, so its lock is a file of its own named by the folder it is in (device and inode) and
+    its name."""
+    path = Path(output.path)
+    if output.kind == "folder":
+        made = None
+        try:
+            if not os.path.lexists(path):
+                path.mkdir()
+                made = path
+            fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+        except OSError:
+            if made is not None:
+                with contextlib.suppress(OSError):
+                    made.rmdir()
+            return None
+        st = os.fstat(fd)
+        return ("folder", st.st_dev, st.st_ino), fd, made
+    try:
+        parent = os.stat(_where(path).parent)
+        key = ("file", parent.st_dev, parent.st_ino, path.name)
+        digest = hashlib.sha256(repr(key).encode()).hexdigest()[:32]
+        fd = os.open(_lock_folder() / f"{digest}.lock", os.O_RDONLY | os.O_CREAT, 0o666)
+    except OSError:
+        return None
+    with contextlib.suppress(OSError):
+        os.fchmod(fd, 0o666)  # another user's command must be able to open it to be refused
+    return key, fd, None
 
 
 @contextlib.contextmanager
-def claimed(outputs: Iterable[tuple[str, Path]]) -> Iterator[None]:
-    """Hold each output path for this command while it runs: a second command (another process)
-    given the same path meanwhile is refused at once, before it looks at what the path holds.
+def claimed(outputs: Iterable[Output]) -> Iterator[None]:
+    """Hold each output for this command while it runs: a second command (another process) given
+    the same output meanwhile, by any name, is refused at once, before it looks at what it holds.
 
     Two commands writing one ``--out`` at once replaced each other's report, or mixed two grids'
     runs in one table, each saying it had written its own. The claim is an advisory lock
-    (``fcntl.flock``) on a file named by the path (:func:`_lock_file`); the operating system lets
-    it go when the process ends, however it ends. A process may claim a path it holds again. Where
-    the platform has no ``flock``, or the temporary folder takes no file, nothing is claimed.
-
-    Parameters
-    ----------
-    outputs : iterable of (str, Path)
-        Each output by the option that named it (``("--out", Path("r"))``), for the message.
+    (``fcntl.flock``) on the output folder itself, or for a file on a lock file named by its folder
+    and name (:func:`_open_claim`); the operating system lets it go when the process ends, however
+    it ends. A folder made for the claim and left empty is removed with it. A process may claim
+    what it holds again. Where the platform has no ``flock``, or a path cannot be opened (the
+    output checks then say why), nothing is claimed.
 
     Raises
     ------
     OutputBusyError
-        Another process holds one of the paths: ``"--out r: another nbs command (process 4242) is
+        Another process holds one of them: ``"--out r: another nbs command (process 4242) is
         writing it; wait for it to end, or choose another --out"``.
     """
     try:
@@ -294,43 +340,46 @@ def claimed(outputs: Iterable[tuple[str, Path]]) -> Iterator[None]:
     except ImportError:  # not a POSIX system
         yield
         return
-    taken: list[Path] = []
+    taken: list[tuple[tuple, Path | None]] = []
     try:
-        for flag, path in outputs:
-            lock = _lock_file(Path(path))
-            if lock in _HELD:
-                fd, count = _HELD[lock]
-                _HELD[lock] = (fd, count + 1)
-                taken.append(lock)
+        for output in outputs:
+            opened = _open_claim(output)
+            if opened is None:
                 continue
-            try:
-                lock.parent.mkdir(mode=0o700, exist_ok=True)
-                fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o600)
-            except OSError:  # no lock without a temporary folder; the command itself is not refused for it
+            key, fd, made = opened
+            if key in _HELD:
+                os.close(fd)
+                held, count = _HELD[key]
+                _HELD[key] = (held, count + 1)
+                taken.append((key, made))
                 continue
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError:
-                holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+                who = _holder(os.fstat(fd))
                 os.close(fd)
-                who = f" (process {holder})" if holder.isdigit() else ""
-                other = "" if flag == "--resume" else f", or choose another {flag}"  # a run is resumed where it is
+                if made is not None:
+                    with contextlib.suppress(OSError):
+                        made.rmdir()
+                other = "" if output.flag == "--resume" else f", or choose another {output.flag}"
                 raise OutputBusyError(
-                    f"{flag} {_shown(Path(path))}: another nbs command{who} is writing it; wait for it to end{other}"
+                    f"{output.flag} {_shown(Path(output.path))}: another nbs command{who} is writing it; "
+                    f"wait for it to end{other}"
                 ) from None
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, str(os.getpid()).encode(), 0)
-            _HELD[lock] = (fd, 1)
-            taken.append(lock)
+            _HELD[key] = (fd, 1)
+            taken.append((key, made))
         yield
     finally:
-        for lock in taken:
-            fd, count = _HELD[lock]
+        for key, made in reversed(taken):
+            fd, count = _HELD[key]
             if count > 1:
-                _HELD[lock] = (fd, count - 1)
-            else:
-                del _HELD[lock]
-                os.close(fd)  # the lock goes with the last descriptor
+                _HELD[key] = (fd, count - 1)
+                continue
+            del _HELD[key]
+            os.close(fd)  # the lock goes with the last descriptor
+            if made is not None:  # made for the claim: gone again if the command left it empty
+                with contextlib.suppress(OSError):
+                    made.rmdir()
 
 
 class NamedStream:

@@ -1149,13 +1149,13 @@ def train(
     train.outputs.OutputBusyError
         Another process is training in ``out`` (or writing a comparison or a report there).
     """
-    from train.outputs import claimed
+    from train.outputs import Output, claimed
 
     out = Path(out)
+    made = not os.path.lexists(out)
     # Held for the run: a second run (or resume) of the same folder meanwhile is refused before it
     # looks at the folder (two runs into one --out left one run and both runs' TensorBoard logs).
-    with claimed([("--resume" if resume else "--out", out)]):
-        made = not os.path.lexists(out)
+    with claimed([Output("--resume" if resume else "--out", out)]):
         before = set() if resume or made or not out.is_dir() else {p.name for p in out.iterdir()}
         try:
             with _tensorboard_failures(out / "tb"):
