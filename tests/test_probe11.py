@@ -1247,3 +1247,55 @@ def test_a_grid_s_workers_end_when_their_parent_is_killed(tmp_path):
     else:
         os.kill(worker, signal.SIGKILL)
         pytest.fail("the worker outlived its killed parent by 20 s")
+
+
+def test_an_output_inside_or_around_another_command_s_is_refused(tmp_path, capsys):
+    """Probe 39: a scan whose ``--out`` was a folder inside a running grid's ``runs/`` wrote its report
+    there, and the grid then wrote its run into the same folder: an output's folders are claimed too
+    (shared), so neither a command inside another's output nor one around it runs meanwhile; two
+    commands writing side by side in one folder still do."""
+    import os
+    import subprocess
+    import sys
+
+    from train.outputs import Output, OutputBusyError, claimed
+
+    grid, beside = tmp_path / "grid", tmp_path / "beside"
+    hold = (
+        "import sys, time\nfrom train.outputs import Output, claimed\n"
+        "with claimed([Output('--out', sys.argv[1])]):\n    print('held', flush=True)\n    time.sleep(120)\n"
+    )
+    root = Path(__file__).resolve().parents[1]
+    holder = subprocess.Popen(
+        [sys.executable, "-c", hold, str(grid)], stdout=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONPATH": str(root)},
+    )  # fmt: skip
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        inside = grid / "runs" / "five_rooms"
+        inside.mkdir(parents=True)
+        run = inside / "seed13"
+        scan = ["scan", "--scene", "l_room", "--preset", "fast", "--max-scans", "1", "--quiet", "--out", str(run)]
+        assert nbs(scan) == EXIT_USAGE
+        assert _err(capsys) == (
+            f"nbs scan: error: --out {run}: another nbs command (process {holder.pid}) is writing {grid}, which "
+            "holds it; wait for it to end, or choose another --out"
+        )
+        assert not run.exists()
+        with claimed([Output("--out", beside)]):  # side by side in one folder: both run
+            pass
+    finally:
+        holder.kill()
+        holder.wait()
+    holder = subprocess.Popen(
+        [sys.executable, "-c", hold, str(inside / "seed13")], stdout=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONPATH": str(root)},
+    )  # fmt: skip
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        busy = pytest.raises(OutputBusyError, match=rf"--out {re.escape(str(grid))}: another nbs command")
+        with busy, claimed([Output("--out", grid)]):  # a grid around a scan that is writing
+            pass
+    finally:
+        holder.kill()
+        holder.wait()

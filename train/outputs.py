@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import hashlib
 import os
 import stat
@@ -341,33 +342,48 @@ def claimed(outputs: Iterable[Output]) -> Iterator[None]:
         yield
         return
     taken: list[tuple[tuple, Path | None]] = []
+
+    def lock(key: tuple, fd: int, made: Path | None, mode: int, output: Output, within: str = "") -> None:
+        if key in _HELD:  # this process's own: a flock of a second descriptor would wait on the first
+            os.close(fd)
+            held, count = _HELD[key]
+            _HELD[key] = (held, count + 1)
+            taken.append((key, made))
+            return
+        try:
+            fcntl.flock(fd, mode | fcntl.LOCK_NB)
+        except OSError as exc:
+            if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                # A file system without flock (some network mounts: ENOLCK, EBADF): not claimed.
+                os.close(fd)
+                return
+            who = _holder(os.fstat(fd))
+            os.close(fd)
+            if made is not None:
+                with contextlib.suppress(OSError):
+                    made.rmdir()
+            other = "" if output.flag == "--resume" else f", or choose another {output.flag}"
+            raise OutputBusyError(
+                f"{output.flag} {_shown(Path(output.path))}: another nbs command{who} is writing "
+                f"{within or 'it'}; wait for it to end{other}"
+            ) from None
+        _HELD[key] = (fd, 1)
+        taken.append((key, made))
+
     try:
         for output in outputs:
-            opened = _open_claim(output)
-            if opened is None:
-                continue
-            key, fd, made = opened
-            if key in _HELD:
-                os.close(fd)
-                held, count = _HELD[key]
-                _HELD[key] = (held, count + 1)
-                taken.append((key, made))
-                continue
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                who = _holder(os.fstat(fd))
-                os.close(fd)
-                if made is not None:
-                    with contextlib.suppress(OSError):
-                        made.rmdir()
-                other = "" if output.flag == "--resume" else f", or choose another {output.flag}"
-                raise OutputBusyError(
-                    f"{output.flag} {_shown(Path(output.path))}: another nbs command{who} is writing it; "
-                    f"wait for it to end{other}"
-                ) from None
-            _HELD[key] = (fd, 1)
-            taken.append((key, made))
+            # The folders it is in, shared: a scan into a running grid's runs/ wrote into a run's folder
+            # (and a grid into a folder a scan is writing within would too).
+            for folder in _where(Path(output.path)).parents:
+                try:
+                    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+                except OSError:  # a folder that cannot be read: not locked, never refused for it
+                    continue
+                st = os.fstat(fd)
+                lock(("folder", st.st_dev, st.st_ino), fd, None, fcntl.LOCK_SH, output, f"{folder}, which holds it")
+            opened = _open_claim(output)  # after its folders: one refused makes nothing
+            if opened is not None:
+                lock(*opened, fcntl.LOCK_EX, output)
         yield
     finally:
         for key, made in reversed(taken):
