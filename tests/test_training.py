@@ -496,21 +496,20 @@ def test_discounted_returns_end_at_each_episode_s_end_and_mark_cut_ones():
     assert complete.tolist() == [True, False, True, False, False, False]
 
 
-def test_the_critic_learns_the_teacher_s_returns_and_the_clone_stays_as_it_was():
-    """Run hold1's critic explained none of the return over 41 updates: after cloning, the value
-    branch is fitted to the teacher's returns, and the policy (shared encoder, scorer) is not touched."""
-    pytest.importorskip("sb3_contrib")
-    import torch
+def _first_choices(split_critic: bool = False):
+    """A MaskablePPO with the run's network, and 30 observations of one env taking its first valid
+    candidate each step."""
     from sb3_contrib import MaskablePPO
     from sb3_contrib.common.maskable.utils import get_action_masks
 
-    from train.ppo import TrainConfig, _policy_class, fit_value, make_training_envs
+    from train.ppo import TrainConfig, _policy_class, make_training_envs
 
     config = TrainConfig(envs=1, seed=0, rooms=(1, 2), completion="policy")
     venv = make_training_envs(config)
     model = MaskablePPO(
-        _policy_class(), venv, n_steps=32, batch_size=32, seed=0, policy_kwargs={"network": config.network}
-    )
+        _policy_class(), venv, n_steps=32, batch_size=32, seed=0,
+        policy_kwargs={"network": config.network, "split_critic": split_critic},
+    )  # fmt: skip
     try:
         obs, samples = venv.reset(), []
         for _ in range(30):
@@ -518,7 +517,18 @@ def test_the_critic_learns_the_teacher_s_returns_and_the_clone_stays_as_it_was()
             obs, *_ = venv.step(np.array([int(np.flatnonzero(get_action_masks(venv)[0])[0])]))
     finally:
         venv.close()
-    all_obs = {k: np.concatenate([s[k] for s in samples]) for k in samples[0]}
+    return model, {k: np.concatenate([s[k] for s in samples]) for k in samples[0]}
+
+
+def test_the_critic_learns_the_teacher_s_returns_and_the_clone_stays_as_it_was():
+    """Run hold1's critic explained none of the return over 41 updates: after cloning, the value
+    branch is fitted to the teacher's returns, and the policy (shared encoder, scorer) is not touched."""
+    pytest.importorskip("sb3_contrib")
+    import torch
+
+    from train.ppo import fit_value
+
+    model, all_obs = _first_choices()
     rewards, ends = np.ones((30, 1)), (np.arange(30) % 10 == 9)[:, None]  # episodes of 10 steps
     policy = model.policy
     kept = {k: v.clone() for k, v in policy.state_dict().items() if not k.startswith(("value_net", "mlp_extractor"))}
@@ -535,4 +545,31 @@ def test_the_critic_learns_the_teacher_s_returns_and_the_clone_stays_as_it_was()
     assert fitted["value_samples"] == 30 and fitted["value_explained_variance"] is not None
     # Better than the best constant (the mean return): the critic reads the observations.
     assert error() < 0.8 * target.var() < 0.2 * before
+    assert all(torch.equal(v, policy.state_dict()[k]) for k, v in kept.items())
+
+
+def test_a_split_critic_is_fitted_to_the_teacher_s_gain_and_price_apart():
+    """After cloning, each head learns its own discounted term; the policy is not touched."""
+    pytest.importorskip("sb3_contrib")
+    import torch
+
+    from train.ppo import fit_value
+
+    model, all_obs = _first_choices(split_critic=True)
+    to_go = 10 - np.arange(30) % 10  # episodes of 10 steps
+    rewards = np.stack([np.full(30, 3.0), 0.5 + 0.1 * (to_go == 1)], axis=1)[:, None, :]  # a dearer last step
+    ends = (to_go == 1)[:, None]
+    policy = model.policy
+    kept = {k: v.clone() for k, v in policy.state_dict().items() if not k.startswith(("value_net", "mlp_extractor"))}
+    fitted = fit_value(model, all_obs, rewards, ends)
+    assert fitted["value_samples"] == 30 and fitted["value_explained_variance"] is not None
+    gamma = model.gamma
+    gain = 3.0 * (1 - gamma**to_go) / (1 - gamma)
+    price = 0.5 * (1 - gamma**to_go) / (1 - gamma) + 0.1 * gamma ** (to_go - 1)
+    with torch.no_grad():
+        heads = policy.value_heads(policy.obs_to_tensor(all_obs)[0]).numpy()
+    # Each head nearer its own return than the other's, and than the best constant.
+    assert ((heads[:, 0] - gain) ** 2).mean() < 0.8 * gain.var()
+    assert ((heads[:, 1] - price) ** 2).mean() < 0.8 * price.var()
+    assert ((heads[:, 1] - gain) ** 2).mean() > 10 * ((heads[:, 1] - price) ** 2).mean()
     assert all(torch.equal(v, policy.state_dict()[k]) for k, v in kept.items())
