@@ -1417,10 +1417,11 @@ def _shown(value: Any) -> str:
 
 def _number(record: dict[str, Any], key: str, where: str, *, high: float = MAX_FIGURE, **kind: bool) -> None:
     """``record[key]`` is a number in [0, high]: ``integer``, an int; ``optional``, or absent;
-    ``nullable``, or None or absent (what the summary reads only when it is not None)."""
+    ``nullable``, or None or absent (what the summary reads only when it is not None); ``present``
+    with ``nullable``, or None but not absent (a field every record of the schema writes)."""
     name = f"{where}{key}"
     if key not in record:
-        if kind.get("optional") or kind.get("nullable"):
+        if kind.get("optional") or (kind.get("nullable") and not kind.get("present")):
             return
         raise _BadRecordError(f"{name} is missing")
     value = record[key]
@@ -1529,16 +1530,13 @@ def _check_metrics(m: Any, spec: dict[str, Any]) -> None:
     for key in ("min_density_per_m2", "max_incidence_deg", "density_radius_m"):  # head quality.md
         _number(quality, key, "quality.")
     for key in ("dense_pct", "incidence_pct", "quality_pct"):  # null where no structure was measured
-        _present(quality, key, "quality.")
-        _number(quality, key, "quality.", nullable=True, **pct)
+        _number(quality, key, "quality.", nullable=True, present=True, **pct)
     for key in ("median_density_per_m2", "median_incidence_deg", "median_range_m"):
-        _present(quality, key, "quality.")
-        _number(quality, key, "quality.", nullable=True)
+        _number(quality, key, "quality.", nullable=True, present=True)
     registrability = m["registrability"]
     _number(registrability, "scans", "registrability.", integer=True)
     for key in ("mean_overlap", "min_overlap", "mean_fitness", "min_fitness"):  # shares; null with one scan
-        _present(registrability, key, "registrability.")
-        _number(registrability, key, "registrability.", high=1.0, nullable=True)
+        _number(registrability, key, "registrability.", high=1.0, nullable=True, present=True)
     _number(registrability, "refused", "registrability.", integer=True)
     _number(m, "measured_points", "", integer=True)
     _number(m, "policy_time_s", "")
@@ -1553,11 +1551,6 @@ def _check_metrics(m: Any, spec: dict[str, Any]) -> None:
     if odd:
         said = "holds" if odd[0] in m["config"] else "lacks"
         raise _BadRecordError(f"config {said} {_shown(odd[0])}: not the configuration a run records")
-
-
-def _present(record: dict[str, Any], key: str, where: str) -> None:
-    if key not in record:
-        raise _BadRecordError(f"{where}{key} is missing")
 
 
 def _is_point(value: Any) -> bool:
