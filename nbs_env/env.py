@@ -18,7 +18,14 @@ from gymnasium import spaces
 
 from nbs_env.config import PRESETS, EnvConfig, RewardConfig, make_config
 from nbs_env.errors import ConfigError, InvalidActionError
-from nbs_env.observation import CANDIDATE_FEATURES, ROOM_FEATURES, BeliefView, candidate_table_of, observe
+from nbs_env.observation import (
+    CANDIDATE_FEATURES,
+    ROOM_FEATURES,
+    STOREY_FEATURES,
+    BeliefView,
+    candidate_table_of,
+    observe,
+)
 from nbs_env.storey import STAGES, StageTimes, StepOutcome, Storey, resolve_scene
 from scenes import Scene
 from scenes.limits import MAX_SEED_DIGITS
@@ -80,6 +87,9 @@ class NBSEnv(gym.Env):
       in it, the share of its structural voxels sensed (Structure over Structure +
       Occluded-structure), its structural surface as mapped (m²), the length of its frontier faces
       (m) and the rooms completed before it.
+    - `storey`: (4,) float32, what the robot knows beyond the room (`nbs_env.observation.StoreyColumn`):
+      scans taken in the episode, the doors it detected and has not crossed or given up, and the
+      straight-line metres to the nearest of them and to all of them.
 
     Everything in the observation comes from the robot's own measurements and pose estimate. The
     shapes are those stable-baselines3 takes without a warning: `voxels` is image-like (its default
@@ -168,6 +178,7 @@ class NBSEnv(gym.Env):
                 "candidates": spaces.Box(-1e4, 1e4, shape=(k * len(CANDIDATE_FEATURES),), dtype=np.float32),
                 "pose": spaces.Box(-1e4, 1e4, shape=(4,), dtype=np.float32),
                 "room": spaces.Box(-1e4, 1e4, shape=(len(ROOM_FEATURES),), dtype=np.float32),
+                "storey": spaces.Box(-1e4, 1e4, shape=(len(STOREY_FEATURES),), dtype=np.float32),
             }
         )
         self._scene_cache: dict[str, Scene] = {}

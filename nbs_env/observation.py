@@ -17,7 +17,7 @@ index it by name (``table[:, CandidateColumn.PATH_LENGTH]``), never by number. N
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import IntEnum
 
 import numba
@@ -32,15 +32,18 @@ from nbs_env.perception.roi import RoI
 __all__ = [
     "CANDIDATE_FEATURES",
     "ROOM_FEATURES",
+    "STOREY_FEATURES",
     "BeliefView",
     "CandidateColumn",
     "ObservationConfig",
     "RoomColumn",
+    "StoreyColumn",
     "candidate_table",
     "candidate_table_of",
     "observe",
     "pool_labels",
     "room_features",
+    "storey_features",
     "voxel_window",
 ]
 
@@ -86,6 +89,21 @@ class RoomColumn(IntEnum):
 
 #: Names of the ``room`` vector's entries, in order.
 ROOM_FEATURES = tuple(c.name.lower() for c in RoomColumn)
+
+
+class StoreyColumn(IntEnum):
+    """The entries of the observation's ``storey`` vector: what the robot knows of the storey beyond
+    the room, for a critic that predicts the scans and metres still to come (the doors it found and
+    has not crossed are rooms still to scan)."""
+
+    SCANS_TAKEN = 0  # scans taken in the episode, door-frame scans included
+    DOORS_WAITING = 1  # doors detected, not crossed and not given up
+    NEAREST_DOOR = 2  # metres in a straight line to the nearest of them (0 when none)
+    DOOR_DISTANCE = 3  # metres in a straight line to all of them, summed
+
+
+#: Names of the ``storey`` vector's entries, in order.
+STOREY_FEATURES = tuple(c.name.lower() for c in StoreyColumn)
 
 
 @dataclass(frozen=True)
@@ -139,6 +157,10 @@ class BeliefView:
         Scans the robot took in the current room (its door-frame scan included).
     rooms_done : int
         Rooms the robot has completed.
+    scans_taken : int
+        Scans taken in the episode.
+    doors_waiting : (d, 2) float
+        Centres of the doors the robot detected and has not crossed or given up, map frame.
     """
 
     pose: np.ndarray
@@ -158,6 +180,8 @@ class BeliefView:
     scanner: ScannerConfig
     scans_in_room: int = 0
     rooms_done: int = 0
+    scans_taken: int = 0
+    doors_waiting: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
     @property
     def count(self) -> int:
@@ -286,6 +310,20 @@ def room_features(view: BeliefView) -> np.ndarray:
     return out
 
 
+def storey_features(view: BeliefView) -> np.ndarray:
+    """(4,) float32: what the robot knows of the storey beyond the room, entries :class:`StoreyColumn`,
+    from its own scan count and door memory."""
+    out = np.zeros(len(StoreyColumn), dtype=np.float32)
+    out[StoreyColumn.SCANS_TAKEN] = view.scans_taken
+    doors = np.asarray(view.doors_waiting, dtype=float).reshape(-1, 2)
+    out[StoreyColumn.DOORS_WAITING] = len(doors)
+    if len(doors):
+        distance = np.linalg.norm(doors - np.asarray(view.pose, dtype=float)[:2, 3], axis=1)
+        out[StoreyColumn.NEAREST_DOOR] = distance.min()
+        out[StoreyColumn.DOOR_DISTANCE] = distance.sum()
+    return out
+
+
 def observe(view: BeliefView, config: ObservationConfig) -> dict[str, np.ndarray]:
     """The env's observation of a belief: ``voxels``, ``candidates`` (flat), ``pose`` and ``room``.
 
@@ -293,8 +331,8 @@ def observe(view: BeliefView, config: ObservationConfig) -> dict[str, np.ndarray
     -------
     dict
         ``voxels`` ``config.shape`` uint8; ``candidates`` (K·5,) float32; ``pose`` (4,) float32 x, y,
-        z (m) and yaw (rad); ``room`` (5,) float32 (:func:`room_features`); all clipped to the
-        observation space's ±1e4.
+        z (m) and yaw (rad); ``room`` (5,) float32 (:func:`room_features`); ``storey`` (4,) float32
+        (:func:`storey_features`); all clipped to the observation space's ±1e4.
     """
     pose = view.pose
     xy = pose[:2, 3]
@@ -308,4 +346,5 @@ def observe(view: BeliefView, config: ObservationConfig) -> dict[str, np.ndarray
         "candidates": np.clip(table, -1e4, 1e4).reshape(-1),
         "pose": np.clip(pose_vec, -1e4, 1e4),
         "room": np.clip(room_features(view), -1e4, 1e4),
+        "storey": np.clip(storey_features(view), -1e4, 1e4),
     }

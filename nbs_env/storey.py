@@ -513,6 +513,10 @@ class Storey:
             scanner=robot.config.scanner,
             scans_in_room=robot.scans_in_room,
             rooms_done=len(self.rooms.done),
+            scans_taken=len(self.scans),
+            doors_waiting=np.array(
+                [d.centre[:2] for d in self.rooms.doors if self.rooms.door_open(d)], dtype=float
+            ).reshape(-1, 2),
         )
 
     # ------------------------------------------------------------------ decisions

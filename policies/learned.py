@@ -386,7 +386,7 @@ def build_network(config: NetworkConfig):
             return self.net(one_hot.permute(0, 4, 1, 2, 3))
 
     class CandidateScorer(nn.Module):
-        """(B, grid_dim + K·F + R) → (B, actions) logits; one MLP shared by every candidate slot,
+        """(B, grid_dim + K·F + R [+ more]) → (B, actions) logits; one MLP shared by every candidate slot,
         and with completion="policy" a "room done" head on g, the room vector and a summary of
         the candidates' predicted gains."""
 
@@ -413,7 +413,8 @@ def build_network(config: NetworkConfig):
             g = latent[:, :g_dim]
             c = latent[:, g_dim : g_dim + k * f].reshape(len(latent), k, f)
             # Counts and lengths on a log scale: a room's scans, area and frontier vary tenfold.
-            room = torch.log1p(latent[:, g_dim + k * f :].clamp(min=0))
+            # The room vector, and nothing after it (the critic's storey vector, train.ppo).
+            room = torch.log1p(latent[:, g_dim + k * f : g_dim + k * f + config.room_features].clamp(min=0))
             # Each candidate's gain and path relative to the best gain and the longest path of its
             # step: the raw gain share is small (1e-3 to 1e-1) and its scale varies with the room.
             rel = [c[..., col] / (c[..., col].amax(dim=1, keepdim=True) + 1e-6) for col in _RELATIVE]

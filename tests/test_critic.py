@@ -131,3 +131,32 @@ def test_the_two_heads_advantages_combine_on_ray_rollouts_too(tmp_path, monkeypa
     seen = _spy_on_rollouts(monkeypatch)
     train(_config(), tmp_path / "ray", progress=False, backend="ray")
     _check_rollouts(seen, 3)
+
+
+@pytest.mark.parametrize("split", [False, True])
+def test_the_critic_reads_the_storey_vector_and_the_policy_does_not(split):
+    """The scans and metres still to come turn on the doors the robot found: the critic reads the
+    observation's storey vector, while the policy's logits (what a checkpoint runs) stay those of
+    the voxels, the candidates and the room vector alone."""
+    import torch
+
+    from nbs_env import NBSEnv
+    from train.ppo import _policy_class
+
+    config = _config()
+    env = NBSEnv(config.env_config(), scene="generated:3")
+    obs, _ = env.reset(seed=0)
+    policy = _policy_class()(
+        env.observation_space, env.action_space, lambda _: 1e-3, network=config.network, split_critic=split
+    )
+    torch.manual_seed(0)
+    with torch.no_grad():
+        for p in policy.parameters():
+            p.add_(0.1 * torch.randn_like(p))
+    other = {**obs, "storey": obs["storey"] + np.array([5, 2, 7, 11], dtype=np.float32)}
+    tensors, _ = policy.obs_to_tensor({k: np.stack([obs[k], other[k]]) for k in obs})
+    with torch.no_grad():
+        logits = policy.get_distribution(tensors).distribution.logits
+        values = policy.value_heads(tensors) if split else policy.predict_values(tensors)
+    torch.testing.assert_close(logits[0], logits[1])
+    assert (values[0] - values[1]).abs().max() > 1e-4

@@ -15,7 +15,14 @@ from nbs_env.config import make_config
 from nbs_env.env import NBSEnv
 from nbs_env.errors import ConfigError, InvalidActionError, InvalidPoseError
 from nbs_env.labels import VoxelLabel
-from nbs_env.observation import CandidateColumn, ObservationConfig, RoomColumn, candidate_table_of, pool_labels
+from nbs_env.observation import (
+    CandidateColumn,
+    ObservationConfig,
+    RoomColumn,
+    StoreyColumn,
+    candidate_table_of,
+    pool_labels,
+)
 from policies import GreedyPolicy, RandomPolicy
 from scenes.corpus import corpus_entry
 
@@ -467,3 +474,32 @@ def test_the_gain_rule_reads_at_another_fraction_on_request():
     for bad in (-0.1, 1.0):
         with pytest.raises(ValueError, match="fraction"):
             env.gain_rule_done(bad)
+
+
+def test_the_storey_vector_is_the_robots_own_door_memory():
+    """obs["storey"] counts the scans of the episode and the doors the robot detected and has not
+    crossed or given up, with straight-line distances to them from its pose estimate: the robot's
+    door memory (KnownDoor estimates), never the scene's true doors."""
+    env = gym.make("nbs_env/NBS-Fast-v0", scene="generated:3")
+    obs, info = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
+    assert list(obs["storey"]) == [1, 0, 0, 0]  # the first scan, no door known yet
+    storey = env.unwrapped.storey
+    seen_doors, crossed = 0, False
+    for _ in range(80):
+        obs, _, terminated, truncated, info = env.step(int(np.flatnonzero(info["action_mask"])[0]))
+        s = obs["storey"]
+        rooms = storey.rooms
+        waiting = [d for d in rooms.doors if rooms.door_open(d)]
+        assert s[StoreyColumn.SCANS_TAKEN] == len(storey.scans) == info["scans"]
+        assert s[StoreyColumn.DOORS_WAITING] == len(waiting)
+        here = storey.robot.pose[:2, 3]
+        distance = [float(np.linalg.norm(d.centre[:2] - here)) for d in waiting]
+        assert s[StoreyColumn.NEAREST_DOOR] == pytest.approx(min(distance, default=0.0), rel=1e-5, abs=1e-5)
+        assert s[StoreyColumn.DOOR_DISTANCE] == pytest.approx(sum(distance), rel=1e-5, abs=1e-5)
+        crossed |= seen_doors > 0 and len(waiting) < seen_doors
+        seen_doors = len(waiting)
+        if terminated or truncated:
+            break
+    # The storey has several rooms: doors were found, and crossing one took it off the list.
+    assert len(storey.rooms.doors) >= 2 and crossed
