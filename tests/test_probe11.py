@@ -567,7 +567,7 @@ def test_the_twenty_eighth_probes_findings(run, tmp_path, capsys):
     resume after the model was built; a glTF of lines was "empty"; --init of another completion
     dumped two networks."""
     import scenes
-    from nbs_env.errors import ConfigError
+    from nbs_env.errors import ConfigError, ModelFileError
     from scenes import InvalidMeshError
     from train.ppo import TrainConfig, load_model, train
 
@@ -575,9 +575,11 @@ def test_the_twenty_eighth_probes_findings(run, tmp_path, capsys):
     train(TrainConfig(**{**_TINY, "stop_lr_scale": 3.0}), out, progress=False)
     path = out / "training_state.json"
     document = json.loads(path.read_text())
+    assert load_model(out).policy.optimizer.param_groups[1]["lr_scale"] == 3.0  # the run's, as recorded
     document["run"]["stop_lr_scale"] = 5.0
     path.write_text(json.dumps(document))
-    assert load_model(out).policy.optimizer.param_groups[1]["lr_scale"] == 5.0  # the record is what runs
+    with pytest.raises(ModelFileError, match=r"stop_lr_scale 5\.0 against 3\.0\); a resumed run keeps its own"):
+        load_model(out)  # probe 40: a setting edited after the state was saved is not trained with
     with pytest.raises(ConfigError, match=r"stop_lr_scale must be within \[0\.001, 100\]"):
         TrainConfig(completion="policy", stop_lr_scale=1e-320)
     with pytest.raises(ConfigError, match="completion must be 'policy' or 'gain'"):
@@ -1299,3 +1301,51 @@ def test_an_output_inside_or_around_another_command_s_is_refused(tmp_path, capsy
     finally:
         holder.kill()
         holder.wait()
+
+
+def test_a_resume_refuses_settings_edited_after_the_state_and_another_run_s_state(run, tmp_path, capsys):
+    """Probe 40: ``n_steps`` and ``seed`` edited in ``training_state.json`` were trained with and
+    recorded as the whole run's; another run's state pair copied into a run folder resumed that run
+    beside this one's curve and logs. The tensors keep the settings and the run's id under their
+    checksum, and the curve's records the run's id."""
+    from train.ppo import main
+
+    untouched = (run / "training_state.json").read_text()
+    _edit_run(run, lambda r: r.update(n_steps=16, seed=7))
+    assert main(["--resume", str(run), "--timesteps", "32", "--quiet"]) == EXIT_USAGE
+    assert _err(capsys) == (
+        f"nbs train: error: --resume: {run / 'training_state.json'}: its run settings are not those the state was "
+        "saved with (n_steps 16 against 8, seed 7 against 0); a resumed run keeps its own settings: restore the "
+        "file, or start a new run from its weights with --init"
+    )
+    (run / "training_state.json").write_text(untouched)
+    other = tmp_path / "other"
+    shutil.copytree(run, other)
+    document = json.loads((other / "training_state.json").read_text())
+    document["run_id"] = "0123456789abcdef"
+    (other / "training_state.json").write_text(json.dumps(document))
+    assert main(["--resume", str(other), "--timesteps", "32", "--quiet"]) == EXIT_USAGE
+    assert "its run_id is not the one the state was saved with" in _err(capsys)
+    # Records of another run's id in the curve beside a state are refused; its own go on.
+    state_id = json.loads(untouched)["run_id"]
+    assert isinstance(state_id, str) and len(state_id) == 16
+    figures = {"structure_sensed_pct": 90.0, "scans": 5.0, "path_length_m": 20.0}
+
+    def record(run_id: str) -> str:
+        return json.dumps({"timesteps": 8, "run": run_id, "learned": figures, "greedy": figures}) + "\n"
+
+    (run / "learning_curve.jsonl").write_text(record("fedcba9876543210"))
+    assert main(["--resume", str(run), "--timesteps", "32", "--quiet"]) == EXIT_USAGE
+    assert "records are of another run (fedcba9876543210) than the training state beside it" in _err(capsys)
+    (run / "learning_curve.jsonl").write_text(record(state_id))
+    assert main(["--resume", str(run), "--timesteps", "32", "--quiet"]) == 0
+    assert json.loads((run / "training_state.json").read_text())["run_id"] == state_id  # the same run goes on
+
+
+def test_scenes_info_names_its_positional_scene_without_an_option(capsys):
+    """Probe 40: ``nbs scenes info`` and ``show`` take the scene as a positional argument, and a name
+    that is not UTF-8 was refused as ``--scene NAME``, an option they do not have."""
+    assert nbs(["scenes", "info", "p_\udcff.json"]) == EXIT_USAGE
+    assert _err(capsys) == "nbs scenes info: error: p_\ufffd.json: the name is not valid UTF-8; rename it"
+    assert nbs(["scenes", "show", "p_\udcff.json", "--out", "x.png"]) == EXIT_USAGE
+    assert _err(capsys).startswith("nbs scenes show: error: p_\ufffd.json: the name")

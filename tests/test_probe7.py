@@ -74,7 +74,9 @@ def test_ply_headers_that_trimesh_would_misread_are_refused(edit, message, tmp_p
 
 def test_a_closed_stdout_or_stderr_drops_what_is_written_and_the_report_is_kept(tmp_path):
     """With descriptor 1 closed Python's sys.stdout is None: every write ended in an AttributeError
-    traceback after the report was written, and the report's file could take descriptor 1."""
+    traceback after the report was written, and the report's file could take descriptor 1. A command
+    whose product is what it prints (probe 40: ``scenes list``, ``scenes info``, ``--version`` exited
+    0 having written nothing) fails instead, as ``ls >&-`` does."""
     import json
     import subprocess
     import sys
@@ -84,7 +86,10 @@ def test_a_closed_stdout_or_stderr_drops_what_is_written_and_the_report_is_kept(
     nbs = f"{sys.executable} -c 'import sys; from train.cli import main; sys.argv[0] = \"nbs\"; sys.exit(main())'"
     out = tmp_path / "o"
     for command, code in (
-        (f"{nbs} scenes info l_room >&-", 0),
+        (f"{nbs} scenes info l_room >&-", 1),
+        (f"{nbs} scenes list >&-", 1),
+        (f"{nbs} --version >&-", 1),
+        (f"{nbs} scenes info l_room 2>&-", 0),
         (f"{nbs} scenes info nope.json >&-", 1),
         (f"{nbs} scenes info nope.json 2>&-", 1),
         (f"{nbs} scan --scene l_room --preset fast --max-scans 1 --no-steps --out {out} >&- 2>&-", 0),
@@ -92,6 +97,8 @@ def test_a_closed_stdout_or_stderr_drops_what_is_written_and_the_report_is_kept(
         proc = subprocess.run(["bash", "-c", command], cwd=root, capture_output=True, text=True, timeout=300)
         assert proc.returncode == code, (command, proc.stderr)
         assert "Traceback" not in proc.stderr, proc.stderr
+        if "nope" not in command and code == 1:
+            assert proc.stderr.startswith("nbs: error: stdout is closed"), proc.stderr
     assert json.loads((out / "metrics.json").read_text())["scans"] == 1
 
 

@@ -412,16 +412,17 @@ MESH_SUFFIXES = (".obj", ".glb", ".gltf", ".ply")
 
 
 def scene_option_error(
-    scene: str, storey: object, y_up: bool, ifc_doors: object = None, units: object = None
+    scene: str, storey: object, y_up: bool, ifc_doors: object = None, units: object = None, flag: str = "--scene"
 ) -> str | None:
     """Why ``--storey``, ``--ifc-doors``, ``--y-up`` or ``--units`` does not apply to ``scene`` (None when
     they do).
 
     A corpus entry (``corpus:NAME``) carries its own options; only IFC's apply to it. A name that is
-    not valid UTF-8 is refused too: the reports, clouds and pictures carry it."""
+    not valid UTF-8 is refused too: the reports, clouds and pictures carry it. ``flag`` is how the
+    command takes the scene ("" for a positional argument)."""
     from train.outputs import utf8_problem
 
-    problem = utf8_problem("--scene", scene)
+    problem = utf8_problem(flag, scene)
     if problem is not None:
         return problem
     suffix = Path(scene).suffix.lower()

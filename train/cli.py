@@ -410,7 +410,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"{name:12s} {len(scene.rooms)} rooms, {len(scene.doors)} doors, {floor:6.1f} m² of floor")
         return 0
     if args.action in ("show", "info"):
-        problem = scene_option_error(args.scene, args.storey, args.y_up, args.ifc_doors, args.units)
+        problem = scene_option_error(args.scene, args.storey, args.y_up, args.ifc_doors, args.units, flag="")
         if problem is not None:
             print(f"nbs scenes {args.action}: error: {problem}", file=sys.stderr)
             return EXIT_USAGE
@@ -887,6 +887,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     # A stream closed by the caller (`nbs scan ... >&-`: Python's is None) takes what is written and
     # drops it, as print() does; the report files are the command's work.
     sinks = {name: open(os.devnull, "w") for name in ("stdout", "stderr") if getattr(sys, name) is None}  # noqa: SIM115  # closed in main's finally
+    if "stdout" in sinks and _prints_its_product(sys.argv[1:] if argv is None else argv):
+        # What the command makes is what it prints (a scene's JSON, the list, the version): dropped,
+        # it was lost with exit 0. As coreutils' `ls >&-` does, say so and fail.
+        for sink in sinks.values():
+            sink.close()
+        if sys.stderr is not None:
+            print("nbs: error: stdout is closed, and what this command makes is what it prints to it: "
+                  "redirect it to a file or to /dev/null", file=sys.stderr)  # fmt: skip
+        for sig, handler in handlers.items():
+            if handler is not None:
+                signal.signal(sig, handler)
+        return EXIT_SCENE_ERROR
     if sinks:
         sys.stdout, sys.stderr = sinks.get("stdout", sys.stdout), sinks.get("stderr", sys.stderr)
         stderr, stdout = sys.stderr, sys.stdout
@@ -924,6 +936,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         for sig in STOP_SIGNALS:
             signal.signal(sig, signal.SIG_IGN)
     return code
+
+
+def _prints_its_product(argv: Sequence[str]) -> bool:
+    """Whether the command line's whole product is what it prints: the version, help, and the
+    ``scenes list`` and ``scenes info`` commands (the others write files, and print a summary)."""
+    args = [str(a) for a in argv]
+    if any(a in ("-h", "--help", "--version") for a in args):
+        return True
+    return len(args) >= 2 and args[0] == "scenes" and args[1] in ("list", "info")
 
 
 def interrupted(exc: BaseException) -> bool:

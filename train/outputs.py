@@ -193,7 +193,7 @@ def utf8_problem(flag: str, name: object, advice: str = "rename it") -> str | No
         str(name).encode("utf-8")
     except UnicodeEncodeError:
         shown = str(name).encode("utf-8", "surrogateescape").decode("utf-8", "replace")
-        return f"{flag} {shown}: the name is not valid UTF-8; {advice}"
+        return f"{f'{flag} ' if flag else ''}{shown}: the name is not valid UTF-8; {advice}"
     return None
 
 

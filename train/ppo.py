@@ -20,6 +20,7 @@ import json
 import math
 import os
 import re
+import secrets
 import shutil
 import signal
 import sys
@@ -832,11 +833,17 @@ class CostWeight:
         self.finished = []
 
 
-def save_training_state(model, folder: str | Path, run: TrainConfig, cost_weight: float = 1.0) -> Path:
+def save_training_state(
+    model, folder: str | Path, run: TrainConfig, cost_weight: float = 1.0, run_id: str | None = None
+) -> Path:
     """Write what a run continues from into ``folder``: :data:`STATE_FILE` (the whole policy's
     tensors and the optimiser's state) and :data:`STATE_JSON` (the timesteps done and the run's
     settings, and :class:`CostWeight`'s weight). Never a pickle of objects: tensors and numbers,
     and JSON.
+
+    The tensors file keeps the settings and ``run_id`` (which run's records the folder holds) as a
+    JSON string too, under its checksum: a resume refuses settings edited in :data:`STATE_JSON`
+    after the state was saved, which it would otherwise train with and record as the whole run's.
 
     Returns
     -------
@@ -854,6 +861,7 @@ def save_training_state(model, folder: str | Path, run: TrainConfig, cost_weight
     state = {
         "policy": {k: v.detach().cpu() for k, v in policy.state_dict().items()},
         "optimizer": policy.optimizer.state_dict(),
+        "record": json.dumps({"run": run.to_dict(), "run_id": run_id}, sort_keys=True),
     }
     path = folder / STATE_JSON
     # Both whole under temporary names, then renamed, the tensors first: a full disk, a signal or a
@@ -868,6 +876,7 @@ def save_training_state(model, folder: str | Path, run: TrainConfig, cost_weight
             "sha256": _sha256(temporary),
             "run": run.to_dict(),
             "cost_weight": float(cost_weight),
+            "run_id": run_id,
         }
         description.write_text(json.dumps(document, indent=1))
     return path
@@ -1040,6 +1049,7 @@ def _load_state(model, folder: Path, document: dict) -> None:
     if not isinstance(state, dict) or not isinstance(state.get("policy"), dict) or "optimizer" not in state:
         raise ModelFileError(f"{tensors}: not a training state (the policy's tensors and the optimiser's state)")
     check_tensors(state, tensors)
+    _check_record(state.get("record"), document, folder / STATE_JSON)
     try:
         model.policy.load_state_dict(state["policy"])
         model.policy.optimizer.load_state_dict(state["optimizer"])
@@ -1049,6 +1059,39 @@ def _load_state(model, folder: Path, document: dict) -> None:
         if "lr_scale" in group:  # the run's setting, as its record says, not the one the tensors kept
             group["lr_scale"] = model.policy.stop_lr_scale
     model.num_timesteps = int(document["timesteps"])
+
+
+def _check_record(record: Any, document: dict, path: Path) -> None:
+    """That the settings and run id of a state's JSON are those its tensors were saved with (the
+    ``record`` string :func:`save_training_state` keeps under the checksum; states written before it
+    hold none, and are taken as they are).
+
+    Raises
+    ------
+    ModelFileError
+        Naming the settings that differ.
+    """
+    if record is None:
+        return
+    try:
+        saved = read_json(record) if isinstance(record, str) else None
+    except json.JSONDecodeError:
+        saved = None
+    if not isinstance(saved, dict) or not isinstance(saved.get("run"), dict):
+        raise ModelFileError(f"{path}: its tensors' record of the run is not one this version writes")
+    run = document["run"]
+    changed = [k for k in sorted(set(run) | set(saved["run"])) if not same_json(run.get(k), saved["run"].get(k))]
+    if changed:
+        shown = ", ".join(
+            f"{k} {json_text(run.get(k), 30)} against {json_text(saved['run'].get(k), 30)}" for k in changed[:4]
+        )
+        raise ModelFileError(
+            f"{path}: its run settings are not those the state was saved with ({shown}"
+            f"{f' and {len(changed) - 4} more' if len(changed) > 4 else ''}); a resumed run keeps its own "
+            "settings: restore the file, or start a new run from its weights with --init"
+        )
+    if document.get("run_id") != saved.get("run_id"):
+        raise ModelFileError(f"{path}: its run_id is not the one the state was saved with; restore the file")
 
 
 def build_model(config: TrainConfig, venv, device: str = "cpu", tensorboard: str | None = None):
@@ -1293,6 +1336,15 @@ def _train(
     # A resumed run's curve is read whole before any step: a damaged one was found by the plot at the
     # end of the session, after the training it records had been done.
     earlier = _curve(log) if state is not None else []
+    # Which run the folder's records are of: a state copied in from another run's folder resumed that
+    # run here, beside this one's curve and logs.
+    run_id = secrets.token_hex(8) if state is None or state[1].get("run_id") is None else state[1]["run_id"]
+    others = sorted({r["run"] for r in earlier if r.get("run", run_id) != run_id})
+    if others:
+        raise ModelFileError(
+            f"{log}: its records are of another run ({others[0]}) than the training state beside it ({run_id}): "
+            "the state files were copied from another run's folder; resume that run in its own folder"
+        )
     if earlier and earlier[-1]["timesteps"] > done_before:
         # Evaluations after the last saved state (a run killed before its next save): the steps they
         # measured are taken again, and so are they.
@@ -1330,7 +1382,7 @@ def _train(
         made = not os.path.lexists(folder)
         try:
             save_checkpoint(folder, network, _state_dict(model), _layout(model), recorded)
-            save_training_state(model, folder, config, weight())
+            save_training_state(model, folder, config, weight(), run_id)
         except BaseException:
             if made:  # a checkpoint is whole or absent: a full disk left an empty or policy-only folder
                 shutil.rmtree(folder, ignore_errors=True)
@@ -1403,7 +1455,7 @@ def _train(
                 return int(action[0])
 
             learned = evaluate(act, held_out, config.max_episode_steps, config.evaluation_config())
-            record = {"timesteps": n, "learned": learned, "greedy": baseline}
+            record = {"timesteps": n, "run": run_id, "learned": learned, "greedy": baseline}
             if taught is not None:
                 record["teacher"] = taught
             record["train_return"] = float(np.mean(self.episodes[-20:])) if self.episodes else None
@@ -1463,7 +1515,7 @@ def _train(
             start = None if progress_callback is None else progress_callback.rollout_start
             if start is not None and start > done_before:
                 model.num_timesteps = start  # the rollout under way is dropped: it would be collected again
-                save_training_state(model, out, config, weight())
+                save_training_state(model, out, config, weight(), run_id)
             with contextlib.suppress(Exception):
                 venv.close()
         raise
@@ -1488,7 +1540,7 @@ def _train(
         "behaviour_cloning": warm,
     }
     final = save_checkpoint(out, network, _state_dict(model), _layout(model), training=training)
-    save_training_state(model, out, config, weight())
+    save_training_state(model, out, config, weight(), run_id)
     plot_learning_curve(log, out / "learning_curve.png")
     # TensorBoard's last events written now, where a failure is reported (it flushed in a thread, at exit).
     model.logger.close()
@@ -1545,6 +1597,8 @@ def _curve_record_problem(record: Any) -> str | None:
     """What makes one learning-curve record unusable, or None."""
     if not isinstance(record, dict):
         return "is not a record (a JSON object)"
+    if not isinstance(record.get("run", ""), str):
+        return f"has run {json_text(record['run'], 40)}, not a run's id"
     steps = record.get("timesteps")
     if type(steps) is not int or not 0 <= steps <= MAX_STATE_TIMESTEPS:
         return f"has timesteps {json_text(steps, 40)}, not a count of steps (0..{MAX_STATE_TIMESTEPS:,})"
