@@ -20,6 +20,18 @@ _POOL_SIZE = 0
 _BESIDE: ThreadPoolExecutor | None = None
 
 
+def _forget_pools() -> None:
+    """In a child made by ``fork``: the pools' threads were not copied, so work handed to them would
+    wait for ever (gymnasium's ``AsyncVectorEnv`` forked after an env had stepped in the parent hung
+    at its first reset). The child starts its own pools when it first needs them."""
+    global _POOL, _POOL_SIZE, _BESIDE
+    _POOL, _POOL_SIZE, _BESIDE = None, 0, None
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_pools)
+
+
 #: ``NBS_THREADS`` may ask for at most this many threads per core the process may use: more only
 #: share the same cores, and each takes a stack (10⁵ threads crashed the process).
 THREADS_PER_CORE = 4

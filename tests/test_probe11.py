@@ -1349,3 +1349,19 @@ def test_scenes_info_names_its_positional_scene_without_an_option(capsys):
     assert _err(capsys) == "nbs scenes info: error: p_\ufffd.json: the name is not valid UTF-8; rename it"
     assert nbs(["scenes", "show", "p_\udcff.json", "--out", "x.png"]) == EXIT_USAGE
     assert _err(capsys).startswith("nbs scenes show: error: p_\ufffd.json: the name")
+
+
+def test_a_run_says_where_whole_rollouts_take_it_past_its_timesteps(run, tmp_path, capsys):
+    """Probe 41: ``--timesteps 10`` with rollouts of 32 steps trained 32 without a word (policy.json's
+    ``timesteps_done`` said so, its ``timesteps`` the 10 asked for)."""
+    from train.ppo import TrainConfig, _note_rounding
+
+    _note_rounding(TrainConfig(timesteps=10, n_steps=32, envs=1), tmp_path / "new", resume=False)
+    assert capsys.readouterr().err == (
+        "nbs train: note: PPO trains whole rollouts of n_steps 32 x 1 env(s) = 32 steps: --timesteps 10 runs to 32\n"
+    )
+    _note_rounding(TrainConfig(timesteps=64, n_steps=16, envs=2), tmp_path / "new", resume=False)
+    assert capsys.readouterr().err == ""  # whole rollouts: nothing to say
+    # A resumed run rounds from the steps it has done (16 of the tiny run's rollouts of 8).
+    _note_rounding(TrainConfig(timesteps=20, n_steps=8, envs=1, batch_size=8), run, resume=True)
+    assert capsys.readouterr().err.endswith("= 8 steps: --timesteps 20 runs to 24\n")

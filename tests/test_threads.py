@@ -215,3 +215,32 @@ def test_the_cast_waits_until_the_noise_draw_has_begun(monkeypatch):
     scanner.scan(pose, rng)
     # The pattern's cast, and the footprints' where beams straddle an edge: none before the draw began.
     assert casts and rng.casts_before == 0
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="fork is POSIX's")
+def test_a_forked_child_starts_its_own_kernel_threads():
+    """Probe 41: the pools' threads are not copied by ``fork``, and work handed to them in the child
+    waited for ever (gymnasium's ``AsyncVectorEnv`` forked after an env had stepped hung at reset)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = (
+        "import os, signal, sys\n"
+        "from nbs_env import threads\n"
+        "assert threads.split(lambda s: s.start, rows=4, cost=10**7) == [0, 1]\n"  # the pools exist
+        "assert threads.beside(lambda: 5).result() == 5\n"
+        "pid = os.fork()\n"
+        "if pid == 0:\n"
+        "    signal.alarm(20)\n"  # a child that hangs ends itself, and fails the test
+        "    ok = threads.split(lambda s: s.start, rows=4, cost=10**7) == [0, 1]\n"
+        "    ok = ok and threads.beside(lambda: 5).result() == 5\n"
+        "    os._exit(0 if ok else 3)\n"
+        "_, status = os.waitpid(pid, 0)\n"
+        "sys.exit(os.waitstatus_to_exitcode(status))\n"
+    )
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "NBS_THREADS": "2", "PYTHONPATH": str(root)}
+    proc = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, (proc.returncode, proc.stderr[-500:])

@@ -2257,10 +2257,28 @@ def _kept(out: Path, first: str) -> str:
     )
 
 
+def _note_rounding(config: TrainConfig, out: Path, resume: bool) -> None:
+    """Say where PPO's whole rollouts take a run past ``--timesteps`` (``--timesteps 10`` with rollouts
+    of 32 steps trained 32 without a word; ``policy.json``'s ``timesteps_done`` records it)."""
+    done = 0
+    if resume:
+        with contextlib.suppress(ModelFileError):
+            done = int(latest_state(out)[1]["timesteps"])
+    rollout = config.n_steps * config.envs
+    if config.timesteps > done and (config.timesteps - done) % rollout:
+        end = done + -(-(config.timesteps - done) // rollout) * rollout
+        print(
+            f"nbs train: note: PPO trains whole rollouts of n_steps {config.n_steps} x {config.envs} env(s) = "
+            f"{rollout} steps: --timesteps {config.timesteps} runs to {end}",
+            file=sys.stderr,
+        )
+
+
 def _run(config: TrainConfig, out: Path, args, resume: bool) -> int:
     from train.outputs import OutputBusyError
     from train.stopping import exit_code
 
+    _note_rounding(config, out, resume)
     try:
         path, model = train(
             config, out, progress=not args.quiet, resume=resume, backend=args.backend, address=args.address
