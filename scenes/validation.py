@@ -5,7 +5,7 @@
   no wall or clutter inside rooms. A door is crossed straight along its axis, so it needs only to be
   :data:`MIN_DOOR_WIDTH` wide (a 0.5 m wide robot plus 10 cm): doors of 0.8-1.0 m could never be
   crossed with 0.2 m of safety on each side, and the method drives to the door frame deliberately
-  (METHOD §8).
+  (METHOD §8); and at least :data:`MIN_DOOR_HEIGHT` high, the robot's height.
 - **Free start**: the start keeps the same clearance.
 - **Closed**: no ray cast from inside any room escapes the building.
 """
@@ -25,6 +25,7 @@ from scenes.geometry import STOREY_CLEARANCE, inner_point
 from scenes.model import Scene
 
 __all__ = [
+    "MIN_DOOR_HEIGHT",
     "MIN_DOOR_WIDTH",
     "count_escaping_rays",
     "fibonacci_sphere",
@@ -35,6 +36,10 @@ __all__ = [
 
 #: The narrowest door a valid storey may have, metres.
 MIN_DOOR_WIDTH = 0.60
+#: The lowest door a valid storey may have, metres: the robot's height (the column above the floor
+#: its navigation keeps clear, ``NavigationConfig.robot_height``) and the lowest lintel its door
+#: detection takes (``DoorConfig.min_height``).
+MIN_DOOR_HEIGHT = 1.80
 
 
 class ClutterLike(Protocol):
@@ -150,6 +155,10 @@ def validate_plan_scene(plan: PlanLike, scene: Scene) -> None:
         if door.width < MIN_DOOR_WIDTH:
             raise StoreyValidationError(
                 name, f"door doors[{j}] is {door.width} m wide; the robot needs {MIN_DOOR_WIDTH} m"
+            )
+        if door.height < MIN_DOOR_HEIGHT:  # 1.5 m doors were accepted, and the robot never left its first room
+            raise StoreyValidationError(
+                name, f"door doors[{j}] is {door.height} m high; the robot needs {MIN_DOOR_HEIGHT} m"
             )
         c = door.position[:2]
         na = node_of(a, c - door.normal * reach)

@@ -1354,14 +1354,66 @@ def test_scenes_info_names_its_positional_scene_without_an_option(capsys):
 def test_a_run_says_where_whole_rollouts_take_it_past_its_timesteps(run, tmp_path, capsys):
     """Probe 41: ``--timesteps 10`` with rollouts of 32 steps trained 32 without a word (policy.json's
     ``timesteps_done`` said so, its ``timesteps`` the 10 asked for)."""
-    from train.ppo import TrainConfig, _note_rounding
+    from train.ppo import TrainConfig, _rounding
 
-    _note_rounding(TrainConfig(timesteps=10, n_steps=32, envs=1), tmp_path / "new", resume=False)
-    assert capsys.readouterr().err == (
-        "nbs train: note: PPO trains whole rollouts of n_steps 32 x 1 env(s) = 32 steps: --timesteps 10 runs to 32\n"
+    assert _rounding(TrainConfig(timesteps=10, n_steps=32, envs=1), tmp_path / "new", resume=False) == (
+        "nbs train: note: PPO trains whole rollouts of n_steps 32 x 1 env(s) = 32 steps: --timesteps 10 ran to 32"
     )
-    _note_rounding(TrainConfig(timesteps=64, n_steps=16, envs=2), tmp_path / "new", resume=False)
-    assert capsys.readouterr().err == ""  # whole rollouts: nothing to say
+    assert _rounding(TrainConfig(timesteps=64, n_steps=16, envs=2), tmp_path / "new", resume=False) == ""
     # A resumed run rounds from the steps it has done (16 of the tiny run's rollouts of 8).
-    _note_rounding(TrainConfig(timesteps=20, n_steps=8, envs=1, batch_size=8), run, resume=True)
-    assert capsys.readouterr().err.endswith("= 8 steps: --timesteps 20 runs to 24\n")
+    note = _rounding(TrainConfig(timesteps=20, n_steps=8, envs=1, batch_size=8), run, resume=True)
+    assert note.endswith("= 8 steps: --timesteps 20 ran to 24")
+    from train.ppo import main
+
+    assert main(["--resume", str(run), "--timesteps", "20", "--quiet"]) == 0
+    assert capsys.readouterr().err.strip() == note  # said once the run is done
+
+
+def test_a_plan_door_lower_than_the_robot_is_refused_and_a_missed_door_is_said(tmp_path, capsys):
+    """Probe 42: a plan's doors of 1.5 m (or 1 mm) were accepted, and the robot, which could never
+    pass them, scanned its first room and said "storey complete: yes". Doors taller than its door
+    detection's lintels (2.6 m) are a building it meets: the summary now says which rooms got no scan."""
+    from scenes import StoreyValidationError
+    from train.cli import scan_summary
+
+    assert nbs(["scenes", "generate", "--seed", "5", "--out", str(tmp_path / "p.json")]) == 0
+    plan = json.loads((tmp_path / "p.json").read_text())
+    for door in plan["doors"]:
+        door["height"] = 1.5
+    (tmp_path / "low.json").write_text(json.dumps(plan))
+    with pytest.raises(StoreyValidationError, match=r"door doors\[0\] is 1\.5 m high; the robot needs 1\.8 m"):
+        load_scene(str(tmp_path / "low.json"))
+    rooms = [{"name": f"room{k}", "scans": s, "structure_sensed_pct": 50.0, "path_length_m": 1.0,
+              "processed_points": 10, "processing_time_s": 1.0} for k, s in enumerate((0, 6, 0))]  # fmt: skip
+    metrics = {
+        "scene": "p", "policy": "greedy", "seed": 0, "rooms": rooms, "steps": [], "scans": 6, "complete": True,
+        "structure_sensed_pct": 40.0, "path_length_m": 3.0, "processed_points": 30, "processing_time_s": 3.0,
+        "acquisition_time_s": 1.0, "travel_time_s": 1.0,
+        "config": {"max_scans": 60, "travel_speed": 0.5, "robot": {"scanner": {"points_per_second": 1e6}}},
+        "quality": {"quality_pct": 1.0, "min_density_per_m2": 400, "dense_pct": 1.0, "max_incidence_deg": 70,
+                    "incidence_pct": 1.0},
+        "registrability": {}, "registration_error": {"mean_m": 0.0, "mean_deg": 0.0, "max_m": 0.0, "max_deg": 0.0},
+    }  # fmt: skip
+    text = scan_summary(metrics, tmp_path, ["metrics.json"])
+    assert "storey complete: yes by the robot's account (no door it found is left), but 2 of the storey's 3" in text
+    rooms[0]["scans"] = rooms[2]["scans"] = 1
+    assert "storey complete: yes\n" in scan_summary(metrics, tmp_path, ["metrics.json"])
+
+
+def test_scenes_generate_and_show_write_over_a_file_only_with_force(tmp_path, capsys):
+    """Probe 42: ``nbs scenes generate --out`` replaced a hand-edited plan (or a checkpoint's
+    ``policy.json``) without a word, and ``scenes show --out`` a report's picture."""
+    plan, picture = tmp_path / "p.json", tmp_path / "top.png"
+    plan.write_text('{"edited": true}')
+    picture.write_bytes(b"mine")
+    assert nbs(["scenes", "generate", "--seed", "5", "--out", str(plan)]) == EXIT_USAGE
+    assert _err(capsys) == (
+        f"nbs scenes generate: error: --out {plan}: exists; pass --force to write over it, or choose another name"
+    )
+    assert nbs(["scenes", "show", "l_room", "--out", str(picture)]) == EXIT_USAGE
+    assert "--out" in _err(capsys) and picture.read_bytes() == b"mine" and plan.read_text() == '{"edited": true}'
+    assert nbs(["scenes", "generate", "--seed", "5", "--out", str(tmp_path / "q.json"), "--show", str(picture)]) == 2
+    assert not (tmp_path / "q.json").exists()  # refused before anything was written
+    assert nbs(["scenes", "generate", "--seed", "5", "--out", str(plan), "--force"]) == 0
+    assert nbs(["scenes", "show", "l_room", "--out", str(picture), "--force"]) == 0
+    assert json.loads(plan.read_text())["doors"] and picture.read_bytes()[:4] == b"\x89PNG"

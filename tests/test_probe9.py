@@ -425,7 +425,8 @@ def test_an_output_linked_to_a_file_of_another_kind_is_refused(tmp_path, capsys)
     assert (tmp_path / "mesh.obj").read_text() == "v 0 0 0\n"
     (tmp_path / "old.json").write_text("{}")
     (tmp_path / "p.json").symlink_to(tmp_path / "old.json")
-    assert main(["scenes", "generate", "--seed", "2", "--out", str(tmp_path / "p.json")]) == 0  # a plan for a plan
+    # A plan for a plan, with --force (probe 42: an existing plan is not replaced without it).
+    assert main(["scenes", "generate", "--seed", "2", "--out", str(tmp_path / "p.json"), "--force"]) == 0
 
 
 @pytest.mark.parametrize("asset", [None, {"version": 2.0}, {"version": "2.0", "minVersion": 2.0}, {"version": "20"}])

@@ -2257,9 +2257,10 @@ def _kept(out: Path, first: str) -> str:
     )
 
 
-def _note_rounding(config: TrainConfig, out: Path, resume: bool) -> None:
-    """Say where PPO's whole rollouts take a run past ``--timesteps`` (``--timesteps 10`` with rollouts
-    of 32 steps trained 32 without a word; ``policy.json``'s ``timesteps_done`` records it)."""
+def _rounding(config: TrainConfig, out: Path, resume: bool) -> str:
+    """The note a run that PPO's whole rollouts take past ``--timesteps`` ends with ("" for none):
+    ``--timesteps 10`` with rollouts of 32 steps trained 32 without a word (``policy.json``'s
+    ``timesteps_done`` records it). Worked out before the run, from the steps a resumed one had done."""
     done = 0
     if resume:
         with contextlib.suppress(ModelFileError):
@@ -2267,18 +2268,18 @@ def _note_rounding(config: TrainConfig, out: Path, resume: bool) -> None:
     rollout = config.n_steps * config.envs
     if config.timesteps > done and (config.timesteps - done) % rollout:
         end = done + -(-(config.timesteps - done) // rollout) * rollout
-        print(
+        return (
             f"nbs train: note: PPO trains whole rollouts of n_steps {config.n_steps} x {config.envs} env(s) = "
-            f"{rollout} steps: --timesteps {config.timesteps} runs to {end}",
-            file=sys.stderr,
+            f"{rollout} steps: --timesteps {config.timesteps} ran to {end}"
         )
+    return ""
 
 
 def _run(config: TrainConfig, out: Path, args, resume: bool) -> int:
     from train.outputs import OutputBusyError
     from train.stopping import exit_code
 
-    _note_rounding(config, out, resume)
+    rounding = _rounding(config, out, resume)
     try:
         path, model = train(
             config, out, progress=not args.quiet, resume=resume, backend=args.backend, address=args.address
@@ -2322,6 +2323,8 @@ def _run(config: TrainConfig, out: Path, args, resume: bool) -> int:
         )
         # 130 for Ctrl-C, 143 for SIGTERM, as nbs scan and nbs compare exit and shells report.
         return exit_code(model.interrupted)
+    if rounding:
+        print(rounding, file=sys.stderr)
     print(f"wrote {path}")
     return 0
 
