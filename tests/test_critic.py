@@ -90,7 +90,9 @@ def _check_rollouts(seen: list[tuple], rollouts: int) -> None:
         assert (head_rewards[..., 0] > 0).any() and (head_rewards[..., 1] > 0).any()  # gains and prices apart
         assert set(explained) == {"gain_explained_variance", "cost_explained_variance"}
     weights = [w for w, *_ in seen]
-    assert weights[0] == 1.0 and min(weights) < 0.99  # checked at a weight that moved, too
+    # Checked at a weight that moved, too (up or down: which way turns on the episodes each rollout
+    # ends, and Ray's actors end them as their timing falls).
+    assert weights[0] == 1.0 and max(abs(w - 1.0) for w in weights) > 0.01
 
 
 def _config(**changes):
