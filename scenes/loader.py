@@ -239,6 +239,12 @@ def check_source(text: str) -> None:
             )
         return
     path = Path(text)
+    if text.endswith(("/", "\\")):
+        # Path drops a trailing separator, so "p.json/" read the file p.json, which the system
+        # refuses under that name ("Not a directory") and the report then recorded.
+        raise SceneFileError(
+            text, "a folder, not a scene file" if path.is_dir() else "a name ending in a separator names a folder"
+        )
     suffix = path.suffix.lower()
     if not suffix and "/" not in text and "\\" not in text:
         if text not in list_scenes():

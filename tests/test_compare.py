@@ -323,8 +323,9 @@ def test_a_run_folder_is_one_component_inside_out(tmp_path, name):
     assert folder_name("greedy") == "greedy" and folder_name("ppo:reference") == "ppo_reference"
 
 
-def test_resume_runs_again_where_the_building_file_changed(tmp_path):
-    """Runs were matched by the scene's name only: an edited file's old results came back as they were."""
+def test_resume_runs_again_where_the_building_file_changed(tmp_path, capsys):
+    """Runs were matched by the scene's name only: an edited file's old results came back as they were.
+    Probe 43: they were then run again without a word, as if reused; each is now named."""
     import shutil
 
     import train.compare as compare
@@ -342,5 +343,10 @@ def test_resume_runs_again_where_the_building_file_changed(tmp_path):
     assert results[0]["source_sha256"] == compare.source_digest(str(plan)) is not None
     assert len(compare.load_finished(out, specs)["runs"]) == 1
     plan.write_text(plan.read_text().replace('"ceiling_height": 2.6', '"ceiling_height": 2.7'))
+    capsys.readouterr()
     finished = compare.load_finished(out, specs)
     assert finished == {"runs": {}, "oracles": {}}
+    folder = compare._run_folder(out, {"scene": str(plan), "policy": "random", "seed": 0})
+    assert capsys.readouterr().err == (
+        f"nbs compare: {folder}: its scene file changed since it ran; running it again (its result is replaced)\n"
+    )

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import re
 import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -1417,3 +1418,49 @@ def test_scenes_generate_and_show_write_over_a_file_only_with_force(tmp_path, ca
     assert nbs(["scenes", "generate", "--seed", "5", "--out", str(plan), "--force"]) == 0
     assert nbs(["scenes", "show", "l_room", "--out", str(picture), "--force"]) == 0
     assert json.loads(plan.read_text())["doors"] and picture.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_scene_path_ending_in_a_separator_is_refused(tmp_path, capsys):
+    """Probe 43: ``p.json/`` was read as ``p.json`` (pathlib drops the slash), and the report then
+    recorded a name the system refuses to open ("Not a directory")."""
+    from scenes import SceneFileError
+
+    assert nbs(["scenes", "generate", "--seed", "5", "--out", str(tmp_path / "p.json")]) == 0
+    with pytest.raises(SceneFileError, match="a name ending in a separator names a folder"):
+        load_scene(f"{tmp_path / 'p.json'}/")
+    assert nbs(["scenes", "info", f"{tmp_path / 'p.json'}/"]) != 0
+    assert "a name ending in a separator names a folder" in _err(capsys)
+    assert load_scene(str(tmp_path / "p.json")).rooms  # the file itself, as before
+
+
+def test_a_mesh_room_with_a_floor_and_no_walls_is_warned_of(tmp_path):
+    """Probe 43: an OBJ with one room's wall group left out (or a glTF wall node at scale 0) was
+    taken without a word, and its coverage rose (the missing walls left the total)."""
+    from scenes.importers import _write_ply
+    from scenes.labels import SurfaceClass
+
+    scene = load_scene("five_rooms")
+    vertices, faces = np.asarray(scene.mesh.vertices), np.asarray(scene.mesh.faces)
+    labels, rooms = np.asarray(scene.face_labels), np.asarray(scene.face_rooms)
+    _write_ply(tmp_path / "whole.ply", vertices, faces, labels, rooms)
+    keep = ~((labels == SurfaceClass.WALL) & (rooms == 0))
+    _write_ply(tmp_path / "open.ply", vertices, faces[keep], labels[keep], rooms[keep])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_scene(str(tmp_path / "whole.ply"))  # every room walled: no warning
+    with pytest.warns(UserWarning, match=r"room0 has a floor but no wall faces of its own; walls missing"):
+        load_scene(str(tmp_path / "open.ply"))
+
+
+def test_scan_force_names_a_recording_left_in_the_report_folder(tmp_path, capsys):
+    """Probe 43: ``--force`` replaced an earlier report but kept its ``--record OUT/x.rrd`` beside
+    the new one, which replays a run the report is not about; the scan now says so."""
+    out = tmp_path / "rep"
+    out.mkdir()
+    (out / "metrics.json").write_text("{}")
+    (out / "earlier.rrd").write_bytes(b"an earlier run's recording")
+    args = ["scan", "--scene", "l_room", "--preset", "fast", "--max-scans", "1", "--quiet", "--no-steps"]
+    assert nbs([*args, "--out", str(out), "--force"]) == 0
+    err = capsys.readouterr().err
+    assert f"nbs scan: note: {out / 'earlier.rrd'} is kept; it is not this run's recording" in err, err
+    assert (out / "earlier.rrd").read_bytes() == b"an earlier run's recording"  # the user's to remove

@@ -764,6 +764,11 @@ def _scan(args: argparse.Namespace, policy, out: Path, cfg, stop: StopRequest) -
     if recorder is not None:
         files.append(f"{args.record} (nbs view {args.record})")
     print(scan_summary(metrics, out, files, stop.name if cut_short else ""))
+    # --force replaces the report's own files; a recording in the folder may be an earlier run's
+    # (written with --record OUT/x.rrd), which would replay a run this report is not about.
+    this = None if args.record is None else args.record.resolve()
+    for stale in sorted(p for p in out.glob("*.rrd") if p.resolve() != this):
+        print(f"nbs scan: note: {stale} is kept; it is not this run's recording", file=sys.stderr)
     if stop.signal is not None:
         when = f"after {metrics['scans']} scans; wrote their report" if cut_short else "at the end; wrote the report"
         print(f"nbs scan: stopped by {stop.name} {when} to {out}/", file=sys.stderr)

@@ -1149,7 +1149,8 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
     (:func:`record_problem`); an oracle when ``oracle.json`` has it for the same preset and
     overrides, and while the scene's file (:func:`source_digest`) and a ``ppo:PATH`` checkpoint
     (:func:`policy_digest`) are those it ran on. Failed runs are run again, and so are damaged
-    records: each of those is named on stderr with the reason, in one line.
+    records and runs of a file or checkpoint changed since: each of the last two is named on
+    stderr with the reason, in one line.
     """
     out = Path(out)
     runs: dict[str, Any] = {}
@@ -1188,8 +1189,16 @@ def load_finished(out: str | Path, specs: Sequence[RunSpec]) -> dict[str, Any]:
             damaged(folder / "run.json", problem)
             continue
         wanted = json_form(asdict(spec))
-        if not (record.get("ok") is True and isinstance(stored, dict) and same_spec(stored, wanted) and same_file):
-            continue  # a failed run, or a run of an edited file: run it again
+        if not (record.get("ok") is True and isinstance(stored, dict) and same_spec(stored, wanted)):
+            continue  # a failed run: run it again
+        if not same_file:
+            # Another building or another policy: its result is replaced, which the user is told.
+            changed = "scene file" if record.get("source_sha256") != digests[spec.scene] else "checkpoint"
+            print(
+                f"nbs compare: {folder}: its {changed} changed since it ran; running it again (its result is replaced)",
+                file=sys.stderr,
+            )
+            continue
         path = folder / "metrics.json"
         try:
             finished = {**record, "metrics": read_json_file(path)}
