@@ -1,7 +1,8 @@
 """Door detection in the SE wall faces of the RoI (METHOD §8), from measured points only.
 
 An opening is an empty rectangle of a wall face's image (points within ±10 cm of the face, 5 cm
-pixels) that stands on the floor, is 0.6-4.0 m wide and 1.8-2.3 m high (a lintel was seen above it),
+pixels) that stands on the floor, is 0.6-4.0 m wide and 1.8-3.0 m high (a lintel was seen above it;
+above 2.3 m, METHOD §8's tallest door, a lintel of wall at least 0.1 m below the ceiling),
 and through which the scanner saw: registered points lie behind the face plane within the opening.
 That last test tells a door from the shadow a cabinet casts on the wall behind it.
 
@@ -566,10 +567,14 @@ def detect_doors(
             np.where(open_run, level, 0).max(axis=0, initial=0),
             np.where(in_run & ~unseen, level, 0).max(axis=0, initial=0),
         )
+        # The tallest door this face may hold: above the doors METHOD §8 knows, the lintel must be
+        # wall, so a run ending at the ceiling's edge is no door (an outline across open floor, a
+        # wall hidden from floor to ceiling: edge_8rooms_2's two "doors" 2.75 m high under 2.81 m).
+        highest = min(cfg.max_height + px, max(cfg.flush_height + px, face.z1 - face.z0 - cfg.ceiling_clearance))
         lowest = np.maximum((start + measurable) * px, cfg.min_height)
-        hidden = (empty_height > cfg.max_height + px) & (lowest <= cfg.max_height + px)
+        hidden = (empty_height > highest + 1e-9) & (lowest <= highest + 1e-9)
         empty_height = np.where(hidden, lowest, empty_height)
-        tall = (empty_height >= cfg.min_height) & (empty_height <= cfg.max_height + px) & lintel_seen
+        tall = (empty_height >= cfg.min_height) & (empty_height <= highest + 1e-9) & lintel_seen
         tall = _bridged(tall, empty_height >= cfg.min_height, gap)
         for a, b in _runs(tall):
             width = (b - a) * px
