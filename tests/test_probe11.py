@@ -1464,3 +1464,23 @@ def test_scan_force_names_a_recording_left_in_the_report_folder(tmp_path, capsys
     err = capsys.readouterr().err
     assert f"nbs scan: note: {out / 'earlier.rrd'} is kept; it is not this run's recording" in err, err
     assert (out / "earlier.rrd").read_bytes() == b"an earlier run's recording"  # the user's to remove
+
+
+def test_a_storey_of_tall_doors_is_scanned_room_by_room(tmp_path):
+    """Probe 42: five_rooms with 2.6 m doors under a 3.1 m ceiling was scanned in its first room
+    only (METHOD's doors are 1.8-2.3 m high); every room gets its scans now, at the defaults."""
+    from nbs_env.config import make_config
+    from nbs_env.env import NBSEnv
+    from nbs_env.report import metrics_dict
+    from policies import make_policy
+    from train.episode import run_episode
+
+    plan = json.loads((Path(__file__).parents[1] / "scenes" / "data" / "five_rooms.json").read_text())
+    plan["ceiling_height"] = 3.1
+    for door in plan["doors"]:
+        door["height"] = 2.6
+    (tmp_path / "tall.json").write_text(json.dumps(plan))
+    env = NBSEnv(make_config("fast", scene=str(tmp_path / "tall.json")))
+    run_episode(env, make_policy("greedy", 0), 0, {}, lambda info: None)
+    scans = [room["scans"] for room in metrics_dict(env.storey, "tall.json", "greedy", 0)["rooms"]]
+    assert len(scans) == 5 and min(scans) >= 1, scans
