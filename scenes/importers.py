@@ -1012,6 +1012,11 @@ def footprint_polygon(triangles: np.ndarray) -> np.ndarray | None:
     return np.asarray(outline.exterior.coords, dtype=float)[:-1]
 
 
+#: Less wall than this in a room's own faces, m², and the room is named as having none (a sliver
+#: of wall is no wall).
+MIN_ROOM_WALL_AREA = 0.01
+
+
 def _rooms_from_faces(
     source: str, mesh: trimesh.Trimesh, labels: np.ndarray, raw_rooms: np.ndarray
 ) -> tuple[np.ndarray, list[Room]]:
@@ -1019,6 +1024,7 @@ def _rooms_from_faces(
     raw_rooms = np.asarray(raw_rooms, dtype=np.int64)
     face_rooms = np.full(len(raw_rooms), -1, dtype=np.int32)
     triangles = mesh.vertices[mesh.faces]
+    areas = np.asarray(mesh.area_faces)
     rooms: list[Room] = []
     orphans = []
     wall_less = []
@@ -1029,7 +1035,8 @@ def _rooms_from_faces(
         if polygon is None:
             orphans.append(f"room{number}")
             continue
-        if not (members & (labels == SurfaceClass.WALL)).any():
+        # By area, not by count: a glTF wall node at scale 0 leaves its faces, of no area.
+        if float(areas[members & (labels == SurfaceClass.WALL)].sum()) < MIN_ROOM_WALL_AREA:
             wall_less.append(f"room{number}")
         floor_z = float(triangles[floor][..., 2].min())
         ceiling = members & (labels == SurfaceClass.CEILING)

@@ -503,3 +503,20 @@ def test_the_storey_vector_is_the_robots_own_door_memory():
             break
     # The storey has several rooms: doors were found, and crossing one took it off the list.
     assert len(storey.rooms.doors) >= 2 and crossed
+
+
+def test_a_registered_env_steps_after_a_refused_first_reset():
+    """Probe 44: through gymnasium's passive checker (gymnasium 1.4), a first ``reset`` that raised
+    (a seed of -1) left every later ``step`` raising a TypeError after its scan was taken."""
+    import gymnasium
+
+    from nbs_env.errors import ConfigError
+
+    env = gymnasium.make("nbs_env/NBS-Fast-v0")
+    with pytest.raises(ConfigError, match="seed must be None or an integer >= 0"):
+        env.reset(seed=-1)
+    env.reset(seed=1)
+    action = int(np.flatnonzero(env.unwrapped.action_masks())[0])
+    obs, reward, *_, info = env.step(action)
+    assert env.observation_space.contains(obs) and np.isfinite(reward) and info["scans"] == 2
+    env.close()

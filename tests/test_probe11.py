@@ -1450,6 +1450,14 @@ def test_a_mesh_room_with_a_floor_and_no_walls_is_warned_of(tmp_path):
         load_scene(str(tmp_path / "whole.ply"))  # every room walled: no warning
     with pytest.warns(UserWarning, match=r"room0 has a floor but no wall faces of its own; walls missing"):
         load_scene(str(tmp_path / "open.ply"))
+    # Probe 44: a glTF wall node at scale 0 keeps its faces, of no area (here: each collapsed onto
+    # its first corner); they are no walls either.
+    collapsed = faces.copy()
+    walls = (labels == SurfaceClass.WALL) & (rooms == 0)
+    collapsed[walls] = collapsed[walls][:, :1]
+    _write_ply(tmp_path / "flat.ply", vertices, collapsed, labels, rooms)
+    with pytest.warns(UserWarning, match=r"room0 has a floor but no wall faces of its own"):
+        load_scene(str(tmp_path / "flat.ply"))
 
 
 def test_scan_force_names_a_recording_left_in_the_report_folder(tmp_path, capsys):
@@ -1484,3 +1492,32 @@ def test_a_storey_of_tall_doors_is_scanned_room_by_room(tmp_path):
     run_episode(env, make_policy("greedy", 0), 0, {}, lambda info: None)
     scans = [room["scans"] for room in metrics_dict(env.storey, "tall.json", "greedy", 0)["rooms"]]
     assert len(scans) == 5 and min(scans) >= 1, scans
+
+
+def test_a_bundled_name_and_the_path_of_its_plan_are_one_scene(tmp_path, capsys):
+    """Probe 44: ``--scenes office,scenes/data/office.json`` ran one storey twice, and the
+    all-scenes means weighed it twice (two spellings of one path were refused already)."""
+    plan = Path(__file__).parents[1] / "scenes" / "data" / "office.json"
+    code = nbs(["compare", "--scenes", f"office,{plan}", "--policies", "greedy", "--out", str(tmp_path / "c")])
+    assert code == EXIT_USAGE
+    assert f"--scenes names office and {plan}" in _err(capsys)
+    assert not (tmp_path / "c").exists()
+
+
+def test_a_report_folder_of_another_command_is_refused_even_with_force(tmp_path, capsys):
+    """Probe 44: ``nbs scan --force --out`` a comparison's folder mixed a scan report into it (only
+    the scan's own files were replaced), and ``compare --resume`` then took the mixed folder."""
+    comparison, report = tmp_path / "cmp", tmp_path / "rep"
+    comparison.mkdir()
+    (comparison / "table.md").write_text("| a comparison |\n")
+    report.mkdir()
+    (report / "metrics.json").write_text("{}")
+    scan = ["scan", "--scene", "l_room", "--preset", "fast", "--max-scans", "1", "--quiet", "--no-steps", "--force"]
+    assert nbs([*scan, "--out", str(comparison)]) == EXIT_USAGE
+    assert _err(capsys) == f"nbs scan: error: --out {comparison}: holds a comparison (table.md); choose another folder"
+    compare = ["compare", "--scenes", "l_room", "--policies", "greedy", "--max-scans", "1", "--quiet"]
+    for flag in ("--force", "--resume"):
+        assert nbs([*compare, "--out", str(report), flag]) == EXIT_USAGE
+        assert "holds a scan report (metrics.json); choose another folder" in _err(capsys)
+    assert sorted(p.name for p in comparison.iterdir()) == ["table.md"]
+    assert sorted(p.name for p in report.iterdir()) == ["metrics.json"]

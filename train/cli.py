@@ -29,7 +29,17 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from train.arguments import add_robot_arguments, add_scene_arguments, integer_from, scene_option_error, seed_number
-from train.outputs import NamedStream, Output, OutputBusyError, OutputError, check_outputs, claimed, output_path
+from train.outputs import (
+    COMPARISON,
+    TRAINING_RUN,
+    NamedStream,
+    Output,
+    OutputBusyError,
+    OutputError,
+    check_outputs,
+    claimed,
+    output_path,
+)
 from train.stopping import STOP_SIGNALS, StopRequest, exit_code
 
 EXIT_SCENE_ERROR = 1
@@ -620,7 +630,7 @@ def run_scan(args: argparse.Namespace) -> int:
     replace = None if args.force else "pass --force to overwrite it"
     from nbs_env.export import REPORT_FILES
 
-    outputs = [Output("--out", out, "folder", replace=replace, files=REPORT_FILES)]
+    outputs = [Output("--out", out, "folder", replace=replace, files=REPORT_FILES, others=COMPARISON + TRAINING_RUN)]
     if args.record is not None:
         outputs.append(Output("--record", args.record, "file", replace=replace, example="run.rrd"))
     try:

@@ -1001,7 +1001,7 @@ def check_out_dir(out: str | Path, *, keep: bool = False, specs: Sequence[RunSpe
         empty and ``keep`` is False (:func:`train.outputs.check_outputs`); or a file or folder in
         it is a symbolic link (the grid would read and write through it).
     """
-    from train.outputs import Output, OutputError, check_outputs, odd_entry
+    from train.outputs import SCAN_REPORT, TRAINING_RUN, Output, OutputError, check_outputs, odd_entry
 
     out = Path(out)
     replace = None if keep else "pass --resume to continue that comparison, or --force to write over it"
@@ -1013,7 +1013,8 @@ def check_out_dir(out: str | Path, *, keep: bool = False, specs: Sequence[RunSpe
             f"--out {out}: its runs/ holds --scenes {inside}, which the grid writes over: choose another --out"
         )
     try:
-        check_outputs([Output("--out", out, "folder", replace=replace, files=_TOP_FILES)], reads=reads)
+        others = SCAN_REPORT + TRAINING_RUN
+        check_outputs([Output("--out", out, "folder", replace=replace, files=_TOP_FILES, others=others)], reads=reads)
         out.mkdir(exist_ok=True)
     except OutputError as exc:
         raise CompareError(str(exc)) from None
@@ -1711,6 +1712,14 @@ def _scene_identity(scene: str) -> Any:
     path = Path(scene)
     if path.suffix and path.exists():
         return ("file", path.resolve(), None)
+    from importlib import resources
+
+    from scenes import list_scenes
+
+    if scene in list_scenes():  # a bundled name is its plan file (office and scenes/data/office.json)
+        bundled = Path(str(resources.files("scenes") / "data" / f"{scene}.json"))
+        if bundled.exists():
+            return ("file", bundled.resolve(), None)
     return ("name", scene)
 
 

@@ -64,6 +64,10 @@ class Output:
         For a file: a name to suggest when the path is a folder (``"run.rrd"``).
     files : tuple of str
         For a folder: the names the command writes in it (a report's), checked against its inputs.
+    others : tuple of (str, str)
+        For a folder: names another command's product holds, with what that product is
+        (``("table.md", "a comparison")``): a folder holding one is refused, ``--force`` or not,
+        since the command would mix its files into it (and replace only its own).
     """
 
     flag: str
@@ -72,6 +76,14 @@ class Output:
     replace: str | None = None
     example: str = ""
     files: tuple[str, ...] = ()
+    others: tuple[tuple[str, str], ...] = ()
+
+
+#: What each command's folder holds that no other command writes: a scan report, a comparison, a
+#: training run (or a checkpoint folder).
+SCAN_REPORT = (("scans.e57", "a scan report"), ("metrics.json", "a scan report"))
+COMPARISON = (("oracle.json", "a comparison"), ("table.md", "a comparison"), ("runs", "a comparison"))
+TRAINING_RUN = (("training_state.json", "a training run"), ("policy.json", "a checkpoint"))
 
 
 class _FolderLike(type(Path())):  # type: ignore[misc]  # PosixPath or WindowsPath
@@ -135,6 +147,10 @@ def _problem(output: Output) -> str | None:
         if not path.is_dir():
             return "exists and is not a folder"
         problem = _write_problem(path)
+        for name, what in output.others:
+            if problem is None and os.path.lexists(path / name):
+                # --force replaces this command's files, not another's: the two would be mixed.
+                return f"holds {what} ({name}); choose another folder"
         if problem is None and output.replace is not None:
             try:
                 held = sorted(p.name + ("/" if p.is_dir() else "") for p in path.iterdir())

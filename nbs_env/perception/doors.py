@@ -2,7 +2,7 @@
 
 An opening is an empty rectangle of a wall face's image (points within ±10 cm of the face, 5 cm
 pixels) that stands on the floor, is 0.6-4.0 m wide and 1.8-3.0 m high (a lintel was seen above it;
-above 2.3 m, METHOD §8's tallest door, a lintel of wall at least 0.1 m below the ceiling),
+above 2.3 m, METHOD §8's tallest door, a lintel of wall at least 0.25 m deep below the ceiling),
 and through which the scanner saw: registered points lie behind the face plane within the opening.
 That last test tells a door from the shadow a cabinet casts on the wall behind it.
 
@@ -569,7 +569,8 @@ def detect_doors(
         )
         # The tallest door this face may hold: above the doors METHOD §8 knows, the lintel must be
         # wall, so a run ending at the ceiling's edge is no door (an outline across open floor, a
-        # wall hidden from floor to ceiling: edge_8rooms_2's two "doors" 2.75 m high under 2.81 m).
+        # wall hidden from floor to ceiling: edge_8rooms_2's two "doors" of 2.60-2.65 m under 2.81 m,
+        # whose columns' runs ended 0.11-0.21 m below the ceiling, its edge blurred by mixed pixels).
         highest = min(cfg.max_height + px, max(cfg.flush_height + px, face.z1 - face.z0 - cfg.ceiling_clearance))
         lowest = np.maximum((start + measurable) * px, cfg.min_height)
         hidden = (empty_height > highest + 1e-9) & (lowest <= highest + 1e-9)
