@@ -282,12 +282,14 @@ def test_compare_refuses_an_earlier_comparison_without_resume_or_force(tmp_path,
         raise StartedError
 
     monkeypatch.setattr(train.compare, "run_one", lambda *a: pytest.fail("a run started"))
-    out = _report(tmp_path / "grid")
+    out = tmp_path / "grid"
+    out.mkdir()
+    (out / "table.csv").write_text("an earlier comparison's table\n")
     command = f"compare --scenes l_room --policies greedy --out {out} --quiet"
     code, err = run_cli(command, capsys)
     assert code == EXIT_USAGE, err
     assert err.strip() == (
-        f"nbs compare: error: --out {out}: is not empty (it holds metrics.json); pass --resume to continue that "
+        f"nbs compare: error: --out {out}: is not empty (it holds table.csv); pass --resume to continue that "
         "comparison, or --force to write over it, or choose another folder"
     )
     # With either flag the grid starts.
