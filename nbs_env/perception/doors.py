@@ -571,11 +571,13 @@ def detect_doors(
         # wall, so a run ending at the ceiling's edge is no door (an outline across open floor, a
         # wall hidden from floor to ceiling: edge_8rooms_2's two "doors" of 2.60-2.65 m under 2.81 m,
         # whose columns' runs ended 0.11-0.21 m below the ceiling, its edge blurred by mixed pixels).
+        # (Compared as the one limit was, without a tolerance: a run of 47 pixels, 2.35 m in floats,
+        # stays above 2.3 m + a pixel, as it was, so that doors within METHOD's range are as found.)
         highest = min(cfg.max_height + px, max(cfg.flush_height + px, face.z1 - face.z0 - cfg.ceiling_clearance))
         lowest = np.maximum((start + measurable) * px, cfg.min_height)
-        hidden = (empty_height > highest + 1e-9) & (lowest <= highest + 1e-9)
+        hidden = (empty_height > highest) & (lowest <= highest)
         empty_height = np.where(hidden, lowest, empty_height)
-        tall = (empty_height >= cfg.min_height) & (empty_height <= highest + 1e-9) & lintel_seen
+        tall = (empty_height >= cfg.min_height) & (empty_height <= highest) & lintel_seen
         tall = _bridged(tall, empty_height >= cfg.min_height, gap)
         for a, b in _runs(tall):
             width = (b - a) * px
