@@ -38,6 +38,7 @@ __all__ = [
     "SUPPORTED_EXTENSIONS",
     "as_spec",
     "bundled_plan",
+    "bundled_plan_path",
     "check_source",
     "list_scenes",
     "load_source",
@@ -64,8 +65,21 @@ def bundled_plan(name: str) -> FloorPlan:
     """
     if name not in list_scenes():
         raise UnknownSceneError(name, f"no bundled scene of that name; bundled: {', '.join(list_scenes())}")
-    text = (resources.files("scenes") / "data" / f"{name}.json").read_text()
+    text = _bundled_file(name).read_text()
     return FloorPlan.from_dict(json.loads(text), source=f"{name} (bundled)")
+
+
+def bundled_plan_path(name: str) -> Path | None:
+    """The plan file of a bundled scene, or None when ``name`` is not bundled (or its package is
+    not on disk): what a path to that file names too."""
+    if name not in list_scenes():
+        return None
+    path = Path(str(_bundled_file(name)))
+    return path if path.exists() else None
+
+
+def _bundled_file(name: str) -> Any:  # an importlib Traversable
+    return resources.files("scenes") / "data" / f"{name}.json"
 
 
 def load_source(spec: str | os.PathLike[str] | FloorPlan, options: dict[str, Any]) -> Scene:

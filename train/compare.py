@@ -1712,14 +1712,11 @@ def _scene_identity(scene: str) -> Any:
     path = Path(scene)
     if path.suffix and path.exists():
         return ("file", path.resolve(), None)
-    from importlib import resources
+    from scenes.loader import bundled_plan_path
 
-    from scenes import list_scenes
-
-    if scene in list_scenes():  # a bundled name is its plan file (office and scenes/data/office.json)
-        bundled = Path(str(resources.files("scenes") / "data" / f"{scene}.json"))
-        if bundled.exists():
-            return ("file", bundled.resolve(), None)
+    bundled = bundled_plan_path(scene)  # a bundled name is its plan file (office and scenes/data/office.json)
+    if bundled is not None:
+        return ("file", bundled.resolve(), None)
     return ("name", scene)
 
 

@@ -147,10 +147,10 @@ def _problem(output: Output) -> str | None:
         if not path.is_dir():
             return "exists and is not a folder"
         problem = _write_problem(path)
-        for name, what in output.others:
-            if problem is None and os.path.lexists(path / name):
-                # --force replaces this command's files, not another's: the two would be mixed.
-                return f"holds {what} ({name}); choose another folder"
+        # --force replaces this command's files, not another's: the two would be mixed.
+        held_by_other = next(((n, w) for n, w in output.others if os.path.lexists(path / n)), None)
+        if problem is None and held_by_other is not None:
+            return f"holds {held_by_other[1]} ({held_by_other[0]}); choose another folder"
         if problem is None and output.replace is not None:
             try:
                 held = sorted(p.name + ("/" if p.is_dir() else "") for p in path.iterdir())
